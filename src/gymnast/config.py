@@ -1,0 +1,32 @@
+"""Configuration: one frozen dataclass per component, and named presets.
+
+Every field's docstring becomes its ``--help`` text. Derived values are properties, never
+mutations, and the resolved configuration is saved with every run and dataset.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from gymnast.envs.render import CameraPose
+
+
+@dataclass(frozen=True)
+class EnvConfig:
+    """How the real world (and the software simulator) is observed."""
+
+    image_size: int = 96
+    """Side of the square camera image in pixels (every MT10 object and goal spans several
+    pixels at 96; see docs/environment.md)."""
+    horizon: int = 150
+    """Steps before an episode is truncated."""
+    terminate_on_success: bool = True
+    """End the episode at the first step where the task succeeds."""
+    camera: CameraPose = field(default_factory=CameraPose)
+    """The fixed free camera that shows the arm, the objects and the goal."""
+
+    def __post_init__(self) -> None:
+        if self.image_size < 16:
+            raise ValueError(f"EnvConfig.image_size must be at least 16 pixels, got {self.image_size}")
+        if self.horizon < 1:
+            raise ValueError(f"EnvConfig.horizon must be positive, got {self.horizon}")

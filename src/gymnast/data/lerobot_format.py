@@ -1,0 +1,335 @@
+"""The LeRobot dataset format as gymnast uses it: names, per-frame columns, statistics, episode assembly.
+
+Shared by the v3.0 writer (`gymnast.data.lerobot_writer`) and the v3.0 / v2.1 readers
+(`gymnast.data.lerobot`). ``docs/dataset_format.md`` describes the layout on disk.
+
+Legend: L rows (frames) of one episode, T = L - 1 steps (actions), S state size, E environment-state
+size, A action dimensions, H/W image height/width, K episodes.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import io
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+from PIL import Image
+
+from gymnast.data.schema import Episode, EpisodeInfo
+
+STATS_NAMES = ("min", "max", "mean", "std", "count")
+GYMNAST_PREFIX = "gymnast/"
+KEY_COLUMN = "gymnast/key"
+PSNR_COLUMN = "gymnast/video_psnr_db"
+"""Per episode: the worst (minimum) PSNR in dB of its decoded frames against the raw frames."""
+
+_ARROW_TYPES = {"str": pa.string(), "bool": pa.bool_(), "float": pa.float64(), "int": pa.int64()}
+INFO_COLUMNS: dict[str, pa.DataType] = {
+    f"{GYMNAST_PREFIX}{f.name}": _ARROW_TYPES[str(f.type)] for f in dataclasses.fields(EpisodeInfo)
+}
+"""One episodes-metadata column per `EpisodeInfo` field, e.g. ``gymnast/behaviour``."""
+
+STATE_NAMES = ["hand_x", "hand_y", "hand_z", "gripper_opening"]
+ACTION_NAMES = ["dx", "dy", "dz", "gripper_effort"]
+
+
+class DatasetError(ValueError):
+    """A dataset file is unreadable or malformed; the message names the file and the field."""
+
+
+def image_key(camera: str) -> str:
+    """The LeRobot feature name of a camera, e.g. ``front`` -> ``observation.images.front``."""
+    return f"observation.images.{camera}"
+
+
+@dataclass(frozen=True)
+class EpisodeRef:
+    """Where one episode lives on disk; enough to load it without reading anything else.
+
+    Attributes:
+        index: the episode's ``episode_index``.
+        length: number of rows L (frames) of the episode.
+        task: the LeRobot task string (the language instruction).
+        data_path: parquet file holding the episode's rows.
+        rows: [from, to) range of the global ``index`` column inside ``data_path``.
+        video_path: mp4 holding the episode's frames, or None when images are stored in the rows.
+        video_span: [from, to) timestamps in seconds of the episode inside ``video_path``.
+        columns: the episode's metadata row (``gymnast/...`` columns among others).
+        meta_path: the metadata file the episode was listed in, for error messages.
+    """
+
+    index: int
+    length: int
+    task: str
+    data_path: Path
+    rows: tuple[int, int]
+    video_path: Path | None
+    video_span: tuple[float, float]
+    columns: Mapping[str, Any]
+    meta_path: Path
+
+
+def read_parquet(path: Path, columns: Sequence[str] | None = None) -> pa.Table:
+    """Read a parquet file; a missing or unreadable file raises an error naming it."""
+    if not path.is_file():
+        raise FileNotFoundError(f"parquet file not found: {path}")
+    try:
+        return pq.read_table(path, columns=columns)
+    except (pa.ArrowException, OSError) as e:
+        raise DatasetError(f"{path}: cannot read parquet file: {e}") from e
+
+
+def require_columns(table: pa.Table, names: Sequence[str], path: Path) -> None:
+    """Raise naming the file and the first missing column."""
+    for name in names:
+        if name not in table.column_names:
+            raise DatasetError(f"{path}: field {name!r} is missing (columns: {table.column_names})")
+
+
+def column_matrix(table: pa.Table, name: str, path: Path) -> np.ndarray:
+    """A list-of-numbers column as an (L, D) float32 array."""
+    require_columns(table, [name], path)
+    column = table.column(name).combine_chunks()
+    kind = column.type
+    if not (pa.types.is_list(kind) or pa.types.is_fixed_size_list(kind) or pa.types.is_large_list(kind)) or not (
+        pa.types.is_floating(kind.value_type) or pa.types.is_integer(kind.value_type)
+    ):
+        raise DatasetError(f"{path}: field {name!r} has type {kind}, expected a list of numbers")
+    values = column.flatten().to_numpy(zero_copy_only=False).astype(np.float32)
+    if len(column) == 0:
+        return values.reshape(0, 0)
+    if len(values) % len(column):
+        raise DatasetError(f"{path}: field {name!r} has rows of different lengths")
+    return values.reshape(len(column), -1)
+
+
+def column_vector(table: pa.Table, name: str, path: Path, dtype: type) -> np.ndarray:
+    """A scalar column as an (L,) array; also accepts LeRobot's one-element lists."""
+    require_columns(table, [name], path)
+    kind = table.schema.field(name).type
+    if pa.types.is_list(kind) or pa.types.is_fixed_size_list(kind):
+        kind, values = kind.value_type, table.column(name).combine_chunks().flatten()
+    else:
+        values = table.column(name)
+    if not compatible_type(kind, pa.bool_() if dtype is bool else pa.float64()):
+        raise DatasetError(f"{path}: field {name!r} has type {kind}, expected {dtype.__name__}")
+    array = values.to_numpy(zero_copy_only=False).astype(dtype)
+    if len(array) != table.num_rows:
+        raise DatasetError(f"{path}: field {name!r} has {len(array)} values for {table.num_rows} rows")
+    return array
+
+
+def vector_array(matrix: np.ndarray) -> pa.Array:
+    """(L, D) numbers -> a fixed-size-list column, as LeRobot writes vector features."""
+    flat = pa.array(np.ascontiguousarray(matrix).reshape(-1))
+    return pa.FixedSizeListArray.from_arrays(flat, matrix.shape[1])
+
+
+def frame_columns(episode: Episode, episode_index: int, first_index: int, task_index: int, fps: int) -> dict:
+    """The L = T + 1 data rows of an episode (the last row's action is zero padding)."""
+    n_rows = episode.length + 1
+    pad = np.zeros(n_rows, dtype=bool)
+    pad[-1] = True
+    actions = np.concatenate([episode.actions, np.zeros((1, episode.actions.shape[1]))]).astype(np.float32)
+    # The padded row has no action, hence no reward; its success is the last step's (what the
+    # final frame shows), and it is done like the step before it.
+    rewards = np.append(episode.rewards, 0.0).astype(np.float32)
+    successes = np.append(episode.successes, episode.successes[-1]).astype(bool)
+    frame_index = np.arange(n_rows, dtype=np.int64)
+    columns = {"observation.state": episode.states.astype(np.float32)}
+    if episode.env_states.shape[1]:
+        columns["observation.environment_state"] = episode.env_states.astype(np.float32)
+    columns |= {
+        "action": actions,
+        "timestamp": (frame_index / fps).astype(np.float32),
+        "frame_index": frame_index,
+        "episode_index": np.full(n_rows, episode_index, dtype=np.int64),
+        "index": first_index + frame_index,
+        "task_index": np.full(n_rows, task_index, dtype=np.int64),
+        "next.reward": rewards,
+        "next.success": successes,
+        "next.done": frame_index >= episode.length - 1,
+        "action_is_pad": pad,
+    }
+    return columns
+
+
+def to_arrow(columns: Mapping[str, np.ndarray]) -> dict[str, pa.Array]:
+    """Numpy columns -> arrow columns (matrices become fixed-size lists)."""
+    return {k: vector_array(v) if v.ndim == 2 else pa.array(v) for k, v in columns.items()}
+
+
+def feature_stats(values: np.ndarray) -> dict[str, np.ndarray]:
+    """min/max/mean/std/count over rows of an (L,) or (L, D) array; vectors come out (1,) or (D,)."""
+    values = values.astype(np.float64).reshape(len(values), -1)
+    return {
+        "min": values.min(axis=0),
+        "max": values.max(axis=0),
+        "mean": values.mean(axis=0),
+        "std": values.std(axis=0),
+        "count": np.array([len(values)]),
+    }
+
+
+def image_stats(frames: np.ndarray) -> dict[str, np.ndarray]:
+    """Per-channel stats of (N, H, W, 3) uint8 frames in [0, 1], shaped (3, 1, 1) like LeRobot's."""
+    stats = feature_stats(frames.reshape(-1, 3) / 255.0)
+    return {k: v.reshape(3, 1, 1) for k, v in stats.items() if k != "count"} | {"count": np.array([len(frames)])}
+
+
+def episode_stats(columns: Mapping[str, np.ndarray], video_key: str, frames: np.ndarray) -> dict:
+    """Stats of every numeric feature of one episode, plus the camera's per-channel stats.
+
+    Padded actions are left out of the action stats: they are not actions, and zeros would pull
+    the normalisation towards 0.
+    """
+    stats = {}
+    for name, values in columns.items():
+        if name == "action":
+            values = values[~columns["action_is_pad"]]
+        stats[name] = feature_stats(values)
+    stats[video_key] = image_stats(frames)
+    return stats
+
+
+def aggregate_stats(stats_list: Sequence[Mapping[str, Mapping[str, Any]]]) -> dict:
+    """Combine per-episode (or per-dataset) stats: exact pooled mean and standard deviation."""
+    out = {}
+    for name in dict.fromkeys(k for stats in stats_list for k in stats):
+        parts = [{k: np.asarray(v, dtype=np.float64) for k, v in s[name].items()} for s in stats_list if name in s]
+        counts = np.array([p["count"].reshape(-1)[0] for p in parts])  # (K,)
+        means = np.stack([p["mean"] for p in parts])  # (K, *shape)
+        weights = (counts / counts.sum()).reshape(-1, *[1] * (means.ndim - 1))
+        mean = (weights * means).sum(axis=0)
+        stds = np.stack([p["std"] for p in parts])
+        variance = (weights * (stds**2 + (means - mean) ** 2)).sum(axis=0)
+        out[name] = {
+            "min": np.min([p["min"] for p in parts], axis=0),
+            "max": np.max([p["max"] for p in parts], axis=0),
+            "mean": mean,
+            "std": np.sqrt(variance),
+            "count": np.array([int(counts.sum())]),
+        }
+    return out
+
+
+def stats_to_json(stats: Mapping[str, Mapping[str, np.ndarray]]) -> dict:
+    """Stats with numpy values -> nested lists (``count`` stays integer)."""
+    return {
+        name: {k: (np.asarray(v).astype(np.int64) if k == "count" else np.asarray(v)).tolist() for k, v in s.items()}
+        for name, s in stats.items()
+    }
+
+
+def info_columns(info: EpisodeInfo) -> dict[str, Any]:
+    """The ``gymnast/...`` metadata columns of an episode (one per `EpisodeInfo` field, plus its key)."""
+    return {f"{GYMNAST_PREFIX}{k}": v for k, v in info.to_dict().items()} | {KEY_COLUMN: info.key}
+
+
+def has_info_columns(names: Sequence[str]) -> bool:
+    """Whether episode metadata was written by gymnast (it has ``gymnast/...`` columns)."""
+    return any(name.startswith(GYMNAST_PREFIX) for name in names)
+
+
+def check_info_columns(schema: pa.Schema, path: Path) -> None:
+    """Every `EpisodeInfo` column must be present with a compatible type."""
+    for name, kind in INFO_COLUMNS.items():
+        if name not in schema.names:
+            raise DatasetError(f"{path}: field {name!r} is missing")
+        if not compatible_type(schema.field(name).type, kind):
+            raise DatasetError(f"{path}: field {name!r} has type {schema.field(name).type}, expected {kind}")
+
+
+def compatible_type(actual: pa.DataType, expected: pa.DataType) -> bool:
+    """Whether values of arrow type ``actual`` can be read as ``expected`` without loss of meaning."""
+    if pa.types.is_floating(expected):
+        return pa.types.is_floating(actual) or pa.types.is_integer(actual)
+    if pa.types.is_integer(expected):
+        return pa.types.is_integer(actual)
+    if pa.types.is_string(expected):
+        return pa.types.is_string(actual) or pa.types.is_large_string(actual)
+    return pa.types.is_boolean(actual) or pa.types.is_integer(actual)  # a flag may be stored as 0/1
+
+
+def episode_info(ref: EpisodeRef, successes: np.ndarray | None) -> EpisodeInfo:
+    """The episode's facts: from ``gymnast/...`` columns, or defaults for datasets made elsewhere.
+
+    Defaults: task and instruction are the LeRobot task string, behaviour ``expert``, noise 0,
+    seed -1, env_variant ``external``, success = any ``next.success`` if recorded, else True.
+    """
+    if has_info_columns(list(ref.columns)):
+        values = {name.removeprefix(GYMNAST_PREFIX): ref.columns[name] for name in INFO_COLUMNS}
+        try:
+            return EpisodeInfo(**values)
+        except (TypeError, ValueError) as e:
+            raise DatasetError(f"{ref.meta_path}: episode {ref.index}: {e}") from e
+    success = bool(successes.any()) if successes is not None else True
+    return EpisodeInfo(ref.task, ref.task, success, "expert", 0.0, -1, "external")
+
+
+def decode_images(table: pa.Table, name: str, path: Path) -> np.ndarray:
+    """Frames stored in the rows (LeRobot ``image`` features: structs of encoded image bytes)."""
+    require_columns(table, [name], path)
+    column = table.column(name).combine_chunks()
+    if not pa.types.is_struct(column.type) or column.type.get_field_index("bytes") < 0:
+        raise DatasetError(f"{path}: field {name!r} has type {column.type}, expected struct<bytes, path>")
+    try:
+        images = [np.asarray(Image.open(io.BytesIO(b)).convert("RGB")) for b in column.field("bytes").to_pylist()]
+    except (OSError, TypeError) as e:
+        raise DatasetError(f"{path}: field {name!r}: cannot decode an image: {e}") from e
+    return np.stack(images)
+
+
+def assemble_episode(ref: EpisodeRef, rows: pa.Table, frames: np.ndarray) -> Episode:
+    """Build an `Episode` from its L data rows and L frames.
+
+    Rows written by gymnast end with one padded action (``action_is_pad``); rows from elsewhere
+    pair every frame with an action, and the last action is dropped because the frame it leads
+    to was not recorded. Missing optional fields become zeros (rewards, environment state of
+    width 0); missing ``next.success`` marks only the last step successful.
+    """
+    path, n_rows = ref.data_path, rows.num_rows
+    if n_rows < 2:
+        raise DatasetError(f"{path}: episode {ref.index} has {n_rows} rows, at least 2 are needed")
+    if len(frames) != n_rows:
+        source = ref.video_path or path
+        raise DatasetError(f"{source}: episode {ref.index} has {len(frames)} frames for {n_rows} data rows")
+    n_steps = n_rows - 1
+    actions = column_matrix(rows, "action", path)
+    if "action_is_pad" in rows.column_names:
+        pad = column_vector(rows, "action_is_pad", path, bool)
+        if pad[:-1].any() or not pad[-1]:
+            raise DatasetError(f"{path}: field 'action_is_pad' of episode {ref.index} must mark only the last row")
+    names = rows.column_names
+    env_states = (
+        column_matrix(rows, "observation.environment_state", path)
+        if "observation.environment_state" in names
+        else np.zeros((n_rows, 0), np.float32)
+    )
+    rewards = column_vector(rows, "next.reward", path, np.float32)[:n_steps] if "next.reward" in names else None
+    all_successes = column_vector(rows, "next.success", path, bool) if "next.success" in names else None
+    if all_successes is None:
+        successes = np.zeros(n_steps, bool)
+        successes[-1] = True
+    else:
+        successes = all_successes[:n_steps]
+    try:
+        return Episode(
+            frames=frames,
+            states=column_matrix(rows, "observation.state", path),
+            env_states=env_states,
+            actions=actions[:n_steps],
+            rewards=rewards if rewards is not None else np.zeros(n_steps, np.float32),
+            successes=successes,
+            info=episode_info(ref, all_successes),
+        )
+    except ValueError as e:
+        if isinstance(e, DatasetError):
+            raise
+        raise DatasetError(f"{path}: episode {ref.index}: {e}") from e

@@ -1,0 +1,242 @@
+"""LeRobot v3.0 layout: file paths, ``info.json``, the episode index and the task table.
+
+v3.0 packs many episodes into each file. ``meta/episodes/chunk-XXX/file-XXX.parquet`` holds one row
+per episode saying where its frames are: rows [dataset_from_index, dataset_to_index) of a data
+file and [from_timestamp, to_timestamp) of a video file. ``meta/info.json`` counts the episodes;
+rows beyond ``total_episodes`` belong to an unfinished write and are ignored.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
+
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from gymnast.data.lerobot_format import (
+    ACTION_NAMES,
+    STATE_NAMES,
+    DatasetError,
+    EpisodeRef,
+    check_info_columns,
+    compatible_type,
+    has_info_columns,
+    read_parquet,
+)
+
+CODEBASE_VERSION = "v3.0"
+INFO_PATH = "meta/info.json"
+STATS_PATH = "meta/stats.json"
+TASKS_PATH = "meta/tasks.parquet"
+EPISODES_DIR = "meta/episodes"
+CHUNK_FILE = "chunk-{chunk_index:03d}/file-{file_index:03d}"
+EPISODES_PATH = EPISODES_DIR + "/" + CHUNK_FILE + ".parquet"
+DATA_PATH = "data/" + CHUNK_FILE + ".parquet"
+VIDEO_PATH = "videos/{video_key}/" + CHUNK_FILE + ".mp4"
+DEFAULT_CHUNKS_SIZE = 1000
+DEFAULT_DATA_FILE_SIZE_IN_MB = 100
+DEFAULT_VIDEO_FILE_SIZE_IN_MB = 500
+
+_INT, _FLOAT = pa.int64(), pa.float64()
+INDEX_COLUMNS = {
+    "episode_index": _INT,
+    "length": _INT,
+    "data/chunk_index": _INT,
+    "data/file_index": _INT,
+    "dataset_from_index": _INT,
+    "dataset_to_index": _INT,
+}
+
+
+def video_columns(video_key: str) -> dict[str, pa.DataType]:
+    """The episode-index columns locating an episode in the video files of one camera."""
+    prefix = f"videos/{video_key}/"
+    return {
+        prefix + "chunk_index": _INT,
+        prefix + "file_index": _INT,
+        prefix + "from_timestamp": _FLOAT,
+        prefix + "to_timestamp": _FLOAT,
+    }
+
+
+def load_info(root: Path) -> dict:
+    """Read ``meta/info.json``; errors name the file."""
+    path = root / INFO_PATH
+    if not path.is_file():
+        raise FileNotFoundError(f"no LeRobot dataset at {root}: {path} not found")
+    try:
+        info = json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise DatasetError(f"{path}: not valid JSON: {e}") from e
+    if not isinstance(info, dict):
+        raise DatasetError(f"{path}: expected a JSON object, got {type(info).__name__}")
+    return info
+
+
+def info_field(info: Mapping, name: str, kind: type | tuple[type, ...], path: Path) -> Any:
+    """A required field of ``info.json`` with the expected Python type."""
+    value = info.get(name)
+    if not isinstance(value, kind) or isinstance(value, bool) and kind is not bool:
+        raise DatasetError(f"{path}: field {name!r} is {value!r}, expected {kind}")
+    return value
+
+
+def read_episode_rows(
+    root: Path, info: Mapping, keep: Callable[[str], bool] = lambda name: not name.startswith("stats/")
+) -> list[tuple[Path, dict]]:
+    """The committed episodes' metadata rows, in episode order, each with the file it came from.
+
+    Args:
+        root: dataset directory.
+        info: its ``info.json``.
+        keep: which columns to read (per-episode stats are skipped by default: they are large and
+            only the writer's recovery needs them).
+    """
+    total = info_field(info, "total_episodes", int, root / INFO_PATH)
+    rows = []
+    for path in sorted((root / EPISODES_DIR).glob("chunk-*/file-*.parquet")):
+        schema = _read_schema(path)
+        for name, kind in INDEX_COLUMNS.items():
+            _check_column(schema, name, kind, path)
+        if has_info_columns(schema.names):
+            check_info_columns(schema, path)
+        table = read_parquet(path, [name for name in schema.names if keep(name)])
+        rows += [(path, row) for row in table.to_pylist() if row["episode_index"] < total]
+    rows.sort(key=lambda item: item[1]["episode_index"])
+    found = [row["episode_index"] for _, row in rows]
+    if found != list(range(total)):
+        missing = sorted(set(range(total)) - set(found))[:5]
+        raise DatasetError(
+            f"{root / EPISODES_DIR}: info.json lists {total} episodes but the episode metadata has "
+            f"{len(found)} rows below that index (missing e.g. {missing}, or duplicates)"
+        )
+    return rows
+
+
+def episode_refs(root: Path, info: Mapping, image_key: str) -> list[EpisodeRef]:
+    """Locate every committed episode of a v3.0 dataset; ``image_key`` is the camera feature read."""
+    info_path = root / INFO_PATH
+    data_template = info_field(info, "data_path", str, info_path)
+    is_video = info["features"][image_key].get("dtype") == "video"
+    video_template = info_field(info, "video_path", str, info_path) if is_video else None
+    refs = []
+    for path, row in read_episode_rows(root, info):
+        if is_video:
+            for name in video_columns(image_key):
+                if row.get(name) is None:
+                    raise DatasetError(f"{path}: field {name!r} is missing for episode {row['episode_index']}")
+        tasks = row.get("tasks")
+        if isinstance(tasks, list) and tasks and isinstance(tasks[0], str):
+            task = tasks[0]
+        elif isinstance(tasks, str):
+            task = tasks
+        else:
+            raise DatasetError(f"{path}: field 'tasks' of episode {row['episode_index']} is {tasks!r}, expected a list of strings")
+        prefix = f"videos/{image_key}/"
+        refs.append(
+            EpisodeRef(
+                index=row["episode_index"],
+                length=row["length"],
+                task=task,
+                data_path=root / data_template.format(chunk_index=row["data/chunk_index"], file_index=row["data/file_index"]),
+                rows=(row["dataset_from_index"], row["dataset_to_index"]),
+                video_path=None
+                if video_template is None
+                else root
+                / video_template.format(
+                    video_key=image_key, chunk_index=row[prefix + "chunk_index"], file_index=row[prefix + "file_index"]
+                ),
+                video_span=(row.get(prefix + "from_timestamp", 0.0), row.get(prefix + "to_timestamp", 0.0)),
+                columns=row,
+                meta_path=path,
+            )
+        )
+    return refs
+
+
+def build_features(shapes: Mapping[str, tuple[int, ...]], fps: int, image_key: str, video: Mapping) -> dict:
+    """``info.json`` features: every data column plus the camera video with its stream description."""
+
+    def vector(name: str, names: list[str] | None) -> dict:
+        size = shapes[name][0]
+        return {"dtype": "float32", "shape": [size], "names": names if names and len(names) == size else None}
+
+    def scalar(dtype: str) -> dict:
+        return {"dtype": dtype, "shape": [1], "names": None}
+
+    height, width, channels = shapes[image_key]
+    features = {
+        image_key: {
+            "dtype": "video",
+            "shape": [height, width, channels],
+            "names": ["height", "width", "channels"],
+            "info": dict(video),
+        },
+        "observation.state": vector("observation.state", STATE_NAMES),
+    }
+    if shapes["observation.environment_state"][0]:
+        features["observation.environment_state"] = vector("observation.environment_state", None)
+    features |= {
+        "action": vector("action", ACTION_NAMES),
+        "timestamp": scalar("float32"),
+        "frame_index": scalar("int64"),
+        "episode_index": scalar("int64"),
+        "index": scalar("int64"),
+        "task_index": scalar("int64"),
+        "next.reward": scalar("float32"),
+        "next.success": scalar("bool"),
+        "next.done": scalar("bool"),
+        "action_is_pad": scalar("bool"),
+    }
+    for name, feature in features.items():
+        if name != image_key:
+            feature["fps"] = fps  # LeRobot v3.0 gives every non-video feature its rate
+    return features
+
+
+def tasks_table(tasks: Mapping[str, int]) -> pa.Table:
+    """``meta/tasks.parquet``: task strings and their ``task_index``.
+
+    LeRobot reads this file with pandas and expects the task string as the DataFrame's index, so
+    the table carries the pandas metadata that makes the ``task`` column the index.
+    """
+    table = pa.table({"task_index": pa.array(list(tasks.values()), pa.int64()), "task": pa.array(list(tasks), pa.string())})
+    pandas_metadata = {
+        "index_columns": ["task"],
+        "column_indexes": [
+            {"name": None, "field_name": None, "pandas_type": "unicode", "numpy_type": "object", "metadata": {"encoding": "UTF-8"}}
+        ],
+        "columns": [
+            {"name": "task_index", "field_name": "task_index", "pandas_type": "int64", "numpy_type": "int64", "metadata": None},
+            {"name": "task", "field_name": "task", "pandas_type": "unicode", "numpy_type": "object", "metadata": None},
+        ],
+        "creator": {"library": "pyarrow", "version": pa.__version__},
+        "pandas_version": "2.2.0",
+    }
+    return table.replace_schema_metadata({"pandas": json.dumps(pandas_metadata)})
+
+
+def read_tasks(path: Path) -> dict[str, int]:
+    """Task string -> task_index, from a ``tasks.parquet`` written by gymnast or by LeRobot."""
+    table = read_parquet(path)
+    name = next((n for n in ("task", "__index_level_0__") if n in table.column_names), None)
+    if name is None or "task_index" not in table.column_names:
+        raise DatasetError(f"{path}: fields 'task' and 'task_index' are needed, found {table.column_names}")
+    return dict(zip(table.column(name).to_pylist(), table.column("task_index").to_pylist(), strict=True))
+
+
+def _read_schema(path: Path) -> pa.Schema:
+    try:
+        return pq.read_schema(path)
+    except (pa.ArrowException, OSError) as e:
+        raise DatasetError(f"{path}: cannot read parquet file: {e}") from e
+
+
+def _check_column(schema: pa.Schema, name: str, kind: pa.DataType, path: Path) -> None:
+    if name not in schema.names:
+        raise DatasetError(f"{path}: field {name!r} is missing")
+    if not compatible_type(schema.field(name).type, kind):
+        raise DatasetError(f"{path}: field {name!r} has type {schema.field(name).type}, expected {kind}")

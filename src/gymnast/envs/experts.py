@@ -1,0 +1,73 @@
+"""Scripted behaviours that produce demonstrations and deliberate failures.
+
+Meta-World ships a hand-written policy per task that reads the full simulator state. Datasets
+need more than its successes: world models and judges must also see what failure looks like, so
+there are noisy experts, random actions, and the expert of another task (motion that looks
+purposeful but does the wrong thing).
+"""
+
+from __future__ import annotations
+
+import zlib
+from typing import Protocol
+
+import numpy as np
+from metaworld.policies import ENV_POLICY_MAP
+
+from gymnast.data.schema import BEHAVIOURS
+from gymnast.envs.tasks import MT50, check_task
+
+
+class Behaviour(Protocol):
+    """Maps the simulator state to an action in [-1, 1]^4."""
+
+    def __call__(self, env_state: np.ndarray) -> np.ndarray: ...
+
+
+class ScriptedExpert:
+    """Meta-World's scripted policy for `task`, with optional Gaussian action noise.
+
+    Args:
+        task: whose policy to run.
+        noise: standard deviation of the noise added to every action (then clipped to [-1, 1]).
+        rng: source of the noise.
+    """
+
+    def __init__(self, task: str, noise: float = 0.0, rng: np.random.Generator | None = None) -> None:
+        self._policy = ENV_POLICY_MAP[check_task(task)]()
+        self._noise = noise
+        self._rng = rng or np.random.default_rng(0)
+
+    def __call__(self, env_state: np.ndarray) -> np.ndarray:
+        action = np.asarray(self._policy.get_action(env_state), dtype=np.float32)
+        if self._noise > 0:
+            action = action + self._rng.normal(0.0, self._noise, size=action.shape).astype(np.float32)
+        return np.clip(action, -1.0, 1.0)
+
+
+class RandomActions:
+    """Uniform random actions (the noise argument is unused: they are as noisy as it gets)."""
+
+    def __init__(self, rng: np.random.Generator) -> None:
+        self._rng = rng
+
+    def __call__(self, env_state: np.ndarray) -> np.ndarray:
+        return self._rng.uniform(-1.0, 1.0, size=4).astype(np.float32)
+
+
+def wrong_task_for(task: str, seed: int) -> str:
+    """A task other than `task`, picked deterministically from the seed."""
+    others = [t for t in MT50 if t != task]
+    return others[zlib.crc32(f"{task}/{seed}".encode()) % len(others)]
+
+
+def make_behaviour(behaviour: str, task: str, noise: float, seed: int) -> Behaviour:
+    """Builds the named behaviour (see `gymnast.data.schema.BEHAVIOURS`) for one episode."""
+    rng = np.random.default_rng([zlib.crc32(task.encode()), seed, 2])
+    if behaviour in ("expert", "noisy_expert"):
+        return ScriptedExpert(task, noise, rng)
+    if behaviour == "random":
+        return RandomActions(rng)
+    if behaviour == "wrong_task_expert":
+        return ScriptedExpert(wrong_task_for(task, seed), noise, rng)
+    raise ValueError(f"unknown behaviour {behaviour!r}; choose one of {BEHAVIOURS}")
