@@ -7,8 +7,23 @@ mutations, and the resolved configuration is saved with every run and dataset.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Annotated
+
+import tyro
 
 from gymnast.envs.render import CameraPose
+
+CommaFloats = Annotated[
+    tuple[float, ...],
+    tyro.constructors.PrimitiveConstructorSpec(
+        nargs=1,
+        metavar="X,Y,...",
+        instance_from_str=lambda args: tuple(float(x) for x in args[0].split(",") if x.strip()),
+        is_instance=lambda value: isinstance(value, tuple),
+        str_from_instance=lambda value: [",".join(f"{x:g}" for x in value)],
+    ),
+]
+"""A tuple of floats written on the command line as ``0,0.1,0.3``."""
 
 
 @dataclass(frozen=True)

@@ -57,7 +57,8 @@ class EpisodeRef:
         length: number of rows L (frames) of the episode.
         task: the LeRobot task string (the language instruction).
         data_path: parquet file holding the episode's rows.
-        rows: [from, to) range of the global ``index`` column inside ``data_path``.
+        rows: [from, to) range of the global ``index`` column inside ``data_path``; None when the
+            file holds this episode only (v2.1).
         video_path: mp4 holding the episode's frames, or None when images are stored in the rows.
         video_span: [from, to) timestamps in seconds of the episode inside ``video_path``.
         columns: the episode's metadata row (``gymnast/...`` columns among others).
@@ -68,7 +69,7 @@ class EpisodeRef:
     length: int
     task: str
     data_path: Path
-    rows: tuple[int, int]
+    rows: tuple[int, int] | None
     video_path: Path | None
     video_span: tuple[float, float]
     columns: Mapping[str, Any]

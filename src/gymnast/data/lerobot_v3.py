@@ -85,13 +85,17 @@ def info_field(info: Mapping, name: str, kind: type | tuple[type, ...], path: Pa
 
 
 def read_episode_rows(
-    root: Path, info: Mapping, keep: Callable[[str], bool] = lambda name: not name.startswith("stats/")
+    root: Path,
+    info: Mapping,
+    required: Mapping[str, pa.DataType] = INDEX_COLUMNS,
+    keep: Callable[[str], bool] = lambda name: not name.startswith("stats/"),
 ) -> list[tuple[Path, dict]]:
     """The committed episodes' metadata rows, in episode order, each with the file it came from.
 
     Args:
         root: dataset directory.
         info: its ``info.json``.
+        required: columns every episode-metadata file must have, with their types.
         keep: which columns to read (per-episode stats are skipped by default: they are large and
             only the writer's recovery needs them).
     """
@@ -99,7 +103,7 @@ def read_episode_rows(
     rows = []
     for path in sorted((root / EPISODES_DIR).glob("chunk-*/file-*.parquet")):
         schema = _read_schema(path)
-        for name, kind in INDEX_COLUMNS.items():
+        for name, kind in required.items():
             _check_column(schema, name, kind, path)
         if has_info_columns(schema.names):
             check_info_columns(schema, path)
@@ -122,12 +126,9 @@ def episode_refs(root: Path, info: Mapping, image_key: str) -> list[EpisodeRef]:
     data_template = info_field(info, "data_path", str, info_path)
     is_video = info["features"][image_key].get("dtype") == "video"
     video_template = info_field(info, "video_path", str, info_path) if is_video else None
+    required = INDEX_COLUMNS | (video_columns(image_key) if is_video else {})
     refs = []
-    for path, row in read_episode_rows(root, info):
-        if is_video:
-            for name in video_columns(image_key):
-                if row.get(name) is None:
-                    raise DatasetError(f"{path}: field {name!r} is missing for episode {row['episode_index']}")
+    for path, row in read_episode_rows(root, info, required):
         tasks = row.get("tasks")
         if isinstance(tasks, list) and tasks and isinstance(tasks[0], str):
             task = tasks[0]

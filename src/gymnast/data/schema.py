@@ -25,6 +25,11 @@ plausible-looking failure).
 """
 
 
+def episode_key(env_variant: str, task: str, behaviour: str, noise: float, seed: int) -> str:
+    """The identity of an episode's recipe: the same recipe always yields the same episode."""
+    return f"{env_variant}/{task}/{behaviour}/{noise:g}/{seed}"
+
+
 @dataclass(frozen=True)
 class EpisodeInfo:
     """Per-episode facts that are not per-frame data.
@@ -54,7 +59,7 @@ class EpisodeInfo:
     @property
     def key(self) -> str:
         """Identifies the episode's recipe, so a resumed collection knows what is already done."""
-        return f"{self.env_variant}/{self.task}/{self.behaviour}/{self.noise:g}/{self.seed}"
+        return episode_key(self.env_variant, self.task, self.behaviour, self.noise, self.seed)
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)

@@ -9,6 +9,7 @@ camera can frame the table so that arm, objects and goal are all in view and upr
 from __future__ import annotations
 
 import atexit
+import os
 import weakref
 from dataclasses import dataclass
 from typing import Sequence
@@ -17,9 +18,14 @@ import mujoco
 import numpy as np
 
 # MuJoCo's EGL backend terminates its display at exit; a renderer garbage-collected after that
-# fails noisily. Our exit hook is registered later, so it runs earlier and closes them in time.
+# fails noisily. Our exit hook is registered after the first context exists (and with it MuJoCo's
+# hook), so it runs earlier and closes every live renderer in time.
 _LIVE_RENDERERS: weakref.WeakSet = weakref.WeakSet()
-atexit.register(lambda: [r.close() for r in list(_LIVE_RENDERERS)])
+
+
+def _close_live_renderers() -> None:
+    for renderer in list(_LIVE_RENDERERS):
+        renderer.close()
 
 
 @dataclass(frozen=True)
@@ -53,7 +59,7 @@ class Marker:
     """A sphere drawn into the image only (no physics), e.g. to make an invisible goal visible."""
 
     position: tuple[float, float, float]
-    radius: float = 0.02
+    radius: float = 0.025
     rgba: tuple[float, float, float, float] = (0.1, 0.9, 0.1, 1.0)
 
 
@@ -70,7 +76,15 @@ class SceneRenderer:
     def __init__(self, model: mujoco.MjModel, height: int, width: int, camera: CameraPose) -> None:
         # Multisampling must be off before the GL context is created; it costs ~4x on a CPU.
         model.vis.quality.offsamples = 0
-        self._renderer = mujoco.Renderer(model, height=height, width=width)
+        try:
+            self._renderer = mujoco.Renderer(model, height=height, width=width)
+        except mujoco.FatalError as error:
+            raise RuntimeError(
+                "MuJoCo could not create an offscreen OpenGL context "
+                f"(MUJOCO_GL={os.environ.get('MUJOCO_GL')!r}). MUJOCO_GL must be set to egl or "
+                "osmesa before mujoco is first imported (importing gymnast first does it), and the "
+                "system needs libegl1 + libgl1-mesa-dri (or libosmesa6); `gymnast doctor` checks."
+            ) from error
         self._camera = mujoco.MjvCamera()
         self._camera.type = mujoco.mjtCamera.mjCAMERA_FREE
         self.camera = camera
@@ -80,6 +94,9 @@ class SceneRenderer:
         self._option.sitegroup[:] = 0
         self.height, self.width = height, width
         self._closed = False
+        if not _LIVE_RENDERERS:
+            atexit.unregister(_close_live_renderers)
+            atexit.register(_close_live_renderers)
         _LIVE_RENDERERS.add(self)
 
     @property
@@ -99,7 +116,7 @@ class SceneRenderer:
         scene = self._renderer.scene
         scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = 0
         scene.flags[mujoco.mjtRndFlag.mjRND_REFLECTION] = 0
-        for marker in markers:
+        for index, marker in enumerate(markers):
             if scene.ngeom >= scene.maxgeom:
                 raise RuntimeError(f"scene has no room for marker geoms (maxgeom={scene.maxgeom})")
             mujoco.mjv_initGeom(
@@ -110,6 +127,9 @@ class SceneRenderer:
                 mat=np.eye(3).ravel(),
                 rgba=np.asarray(marker.rgba, dtype=np.float32),
             )
+            # mjv_initGeom leaves the ids unset; segmentation maps markers to (index, UNKNOWN).
+            geom = scene.geoms[scene.ngeom]
+            geom.segid, geom.objid, geom.objtype = scene.ngeom, index, mujoco.mjtObj.mjOBJ_UNKNOWN
             scene.ngeom += 1
 
     def render(self, data: mujoco.MjData, markers: Sequence[Marker] = ()) -> np.ndarray:

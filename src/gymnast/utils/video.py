@@ -104,7 +104,8 @@ def encode_video(
     """Encode RGB frames into an mp4 file (frame i is shown at time i / fps).
 
     Args:
-        path: output file; written in mp4 format whatever its extension (so it can be a temp name).
+        path: output file (parent directories are created); written in mp4 format whatever its
+            extension, so it can be a temporary name.
         frames: (N, H, W, 3) uint8 RGB, N >= 1.
         fps: frames per second, a positive integer.
         codec: encoder, pixel format and options.
@@ -119,8 +120,9 @@ def encode_video(
     _, height, width, _ = frames.shape
     if "420" in codec.pix_fmt and (height % 2 or width % 2):
         raise ValueError(f"pix_fmt {codec.pix_fmt} needs an even height and width, got {height}x{width}")
-    forced = set(keyframes)
+    forced = {int(k) for k in keyframes}
     time_base = Fraction(1, fps)
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
     with av.open(str(path), mode="w", format="mp4") as container:
         stream = container.add_stream(codec.codec, rate=fps, options=dict(codec.options))
         stream.width, stream.height, stream.pix_fmt = width, height, codec.pix_fmt

@@ -1,0 +1,33 @@
+# Two commands set everything up on a fresh machine: `make demo` and `make test`.
+PYTHON ?= python3
+VENV := .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.installed
+DEMO := runs/demo
+
+.PHONY: demo test setup clean
+
+$(STAMP): pyproject.toml Makefile
+	@$(PYTHON) -c 'import sys; sys.exit(sys.version_info < (3, 11))' || \
+		{ echo "gymnast needs Python >= 3.11 (found $$($(PYTHON) --version)); set PYTHON=python3.11"; exit 1; }
+	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -e '.[dev]'
+	@# A CUDA build of torch (or its nvidia-* wheels) would mean gigabytes nobody asked for.
+	@! $(BIN)/python -m pip list 2>/dev/null | grep -qi '^nvidia' || \
+		{ echo "set-up pulled CUDA packages; the CPU build is expected"; exit 1; }
+	$(BIN)/gymnast doctor
+	@touch $(STAMP)
+
+setup: $(STAMP)
+
+test: $(STAMP)
+	$(BIN)/python -m pytest
+
+demo: $(STAMP)
+	$(BIN)/gymnast collect --tasks drawer-open-v3,reach-v3,push-v3 --episodes-per-task 4 --out $(DEMO)/data
+	$(BIN)/gymnast inspect --data $(DEMO)/data --sheet $(DEMO)/episodes.png --episodes 6
+	$(BIN)/gymnast contact-sheet --tasks mt10 --out $(DEMO)/mt10.png
+
+clean:
+	rm -rf $(VENV) runs .pytest_cache

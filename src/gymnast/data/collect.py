@@ -1,0 +1,200 @@
+"""`gymnast collect`: record scripted episodes in the real world into a LeRobot v3.0 dataset.
+
+The plan is a deterministic list of episode recipes (task, behaviour, noise, seed), so a rerun
+with the same arguments skips every recipe already in the dataset and records only the rest, and
+a rerun with more episodes per task extends it. Finished episodes are staged durably as they
+arrive (a crash loses at most the episodes in flight) and consolidated into the dataset files
+every `flush_every` episodes and at the end.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import logging
+import math
+from collections import defaultdict
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from gymnast.config import CommaFloats, EnvConfig
+from gymnast.data.lerobot import EpisodeDataset
+from gymnast.data.lerobot_writer import LeRobotWriter
+from gymnast.data.schema import Episode, EpisodeInfo, episode_key
+from gymnast.envs.experts import make_behaviour
+from gymnast.envs.gap import get_gap
+from gymnast.envs.metaworld import MetaWorldEnv
+from gymnast.envs.parallel import cached_env, parallel_map
+from gymnast.envs.tasks import DATA_SEEDS, resolve_tasks
+from gymnast.utils.atomic import write_json
+
+logger = logging.getLogger(__name__)
+
+SETTINGS_FILE = "gymnast_collect.json"
+"""Beside the dataset: the environment settings it was recorded with, checked on every rerun."""
+
+
+@dataclass(frozen=True)
+class CollectConfig:
+    """What to record."""
+
+    tasks: str = "mt10"
+    """Task names and/or task sets (mt10, mt50), comma-separated."""
+    episodes_per_task: int = 10
+    """Expert episodes per task; they cycle through the noise levels."""
+    noise: CommaFloats = (0.0, 0.1, 0.3)
+    """Standard deviations of Gaussian action noise for the expert episodes (0 = clean expert)."""
+    failure_fraction: float = 0.25
+    """Extra failure episodes per task (random actions, another task's expert), as a fraction of
+    episodes_per_task, rounded up; 0 records none."""
+    first_seed: int = 0
+    """Seed of each task's first episode; episode i uses first_seed + i (data seeds only)."""
+    gap: str = "none"
+    """Record in the real world (none) or a software simulator (mild, strong)."""
+    workers: int = 2
+    """Processes that record episodes in parallel (one per core is best)."""
+    flush_every: int = 50
+    """Consolidate staged episodes into dataset files after this many."""
+    env: EnvConfig = field(default_factory=EnvConfig)
+    """Camera, image size and horizon."""
+
+    def __post_init__(self) -> None:
+        if self.episodes_per_task < 0:
+            raise ValueError(f"episodes_per_task must be >= 0, got {self.episodes_per_task}")
+        if not self.noise or any(n < 0 for n in self.noise):
+            raise ValueError(f"noise must be one or more non-negative levels, got {self.noise}")
+        last = self.first_seed + max(self.episodes_per_task, 1) - 1
+        if self.first_seed not in DATA_SEEDS or last not in DATA_SEEDS:
+            raise ValueError(
+                f"seeds {self.first_seed}..{last} leave the data seed range "
+                f"[{DATA_SEEDS.start}, {DATA_SEEDS.stop}); evaluation seeds are never recorded"
+            )
+
+    @property
+    def failures_per_task(self) -> int:
+        return math.ceil(self.episodes_per_task * self.failure_fraction)
+
+
+@dataclass(frozen=True)
+class EpisodeJob:
+    """One episode's recipe: everything needed to record it, in any process."""
+
+    task: str
+    behaviour: str
+    noise: float
+    seed: int
+    gap: str
+    env: EnvConfig
+
+    @property
+    def key(self) -> str:
+        return episode_key(get_gap(self.gap).env_variant, self.task, self.behaviour, self.noise, self.seed)
+
+
+def plan_episodes(config: CollectConfig) -> list[EpisodeJob]:
+    """Every recipe the configuration asks for, in a fixed order."""
+    jobs = []
+    for task in resolve_tasks(config.tasks):
+        for i in range(config.episodes_per_task):
+            noise = config.noise[i % len(config.noise)]
+            behaviour = "expert" if noise == 0 else "noisy_expert"
+            jobs.append(EpisodeJob(task, behaviour, noise, config.first_seed + i, config.gap, config.env))
+        for i in range(config.failures_per_task):
+            behaviour = ("random", "wrong_task_expert")[i % 2]
+            jobs.append(EpisodeJob(task, behaviour, 0.0, config.first_seed + i, config.gap, config.env))
+    return jobs
+
+
+def record_episode(job: EpisodeJob) -> Episode:
+    """Runs one recipe to its end in this process's cached environment."""
+    env = cached_env(job.task, job.env, gap=job.gap)
+    act = make_behaviour(job.behaviour, job.task, job.noise, job.seed)
+    obs, info = env.reset(seed=job.seed)
+    frames, states, env_states = [obs["image"]], [obs["state"]], [info["env_state"]]
+    actions, rewards, successes = [], [], []
+    done = False
+    while not done:
+        action = act(env.env_state)
+        obs, reward, terminated, truncated, info = env.step(action)
+        frames.append(obs["image"])
+        states.append(obs["state"])
+        env_states.append(info["env_state"])
+        actions.append(action)
+        rewards.append(reward)
+        successes.append(info["success"])
+        done = terminated or truncated
+    return Episode(
+        frames=np.stack(frames),
+        states=np.stack(states),
+        env_states=np.stack(env_states),
+        actions=np.stack(actions).astype(np.float32),
+        rewards=np.asarray(rewards, dtype=np.float32),
+        successes=np.asarray(successes, dtype=bool),
+        info=EpisodeInfo(
+            task=job.task,
+            instruction=env.instruction,
+            success=bool(any(successes)),
+            behaviour=job.behaviour,
+            noise=job.noise,
+            seed=job.seed,
+            env_variant=env.gap.env_variant,
+        ),
+    )
+
+
+def collect(config: CollectConfig, out: str | Path, progress: bool = True) -> dict:
+    """Records every planned episode not yet in `out`; returns `success_table` of the dataset.
+
+    Raises:
+        ValueError: `out` holds a dataset recorded with other environment settings.
+    """
+    out = Path(out)
+    _check_settings(out, config)
+    writer = LeRobotWriter(out, fps=MetaWorldEnv.metadata["render_fps"])
+    plan = plan_episodes(config)
+    done = writer.keys()
+    todo = [job for job in plan if job.key not in done]
+    logger.info("%d episodes planned, %d of them already in %s", len(plan), len(plan) - len(todo), out)
+    bar = tqdm(total=len(todo), desc="collect", unit="ep", disable=not progress)
+    successes = 0
+    try:
+        for episode in parallel_map(record_episode, todo, config.workers):
+            writer.add(episode)
+            successes += episode.info.success
+            bar.update()
+            bar.set_postfix(success=f"{successes / bar.n:.0%}")
+            if writer.num_staged >= config.flush_every:
+                writer.flush()
+    finally:
+        bar.close()
+        writer.flush()
+    return success_table(EpisodeDataset(out).episodes)
+
+
+def success_table(episodes: list[EpisodeInfo]) -> dict:
+    """{task: {behaviour: [successes, episodes]}} over a dataset's episodes."""
+    table: dict = defaultdict(lambda: defaultdict(lambda: [0, 0]))
+    for info in episodes:
+        cell = table[info.task][info.behaviour]
+        cell[0] += int(info.success)
+        cell[1] += 1
+    return {task: dict(row) for task, row in table.items()}
+
+
+def _check_settings(out: Path, config: CollectConfig) -> None:
+    settings = {"env": dataclasses.asdict(config.env), "gap": config.gap}
+    path = out / SETTINGS_FILE
+    if path.exists():
+        recorded = json.loads(path.read_text())
+        current = json.loads(json.dumps(settings))  # tuples become lists, as in the file
+        for name in current:
+            if recorded.get(name) != current[name]:
+                raise ValueError(
+                    f"{path}: field {name!r} was {recorded.get(name)} when this dataset was recorded, "
+                    f"now {current[name]}; record into a new directory instead"
+                )
+    else:
+        write_json(path, settings)

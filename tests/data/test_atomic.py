@@ -1,0 +1,38 @@
+"""gymnast.utils.atomic: a file is either the old one or the new one, and no temp file is left."""
+
+from __future__ import annotations
+
+import json
+
+import pyarrow as pa
+import pyarrow.parquet as pq
+import pytest
+
+from gymnast.utils.atomic import atomic_path, is_temporary, write_json, write_parquet
+
+
+def test_writes_replace_the_file_and_leave_no_temporary(tmp_path):
+    path = tmp_path / "sub" / "info.json"
+    write_json(path, {"a": 1})
+    write_json(path, {"a": 2})
+    write_parquet(tmp_path / "t.parquet", pa.table({"x": [1, 2]}))
+    assert json.loads(path.read_text()) == {"a": 2}
+    assert pq.read_table(tmp_path / "t.parquet").column("x").to_pylist() == [1, 2]
+    assert sorted(p.name for p in tmp_path.rglob("*") if p.is_file()) == ["info.json", "t.parquet"]
+
+
+def test_a_failed_write_keeps_the_old_file(tmp_path):
+    path = tmp_path / "info.json"
+    write_json(path, {"a": 1})
+    with pytest.raises(RuntimeError), atomic_path(path) as tmp:
+        tmp.write_text("half")
+        assert is_temporary(tmp)
+        raise RuntimeError("crash")
+    assert json.loads(path.read_text()) == {"a": 1}
+    assert [p.name for p in tmp_path.iterdir()] == ["info.json"]
+
+
+def test_json_refuses_infinity(tmp_path):
+    with pytest.raises(ValueError):
+        write_json(tmp_path / "x.json", {"psnr": float("inf")})
+    assert not any(tmp_path.iterdir())
