@@ -159,13 +159,14 @@ def collect(config: CollectConfig, out: str | Path, progress: bool = True) -> di
     todo = [job for job in plan if job.key not in done]
     logger.info("%d episodes planned, %d of them already in %s", len(plan), len(plan) - len(todo), out)
     bar = tqdm(total=len(todo), desc="collect", unit="ep", disable=not progress)
-    successes = 0
+    recorded = successes = 0
     try:
         for episode in parallel_map(record_episode, todo, config.workers):
             writer.add(episode)
+            recorded += 1
             successes += episode.info.success
             bar.update()
-            bar.set_postfix(success=f"{successes / bar.n:.0%}")
+            bar.set_postfix(success=f"{successes / recorded:.0%}")
             if writer.num_staged >= config.flush_every:
                 writer.flush()
     finally:

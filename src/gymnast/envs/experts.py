@@ -8,6 +8,7 @@ purposeful but does the wrong thing).
 
 from __future__ import annotations
 
+import warnings
 import zlib
 from typing import Protocol
 
@@ -16,6 +17,10 @@ from metaworld.policies import ENV_POLICY_MAP
 
 from gymnast.data.schema import BEHAVIOURS
 from gymnast.envs.tasks import MT50, check_task
+
+# Meta-World's experts warn on every step whose command they clip to [-1, 1]; clipping is the
+# intended behaviour of their proportional controllers, so the warning is only noise.
+warnings.filterwarnings("ignore", message=r"Constant\(s\) may be too high")
 
 
 class Behaviour(Protocol):
