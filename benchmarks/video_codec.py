@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import platform
 import tempfile
@@ -50,7 +51,11 @@ def render_rollout(task: str, sizes: list[int], steps: int, seed: int) -> dict[i
     camera = mujoco.MjvCamera()
     camera.type = mujoco.mjtCamera.mjCAMERA_FREE
     camera.lookat[:] = CAMERA["lookat"]
-    camera.distance, camera.azimuth, camera.elevation = CAMERA["distance"], CAMERA["azimuth"], CAMERA["elevation"]
+    camera.distance, camera.azimuth, camera.elevation = (
+        CAMERA["distance"],
+        CAMERA["azimuth"],
+        CAMERA["elevation"],
+    )
     renderers = {size: mujoco.Renderer(env.model, size, size) for size in sizes}
     rng = np.random.default_rng(seed)
     frames: dict[int, list[np.ndarray]] = {size: [] for size in sizes}
@@ -65,6 +70,7 @@ def render_rollout(task: str, sizes: list[int], steps: int, seed: int) -> dict[i
 
 
 def measure(frames: np.ndarray, codec: VideoCodec, workdir: Path) -> dict:
+    """Encode and decode one clip; PSNR in dB (None = infinite, bit-exact), size and timings."""
     path = workdir / "clip.mp4"
     start = time.perf_counter()
     encode_video(path, frames, FPS, codec, keyframes=[0])
@@ -72,9 +78,9 @@ def measure(frames: np.ndarray, codec: VideoCodec, workdir: Path) -> dict:
     decoded = decode_video(path)
     done = time.perf_counter()
     result = psnr(frames, decoded)
-    finite = result.per_frame[np.isfinite(result.per_frame)]
+    worst = float(result.per_frame.min())
     return {
-        "psnr_min_db": float(result.per_frame.min()) if len(finite) == len(frames) else None,
+        "psnr_min_db": worst if np.isfinite(worst) else None,
         "psnr_mean_db": result.mean if np.isfinite(result.mean) else None,
         "lossless": bool(np.isinf(result.per_frame).all()),
         "bytes_per_frame": path.stat().st_size / len(frames),
@@ -84,7 +90,25 @@ def measure(frames: np.ndarray, codec: VideoCodec, workdir: Path) -> dict:
     }
 
 
+def summarise(rows: list[dict], sizes: list[int]) -> dict:
+    """Per codec: the worst frame over all runs and the mean size per frame at each image size."""
+    summary = {}
+    for name in CANDIDATES:
+        runs = [r for r in rows if r["codec"] == name]
+        mins = [r["psnr_min_db"] for r in runs if r["psnr_min_db"] is not None]
+        summary[name] = {
+            "worst_frame_psnr_db": min(mins) if mins else None,
+            "lossless": all(r["lossless"] for r in runs),
+            "kib_per_frame": {
+                size: float(np.mean([r["bytes_per_frame"] for r in runs if r["size"] == size])) / 1024
+                for size in sizes
+            },
+        }
+    return summary
+
+
 def main() -> None:
+    """Render, measure every candidate, print one line per run and write the JSON results."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--tasks", nargs="+", default=["drawer-open-v3", "pick-place-v3"])
     parser.add_argument("--sizes", nargs="+", type=int, default=[64, 96, 128])
@@ -95,37 +119,32 @@ def main() -> None:
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for seed, task in enumerate(args.tasks):
-            clips = render_rollout(task, args.sizes, args.steps, seed)
-            for size, frames in clips.items():
+            for size, frames in render_rollout(task, args.sizes, args.steps, seed).items():
                 for name, codec in CANDIDATES.items():
                     row = {"task": task, "size": size, "codec": name, **measure(frames, codec, Path(tmp))}
                     rows.append(row)
+                    worst, mean = row["psnr_min_db"] or math.inf, row["psnr_mean_db"] or math.inf
                     print(
-                        f"{task:16s} {size:4d}px {name:28s} min {row['psnr_min_db'] or float('inf'):6.2f} dB  "
-                        f"mean {row['psnr_mean_db'] or float('inf'):6.2f} dB  {row['bytes_per_frame'] / 1024:6.2f} KiB/frame"
+                        f"{task:16s} {size:4d}px {name:28s} worst {worst:6.2f} dB  mean {mean:6.2f} dB  "
+                        f"{row['bytes_per_frame'] / 1024:6.2f} KiB/frame"
                     )
-    summary = {}
-    for name in CANDIDATES:
-        mine = [r for r in rows if r["codec"] == name]
-        mins = [r["psnr_min_db"] for r in mine if r["psnr_min_db"] is not None]
-        summary[name] = {
-            "worst_frame_psnr_db": min(mins) if mins else None,
-            "lossless": all(r["lossless"] for r in mine),
-            "kib_per_frame": {
-                size: float(np.mean([r["bytes_per_frame"] for r in mine if r["size"] == size])) / 1024 for size in args.sizes
-            },
-        }
-    args.out.parent.mkdir(parents=True, exist_ok=True)
+    command = (
+        f"MUJOCO_GL=egl python benchmarks/video_codec.py --tasks {' '.join(args.tasks)} "
+        f"--sizes {' '.join(map(str, args.sizes))} --steps {args.steps}"
+    )
     result = {
-        "command": "MUJOCO_GL=egl python benchmarks/video_codec.py " + " ".join(
-            [f"--tasks {' '.join(args.tasks)}", f"--sizes {' '.join(map(str, args.sizes))}", f"--steps {args.steps}"]
-        ),
+        "command": command,
         "camera": CAMERA,
         "fps": FPS,
-        "platform": {"python": platform.python_version(), "machine": platform.machine(), "mujoco_gl": os.environ.get("MUJOCO_GL")},
-        "summary": summary,
+        "platform": {
+            "python": platform.python_version(),
+            "machine": platform.machine(),
+            "mujoco_gl": os.environ.get("MUJOCO_GL"),
+        },
+        "summary": summarise(rows, args.sizes),
         "runs": rows,
     }
+    args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(result, indent=2) + "\n")
     print(f"wrote {args.out}")
 

@@ -1,5 +1,8 @@
-"""Helpers for the data tests: episodes with smooth rendering-like frames (not noise: codecs are
-tuned for images, so noise would measure the wrong thing)."""
+"""Helpers for the data tests.
+
+Episodes get smooth rendering-like frames, not noise: codecs are tuned for images, so noise would
+measure the wrong thing.
+"""
 
 from __future__ import annotations
 

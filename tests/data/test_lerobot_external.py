@@ -2,13 +2,17 @@
 
 from __future__ import annotations
 
+import io
 import json
+import re
+import shutil
 
 import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 from data_helpers import make_episode, smooth_frames
+from PIL import Image
 
 from gymnast.data.lerobot import EpisodeDataset, LeRobotWriter
 from gymnast.data.schema import EpisodeInfo
@@ -21,12 +25,24 @@ TASK = "pick up the cube"
 def write_v21(root, lengths=(5, 8), with_next=True, channels_first=False):
     """A small v2.1 dataset as LeRobot 0.2 wrote it: one parquet and one mp4 per episode."""
     rng = np.random.default_rng(0)
-    shape, names = ([3, 32, 32], ["channels", "height", "width"]) if channels_first else ([32, 32, 3], ["height", "width", "channel"])
+    shape, names = (
+        ([3, 32, 32], ["channels", "height", "width"])
+        if channels_first
+        else ([32, 32, 3], ["height", "width", "channel"])
+    )
     features = {
-        "observation.images.top": {"dtype": "video", "shape": shape, "names": names, "info": {"video.fps": FPS}},
+        "observation.images.top": {
+            "dtype": "video",
+            "shape": shape,
+            "names": names,
+            "info": {"video.fps": FPS},
+        },
         "observation.state": {"dtype": "float32", "shape": [6], "names": None},
         "action": {"dtype": "float32", "shape": [6], "names": None},
-        **{k: {"dtype": "int64", "shape": [1], "names": None} for k in ("frame_index", "episode_index", "index", "task_index")},
+        **{
+            k: {"dtype": "int64", "shape": [1], "names": None}
+            for k in ("frame_index", "episode_index", "index", "task_index")
+        },
         "timestamp": {"dtype": "float32", "shape": [1], "names": None},
     }
     if with_next:
@@ -109,7 +125,7 @@ def test_v21_missing_data_file_names_it(tmp_path):
     write_v21(tmp_path)
     missing = tmp_path / "data/chunk-000/episode_000001.parquet"
     missing.unlink()
-    with pytest.raises(FileNotFoundError, match=str(missing)):
+    with pytest.raises(FileNotFoundError, match=re.escape(str(missing))):
         EpisodeDataset(tmp_path).load(1)
 
 
@@ -124,8 +140,34 @@ def test_v3_dataset_without_gymnast_columns_gets_the_defaults(tmp_path):
     pq.write_table(pq.read_table(data).drop_columns(["action_is_pad"]), data)
 
     dataset = EpisodeDataset(tmp_path)
-    expected = EpisodeInfo("open the drawer", "open the drawer", bool(episode.successes.any()), "expert", 0.0, -1, "external")
+    expected = EpisodeInfo(
+        "open the drawer",
+        "open the drawer",
+        bool(episode.successes.any()),
+        "expert",
+        0.0,
+        -1,
+        "external",
+    )
     assert dataset.episodes == [expected]
     loaded = dataset.load(0)
     np.testing.assert_array_equal(loaded.actions, episode.actions)  # the padded last row is dropped
     np.testing.assert_array_equal(loaded.rewards, episode.rewards)
+
+
+def test_images_stored_in_the_rows_are_read_when_there_is_no_video(tmp_path):
+    written = write_v21(tmp_path, lengths=(4,))
+    info = json.loads((tmp_path / "meta/info.json").read_text())
+    info["features"]["observation.images.top"]["dtype"] = "image"
+    (tmp_path / "meta/info.json").write_text(json.dumps(info))
+    frames = written[0][1]
+    pngs = []
+    for frame in frames:
+        buffer = io.BytesIO()
+        Image.fromarray(frame).save(buffer, format="PNG")
+        pngs.append({"bytes": buffer.getvalue(), "path": None})
+    path = tmp_path / "data/chunk-000/episode_000000.parquet"
+    pq.write_table(pq.read_table(path).append_column("observation.images.top", pa.array(pngs)), path)
+    shutil.rmtree(tmp_path / "videos")
+
+    np.testing.assert_array_equal(EpisodeDataset(tmp_path).load(0).frames, frames)  # PNG is lossless

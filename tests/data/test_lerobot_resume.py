@@ -19,7 +19,9 @@ HELPERS = Path(__file__).parent
 
 
 def committed_files(root: Path) -> list[str]:
-    return sorted(p.relative_to(root).as_posix() for p in root.rglob("*") if p.is_file() and ".staging" not in p.parts)
+    return sorted(
+        p.relative_to(root).as_posix() for p in root.rglob("*") if p.is_file() and ".staging" not in p.parts
+    )
 
 
 def test_staged_episodes_survive_a_crash_before_flush(tmp_path):
@@ -77,7 +79,10 @@ def test_process_killed_between_data_files_and_info_json_recovers_exactly(tmp_pa
     dataset = EpisodeDataset(tmp_path)
     assert [e.seed for e in dataset.episodes] == [0, 1, 2, 3]
     for i in range(4):
-        assert_same_numbers(dataset.load(i), make_episode(5 + i // 2, seed=i, instruction=dataset.episodes[i].instruction))
+        assert_same_numbers(
+            dataset.load(i),
+            make_episode(5 + i // 2, seed=i, instruction=dataset.episodes[i].instruction),
+        )
     stats = json.loads((tmp_path / "meta/stats.json").read_text())
     assert stats["action"]["count"] == [2 * 5 + 2 * 6] and dataset.info["total_tasks"] == 2
 
@@ -122,6 +127,7 @@ def test_crash_after_commit_drops_staged_duplicates(tmp_path):
 def test_crash_during_the_first_flush_leaves_no_dataset_and_loses_nothing(tmp_path, monkeypatch):
     writer = LeRobotWriter(tmp_path)
     writer.add(make_episode(5, seed=0))
+
     def crash(path, obj):
         raise OSError("crash")
 
@@ -129,7 +135,7 @@ def test_crash_during_the_first_flush_leaves_no_dataset_and_loses_nothing(tmp_pa
     with pytest.raises(OSError):
         writer.flush()
     monkeypatch.undo()
-    with pytest.raises(FileNotFoundError, match="info.json"):
+    with pytest.raises(FileNotFoundError, match=r"info\.json"):
         EpisodeDataset(tmp_path)
 
     resumed = LeRobotWriter(tmp_path)

@@ -23,10 +23,17 @@ def test_round_trip_keeps_numbers_exact_and_frames_within_the_recorded_codec_err
     assert writer.flush() == 3
 
     dataset = EpisodeDataset(tmp_path)
-    assert (len(dataset), dataset.fps, dataset.camera_key, dataset.image_shape) == (3, 80, "front", (48, 48, 3))
+    assert (len(dataset), dataset.fps, dataset.camera_key, dataset.image_shape) == (
+        3,
+        80,
+        "front",
+        (48, 48, 3),
+    )
     assert dataset.lengths == [12, 20, 7]
     assert dataset.episodes == [e.info for e in episodes]
-    recorded = pq.read_table(tmp_path / "meta/episodes/chunk-000/file-000.parquet").column("gymnast/video_psnr_db")
+    recorded = pq.read_table(tmp_path / "meta/episodes/chunk-000/file-000.parquet").column(
+        "gymnast/video_psnr_db"
+    )
     for i, (episode, db) in enumerate(zip(episodes, recorded.to_pylist(), strict=True)):
         loaded = dataset.load(i)
         assert_same_numbers(loaded, episode)
@@ -50,7 +57,9 @@ def test_layout_and_metadata_follow_lerobot_v3(tmp_path):
     video = info["features"]["observation.images.front"]
     assert video["dtype"] == "video" and video["shape"] == [48, 48, 3]
     assert video["info"]["video.codec"] == "h264" and video["info"]["video.fps"] == 80
-    assert info["features"]["action"]["shape"] == [4] and info["features"]["observation.environment_state"]["shape"] == [39]
+    assert info["features"]["action"]["shape"] == [4] and info["features"]["observation.environment_state"][
+        "shape"
+    ] == [39]
 
     assert pq.read_table(tmp_path / "meta/tasks.parquet").to_pydict() == {
         "task_index": [0, 1],
@@ -163,7 +172,12 @@ def test_real_metaworld_frames_are_recorded_above_40db(tmp_path):
     except Exception as e:  # no OpenGL here: nothing to measure
         pytest.skip(f"cannot render: {e}")
     camera = mujoco.MjvCamera()
-    camera.type, camera.distance, camera.azimuth, camera.elevation = mujoco.mjtCamera.mjCAMERA_FREE, 1.4, 135, -30
+    camera.type, camera.distance, camera.azimuth, camera.elevation = (
+        mujoco.mjtCamera.mjCAMERA_FREE,
+        1.4,
+        135,
+        -30,
+    )
     camera.lookat[:] = [0, 0.65, 0.1]
     rng, frames = np.random.default_rng(0), []
     for _ in range(20):

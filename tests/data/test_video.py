@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 from data_helpers import smooth_frames
@@ -17,7 +19,7 @@ def numbered_frames(n: int, size: int = 32) -> np.ndarray:
 
 
 def frame_ids(frames: np.ndarray, size: int = 32) -> list[int]:
-    return [int(round(f[2 : size // 2 - 2, 2 : size // 2 - 2].mean() / 4)) for f in frames]
+    return [round(float(f[2 : size // 2 - 2, 2 : size // 2 - 2].mean() / 4)) for f in frames]
 
 
 def test_default_codec_round_trip_is_above_40db(tmp_path):
@@ -70,19 +72,19 @@ def test_truncated_video_raises_naming_the_file(tmp_path):
     path = tmp_path / "a.mp4"
     encode_video(path, smooth_frames(20, 32), fps=80)
     path.write_bytes(path.read_bytes()[: path.stat().st_size // 2])
-    with pytest.raises(ValueError, match=str(path)):
+    with pytest.raises(ValueError, match=re.escape(str(path))):
         decode_video(path)
 
 
 def test_range_beyond_the_end_raises_naming_the_file(tmp_path):
     path = tmp_path / "a.mp4"
     encode_video(path, smooth_frames(10, 32), fps=80)
-    with pytest.raises(ValueError, match=rf"{path}.*expected 10 frames"):
+    with pytest.raises(ValueError, match=re.escape(str(path)) + ".*expected 10 frames"):
         decode_video(path, 5 / 80, 15 / 80)
 
 
 def test_missing_video_raises_file_not_found(tmp_path):
-    with pytest.raises(FileNotFoundError, match="nope.mp4"):
+    with pytest.raises(FileNotFoundError, match=r"nope\.mp4"):
         decode_video(tmp_path / "nope.mp4")
 
 
@@ -90,4 +92,9 @@ def test_bad_frames_are_refused(tmp_path):
     with pytest.raises(ValueError, match=r"\(N, H, W, 3\) uint8"):
         encode_video(tmp_path / "a.mp4", np.zeros((2, 8, 8, 3), np.float32), fps=80)
     with pytest.raises(ValueError, match="even"):
-        encode_video(tmp_path / "a.mp4", np.zeros((2, 9, 8, 3), np.uint8), fps=80, codec=CODEC_PRESETS["h264-yuv420-crf18"])
+        encode_video(
+            tmp_path / "a.mp4",
+            np.zeros((2, 9, 8, 3), np.uint8),
+            fps=80,
+            codec=CODEC_PRESETS["h264-yuv420-crf18"],
+        )

@@ -71,8 +71,9 @@ class EpisodeDataset:
         self.info = lerobot_v3.load_info(self.root)
         self.version = self.info.get("codebase_version")
         if self.version not in SUPPORTED_VERSIONS:
+            supported = ", ".join(SUPPORTED_VERSIONS)
             raise DatasetError(
-                f"{info_path}: codebase_version {self.version!r} is not supported (supported: {', '.join(SUPPORTED_VERSIONS)})"
+                f"{info_path}: codebase_version {self.version!r} is not supported (supported: {supported})"
             )
         features = lerobot_v3.info_field(self.info, "features", dict, info_path)
         self.fps = lerobot_v3.info_field(self.info, "fps", (int, float), info_path)

@@ -23,15 +23,16 @@ from PIL import Image
 
 from gymnast.data.schema import Episode, EpisodeInfo
 
-STATS_NAMES = ("min", "max", "mean", "std", "count")
 GYMNAST_PREFIX = "gymnast/"
 KEY_COLUMN = "gymnast/key"
 PSNR_COLUMN = "gymnast/video_psnr_db"
 """Per episode: the worst (minimum) PSNR in dB of its decoded frames against the raw frames."""
 
+_FIELDS = dataclasses.fields(EpisodeInfo)
+_PY_TYPES = {"str": str, "bool": bool, "float": float, "int": int}
 _ARROW_TYPES = {"str": pa.string(), "bool": pa.bool_(), "float": pa.float64(), "int": pa.int64()}
 INFO_COLUMNS: dict[str, pa.DataType] = {
-    f"{GYMNAST_PREFIX}{f.name}": _ARROW_TYPES[str(f.type)] for f in dataclasses.fields(EpisodeInfo)
+    f"{GYMNAST_PREFIX}{f.name}": _ARROW_TYPES[str(f.type)] for f in _FIELDS
 }
 """One episodes-metadata column per `EpisodeInfo` field, e.g. ``gymnast/behaviour``."""
 
@@ -98,9 +99,7 @@ def column_matrix(table: pa.Table, name: str, path: Path) -> np.ndarray:
     require_columns(table, [name], path)
     column = table.column(name).combine_chunks()
     kind = column.type
-    if not (pa.types.is_list(kind) or pa.types.is_fixed_size_list(kind) or pa.types.is_large_list(kind)) or not (
-        pa.types.is_floating(kind.value_type) or pa.types.is_integer(kind.value_type)
-    ):
+    if not _is_list(kind) or not compatible_type(kind.value_type, pa.float64()):
         raise DatasetError(f"{path}: field {name!r} has type {kind}, expected a list of numbers")
     values = column.flatten().to_numpy(zero_copy_only=False).astype(np.float32)
     if len(column) == 0:
@@ -114,7 +113,7 @@ def column_vector(table: pa.Table, name: str, path: Path, dtype: type) -> np.nda
     """A scalar column as an (L,) array; also accepts LeRobot's one-element lists."""
     require_columns(table, [name], path)
     kind = table.schema.field(name).type
-    if pa.types.is_list(kind) or pa.types.is_fixed_size_list(kind):
+    if _is_list(kind):
         kind, values = kind.value_type, table.column(name).combine_chunks().flatten()
     else:
         values = table.column(name)
@@ -181,7 +180,8 @@ def feature_stats(values: np.ndarray) -> dict[str, np.ndarray]:
 def image_stats(frames: np.ndarray) -> dict[str, np.ndarray]:
     """Per-channel stats of (N, H, W, 3) uint8 frames in [0, 1], shaped (3, 1, 1) like LeRobot's."""
     stats = feature_stats(frames.reshape(-1, 3) / 255.0)
-    return {k: v.reshape(3, 1, 1) for k, v in stats.items() if k != "count"} | {"count": np.array([len(frames)])}
+    stats = {k: v.reshape(3, 1, 1) for k, v in stats.items() if k != "count"}
+    return stats | {"count": np.array([len(frames)])}  # LeRobot counts images, not pixels
 
 
 def episode_stats(columns: Mapping[str, np.ndarray], video_key: str, frames: np.ndarray) -> dict:
@@ -203,7 +203,9 @@ def aggregate_stats(stats_list: Sequence[Mapping[str, Mapping[str, Any]]]) -> di
     """Combine per-episode (or per-dataset) stats: exact pooled mean and standard deviation."""
     out = {}
     for name in dict.fromkeys(k for stats in stats_list for k in stats):
-        parts = [{k: np.asarray(v, dtype=np.float64) for k, v in s[name].items()} for s in stats_list if name in s]
+        parts = [
+            {k: np.asarray(v, dtype=np.float64) for k, v in s[name].items()} for s in stats_list if name in s
+        ]
         counts = np.array([p["count"].reshape(-1)[0] for p in parts])  # (K,)
         means = np.stack([p["mean"] for p in parts])  # (K, *shape)
         weights = (counts / counts.sum()).reshape(-1, *[1] * (means.ndim - 1))
@@ -223,14 +225,37 @@ def aggregate_stats(stats_list: Sequence[Mapping[str, Mapping[str, Any]]]) -> di
 def stats_to_json(stats: Mapping[str, Mapping[str, np.ndarray]]) -> dict:
     """Stats with numpy values -> nested lists (``count`` stays integer)."""
     return {
-        name: {k: (np.asarray(v).astype(np.int64) if k == "count" else np.asarray(v)).tolist() for k, v in s.items()}
+        name: {
+            k: (np.asarray(v).astype(np.int64) if k == "count" else np.asarray(v)).tolist()
+            for k, v in s.items()
+        }
         for name, s in stats.items()
     }
 
 
+def flatten_stats(stats: Mapping[str, Mapping[str, np.ndarray]]) -> dict:
+    """``{feature: {stat: value}}`` -> LeRobot's ``stats/<feature>/<stat>`` episode columns."""
+    return {f"stats/{name}/{k}": v for name, s in stats_to_json(stats).items() for k, v in s.items()}
+
+
+def unflatten_stats(row: Mapping[str, Any]) -> dict:
+    """``stats/<feature>/<stat>`` episode columns -> ``{feature: {stat: value}}``."""
+    stats: dict = {}
+    for name, value in row.items():
+        if name.startswith("stats/"):
+            feature, stat = name.removeprefix("stats/").rsplit("/", 1)
+            stats.setdefault(feature, {})[stat] = value
+    return stats
+
+
 def info_columns(info: EpisodeInfo) -> dict[str, Any]:
     """The ``gymnast/...`` metadata columns of an episode (one per `EpisodeInfo` field, plus its key)."""
-    return {f"{GYMNAST_PREFIX}{k}": v for k, v in info.to_dict().items()} | {KEY_COLUMN: info.key}
+    # Coerced to the column types, so that every file has the same schema (noise=0 is a float).
+    values = {
+        name: _PY_TYPES[str(f.type)](getattr(info, f.name))
+        for f, name in zip(_FIELDS, INFO_COLUMNS, strict=True)
+    }
+    return values | {KEY_COLUMN: info.key}
 
 
 def has_info_columns(names: Sequence[str]) -> bool:
@@ -245,6 +270,10 @@ def check_info_columns(schema: pa.Schema, path: Path) -> None:
             raise DatasetError(f"{path}: field {name!r} is missing")
         if not compatible_type(schema.field(name).type, kind):
             raise DatasetError(f"{path}: field {name!r} has type {schema.field(name).type}, expected {kind}")
+
+
+def _is_list(kind: pa.DataType) -> bool:
+    return pa.types.is_list(kind) or pa.types.is_fixed_size_list(kind) or pa.types.is_large_list(kind)
 
 
 def compatible_type(actual: pa.DataType, expected: pa.DataType) -> bool:
@@ -281,7 +310,9 @@ def decode_images(table: pa.Table, name: str, path: Path) -> np.ndarray:
     if not pa.types.is_struct(column.type) or column.type.get_field_index("bytes") < 0:
         raise DatasetError(f"{path}: field {name!r} has type {column.type}, expected struct<bytes, path>")
     try:
-        images = [np.asarray(Image.open(io.BytesIO(b)).convert("RGB")) for b in column.field("bytes").to_pylist()]
+        images = [
+            np.asarray(Image.open(io.BytesIO(b)).convert("RGB")) for b in column.field("bytes").to_pylist()
+        ]
     except (OSError, TypeError) as e:
         raise DatasetError(f"{path}: field {name!r}: cannot decode an image: {e}") from e
     return np.stack(images)
@@ -301,36 +332,28 @@ def assemble_episode(ref: EpisodeRef, rows: pa.Table, frames: np.ndarray) -> Epi
     if len(frames) != n_rows:
         source = ref.video_path or path
         raise DatasetError(f"{source}: episode {ref.index} has {len(frames)} frames for {n_rows} data rows")
-    n_steps = n_rows - 1
-    actions = column_matrix(rows, "action", path)
-    if "action_is_pad" in rows.column_names:
+    n_steps, names = n_rows - 1, rows.column_names
+    if "action_is_pad" in names:
         pad = column_vector(rows, "action_is_pad", path, bool)
         if pad[:-1].any() or not pad[-1]:
-            raise DatasetError(f"{path}: field 'action_is_pad' of episode {ref.index} must mark only the last row")
-    names = rows.column_names
-    env_states = (
-        column_matrix(rows, "observation.environment_state", path)
-        if "observation.environment_state" in names
-        else np.zeros((n_rows, 0), np.float32)
-    )
-    rewards = column_vector(rows, "next.reward", path, np.float32)[:n_steps] if "next.reward" in names else None
-    all_successes = column_vector(rows, "next.success", path, bool) if "next.success" in names else None
-    if all_successes is None:
-        successes = np.zeros(n_steps, bool)
-        successes[-1] = True
+            raise DatasetError(
+                f"{path}: field 'action_is_pad' of episode {ref.index} must mark only the last row"
+            )
+    states = column_matrix(rows, "observation.state", path)
+    actions = column_matrix(rows, "action", path)[:n_steps]
+    if "observation.environment_state" in names:
+        env_states = column_matrix(rows, "observation.environment_state", path)
     else:
-        successes = all_successes[:n_steps]
+        env_states = np.zeros((n_rows, 0), np.float32)
+    if "next.reward" in names:
+        rewards = column_vector(rows, "next.reward", path, np.float32)[:n_steps]
+    else:
+        rewards = np.zeros(n_steps, np.float32)
+    flags = column_vector(rows, "next.success", path, bool) if "next.success" in names else None
+    # Without success flags the episode is taken to be a demonstration that ends in success.
+    successes = flags[:n_steps] if flags is not None else np.arange(n_steps) == n_steps - 1
+    info = episode_info(ref, flags)
     try:
-        return Episode(
-            frames=frames,
-            states=column_matrix(rows, "observation.state", path),
-            env_states=env_states,
-            actions=actions[:n_steps],
-            rewards=rewards if rewards is not None else np.zeros(n_steps, np.float32),
-            successes=successes,
-            info=episode_info(ref, all_successes),
-        )
-    except ValueError as e:
-        if isinstance(e, DatasetError):
-            raise
+        return Episode(frames, states, env_states, actions, rewards, successes, info)
+    except ValueError as e:  # shapes that disagree between fields
         raise DatasetError(f"{path}: episode {ref.index}: {e}") from e

@@ -33,7 +33,9 @@ def episode_refs(root: Path, info: Mapping, image_key: str) -> list[EpisodeRef]:
         where = f"{root / EPISODES_PATH}:{line}"
         index, length, tasks = row.get("episode_index"), row.get("length"), row.get("tasks")
         if not isinstance(index, int) or not isinstance(length, int):
-            raise DatasetError(f"{where}: fields 'episode_index' and 'length' must be integers, got {index!r}, {length!r}")
+            raise DatasetError(
+                f"{where}: fields 'episode_index' and 'length' must be integers, got {index!r}, {length!r}"
+            )
         if not (isinstance(tasks, list) and tasks and all(isinstance(t, str) for t in tasks)):
             raise DatasetError(f"{where}: field 'tasks' is {tasks!r}, expected a list of strings")
         names = {"episode_chunk": index // chunks_size, "episode_index": index}
@@ -44,7 +46,9 @@ def episode_refs(root: Path, info: Mapping, image_key: str) -> list[EpisodeRef]:
                 task=tasks[0],
                 data_path=root / data_template.format(**names),
                 rows=None,
-                video_path=None if video_template is None else root / video_template.format(video_key=image_key, **names),
+                video_path=None
+                if video_template is None
+                else root / video_template.format(video_key=image_key, **names),
                 video_span=(0.0, length / fps),
                 columns=row,
                 meta_path=root / EPISODES_PATH,

@@ -79,7 +79,7 @@ def load_info(root: Path) -> dict:
 def info_field(info: Mapping, name: str, kind: type | tuple[type, ...], path: Path) -> Any:
     """A required field of ``info.json`` with the expected Python type."""
     value = info.get(name)
-    if not isinstance(value, kind) or isinstance(value, bool) and kind is not bool:
+    if not isinstance(value, kind) or isinstance(value, bool):  # bool is an int, never a count
         raise DatasetError(f"{path}: field {name!r} is {value!r}, expected {kind}")
     return value
 
@@ -107,7 +107,7 @@ def read_episode_rows(
             _check_column(schema, name, kind, path)
         if has_info_columns(schema.names):
             check_info_columns(schema, path)
-        table = read_parquet(path, [name for name in schema.names if keep(name)])
+        table = read_parquet(path, [n for n in schema.names if keep(n) or n == "episode_index"])
         rows += [(path, row) for row in table.to_pylist() if row["episode_index"] < total]
     rows.sort(key=lambda item: item[1]["episode_index"])
     found = [row["episode_index"] for _, row in rows]
@@ -127,34 +127,24 @@ def episode_refs(root: Path, info: Mapping, image_key: str) -> list[EpisodeRef]:
     is_video = info["features"][image_key].get("dtype") == "video"
     video_template = info_field(info, "video_path", str, info_path) if is_video else None
     required = INDEX_COLUMNS | (video_columns(image_key) if is_video else {})
+    prefix = f"videos/{image_key}/"
     refs = []
     for path, row in read_episode_rows(root, info, required):
-        tasks = row.get("tasks")
-        if isinstance(tasks, list) and tasks and isinstance(tasks[0], str):
-            task = tasks[0]
-        elif isinstance(tasks, str):
-            task = tasks
-        else:
-            raise DatasetError(f"{path}: field 'tasks' of episode {row['episode_index']} is {tasks!r}, expected a list of strings")
-        prefix = f"videos/{image_key}/"
-        refs.append(
-            EpisodeRef(
-                index=row["episode_index"],
-                length=row["length"],
-                task=task,
-                data_path=root / data_template.format(chunk_index=row["data/chunk_index"], file_index=row["data/file_index"]),
-                rows=(row["dataset_from_index"], row["dataset_to_index"]),
-                video_path=None
-                if video_template is None
-                else root
-                / video_template.format(
-                    video_key=image_key, chunk_index=row[prefix + "chunk_index"], file_index=row[prefix + "file_index"]
-                ),
-                video_span=(row.get(prefix + "from_timestamp", 0.0), row.get(prefix + "to_timestamp", 0.0)),
-                columns=row,
-                meta_path=path,
+        index, tasks = row["episode_index"], row.get("tasks")
+        if isinstance(tasks, str):
+            tasks = [tasks]
+        if not (isinstance(tasks, list) and tasks and isinstance(tasks[0], str)):
+            raise DatasetError(
+                f"{path}: field 'tasks' of episode {index} is {tasks!r}, expected a list of strings"
             )
-        )
+        data = data_template.format(chunk_index=row["data/chunk_index"], file_index=row["data/file_index"])
+        video, span = None, (0.0, 0.0)
+        if video_template is not None:
+            chunk, file = row[prefix + "chunk_index"], row[prefix + "file_index"]
+            video = root / video_template.format(video_key=image_key, chunk_index=chunk, file_index=file)
+            span = (row[prefix + "from_timestamp"], row[prefix + "to_timestamp"])
+        rows = (row["dataset_from_index"], row["dataset_to_index"])
+        refs.append(EpisodeRef(index, row["length"], tasks[0], root / data, rows, video, span, row, path))
     return refs
 
 
@@ -163,7 +153,11 @@ def build_features(shapes: Mapping[str, tuple[int, ...]], fps: int, image_key: s
 
     def vector(name: str, names: list[str] | None) -> dict:
         size = shapes[name][0]
-        return {"dtype": "float32", "shape": [size], "names": names if names and len(names) == size else None}
+        return {
+            "dtype": "float32",
+            "shape": [size],
+            "names": names if names and len(names) == size else None,
+        }
 
     def scalar(dtype: str) -> dict:
         return {"dtype": dtype, "shape": [1], "names": None}
@@ -204,15 +198,38 @@ def tasks_table(tasks: Mapping[str, int]) -> pa.Table:
     LeRobot reads this file with pandas and expects the task string as the DataFrame's index, so
     the table carries the pandas metadata that makes the ``task`` column the index.
     """
-    table = pa.table({"task_index": pa.array(list(tasks.values()), pa.int64()), "task": pa.array(list(tasks), pa.string())})
+    table = pa.table(
+        {
+            "task_index": pa.array(list(tasks.values()), pa.int64()),
+            "task": pa.array(list(tasks), pa.string()),
+        }
+    )
     pandas_metadata = {
         "index_columns": ["task"],
         "column_indexes": [
-            {"name": None, "field_name": None, "pandas_type": "unicode", "numpy_type": "object", "metadata": {"encoding": "UTF-8"}}
+            {
+                "name": None,
+                "field_name": None,
+                "pandas_type": "unicode",
+                "numpy_type": "object",
+                "metadata": {"encoding": "UTF-8"},
+            }
         ],
         "columns": [
-            {"name": "task_index", "field_name": "task_index", "pandas_type": "int64", "numpy_type": "int64", "metadata": None},
-            {"name": "task", "field_name": "task", "pandas_type": "unicode", "numpy_type": "object", "metadata": None},
+            {
+                "name": "task_index",
+                "field_name": "task_index",
+                "pandas_type": "int64",
+                "numpy_type": "int64",
+                "metadata": None,
+            },
+            {
+                "name": "task",
+                "field_name": "task",
+                "pandas_type": "unicode",
+                "numpy_type": "object",
+                "metadata": None,
+            },
         ],
         "creator": {"library": "pyarrow", "version": pa.__version__},
         "pandas_version": "2.2.0",

@@ -16,6 +16,7 @@ Legend: B batch, C context frames, F future frames, H/W image height/width, A ac
 from __future__ import annotations
 
 import bisect
+import itertools
 from collections import OrderedDict
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -124,7 +125,8 @@ class TrainingWindows:
         self.dataset, self.context, self.future = dataset, context, future
         self.cache_episodes = cache_episodes
         counts = [max(0, lengths[e] + 2 - context - future) for e in self.episodes]
-        self._offsets = np.cumsum([0, *counts]).tolist()  # window i is in episode k if offsets[k] <= i < offsets[k+1]
+        # Window i belongs to self.episodes[k] when offsets[k] <= i < offsets[k + 1].
+        self._offsets = [0, *itertools.accumulate(counts)]
         self._cache: OrderedDict[int, Episode] = OrderedDict()
         self._hits = self._misses = 0
 

@@ -115,7 +115,9 @@ def robot_body_mask(model: mujoco.MjModel) -> np.ndarray:
 def apply_gap(model: mujoco.MjModel, gap: SimGap) -> None:
     """Alters a freshly loaded model in place (call once, before the first reset)."""
     robot = robot_body_mask(model)
-    scene_geoms = ~robot[model.geom_bodyid]
+    # A geom with a material is drawn in its material's colour (tinted below); giving it an own
+    # colour would replace the material's texture, not tint it.
+    scene_geoms = ~robot[model.geom_bodyid] & (model.geom_matid < 0)
     tint = gap.colour_shift * _TINT
     model.geom_rgba[scene_geoms, :3] = np.clip(model.geom_rgba[scene_geoms, :3] + tint, 0.0, 1.0)
     model.mat_rgba[:, :3] = np.clip(model.mat_rgba[:, :3] + tint, 0.0, 1.0)
