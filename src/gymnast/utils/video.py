@@ -5,8 +5,8 @@ Legend: N frames, H/W image height/width; frames are (N, H, W, 3) uint8 RGB.
 The default codec is H.264 with ``qp=0`` in 4:4:4 (``yuv444p``): the encoder is lossless, so the
 only error is the 8-bit RGB -> YCbCr -> RGB round trip, about 52.4 dB PSNR on the worst frame of
 Meta-World renders, far above the 40 dB a world model needs; every H.264 decoder that supports
-the High 4:4:4 profile (FFmpeg, VLC, mpv) plays it. ``docs/dataset_format.md`` lists the measured alternatives;
-``benchmarks/video_codec.py`` re-measures them.
+the High 4:4:4 profile (FFmpeg, VLC, mpv) plays it. ``docs/dataset_format.md`` lists the measured
+alternatives; ``benchmarks/video_codec.py`` re-measures them.
 
 A file may hold many episodes back to back (LeRobot v3). `encode_video` can force a key frame at
 each episode start, so `decode_video` seeks straight to an episode and decodes nothing before it.
