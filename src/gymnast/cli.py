@@ -51,9 +51,10 @@ def inspect(data: Path, sheet: Path | None = None, episodes: int = 10) -> None:
     infos = dataset.episodes
     print(f"{data}: LeRobot {dataset.info['codebase_version']}, {len(infos)} episodes, "
           f"{sum(dataset.lengths)} steps, {dataset.fps} fps, images {dataset.image_shape}")
-    codec = dataset.info.get("gymnast", {})
-    if codec:
-        print(f"video codec error: {json.dumps(codec)}")
+    recorded = dataset.info.get("gymnast", {})
+    if "video_psnr_db" in recorded:
+        print(f"video: {json.dumps(recorded['codec'])}, decoded-vs-raw PSNR "
+              f"min {recorded['video_psnr_db']['min']:.1f} dB, mean {recorded['video_psnr_db']['mean']:.1f} dB")
     print(format_success_table(success_table(infos)))
     if sheet is not None:
         frames, labels = [], []
@@ -114,7 +115,7 @@ def gap_report(
     """Measure each sim-to-real gap level: expert success drop, open-loop divergence of replays.
 
     Args:
-        out: JSON file with the per-level summary and per-episode records.
+        out: JSON file with the per-level summary and per-episode records (and a .md beside it).
         tasks: task names and/or sets.
         episodes: seeds per task.
         levels: gap levels to measure.
@@ -125,9 +126,9 @@ def gap_report(
     from tqdm import tqdm
 
     from gymnast.envs.gap import get_gap
-    from gymnast.envs.gap_report import measure_gap, summarise
+    from gymnast.envs.gap_report import measure_gap, summarise, to_markdown
     from gymnast.envs.tasks import resolve_tasks
-    from gymnast.utils.atomic import write_json
+    from gymnast.utils.atomic import write_bytes, write_json
 
     task_list = resolve_tasks(tasks)
     report = {"tasks": list(task_list), "episodes_per_task": episodes, "horizon": env.horizon, "levels": {}}
@@ -142,7 +143,8 @@ def gap_report(
               f"{overall['replay_success']:.0%}, hand drift {overall['hand_divergence_cm_final']:.1f} cm, "
               f"object drift {overall['object_divergence_cm_final']:.1f} cm")
     write_json(out, report)
-    print(f"report: {out}")
+    write_bytes(out.with_suffix(".md"), to_markdown(report).encode())
+    print(f"report: {out} and {out.with_suffix('.md')}")
 
 
 def tasks(task_set: str = "mt10", split: str = "train") -> None:

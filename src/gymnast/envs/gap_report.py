@@ -95,3 +95,37 @@ def summarise(records: list[dict]) -> dict:
         "overall": mean_of(records),
         "per_task": {t: mean_of([r for r in records if r["task"] == t]) for t in tasks},
     }
+
+
+def to_markdown(report: dict) -> str:
+    """The report as the tables of docs/sim_gap.md."""
+    lines = [
+        "# What the sim-to-real gap levels do (measured)",
+        "",
+        f"Made by `gymnast gap-report --tasks {','.join(report['tasks'])} --episodes "
+        f"{report['episodes_per_task']}` ({report['episodes_per_task']} data seeds per task, horizon "
+        f"{report['horizon']}; the JSON beside this file has every episode).",
+        "",
+        "- *expert success*: Meta-World's scripted expert, closed-loop on the true state, in each world.",
+        "- *replay success*: the real expert episode's actions replayed open-loop in the simulator.",
+        "- *hand / object drift*: distance between the real and the replayed trajectory at the last step.",
+        "- *pixel diff*: mean absolute difference of the first frames, as a fraction of 255.",
+        "",
+        "| level | expert success real | expert success sim | replay success | hand drift (cm) | object drift (cm) | pixel diff |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for level, result in report["levels"].items():
+        o = result["overall"]
+        lines.append(
+            f"| {level} | {o['real_expert_success']:.0%} | {o['sim_expert_success']:.0%} | {o['replay_success']:.0%} "
+            f"| {o['hand_divergence_cm_final']:.1f} | {o['object_divergence_cm_final']:.1f} | {o['first_frame_pixel_diff']:.3f} |"
+        )
+    for level, result in report["levels"].items():
+        lines += ["", f"## {level}, per task", "",
+                  "| task | expert success sim | replay success | hand drift (cm) | object drift (cm) |", "|---|---|---|---|---|"]
+        for task, p in result["per_task"].items():
+            lines.append(
+                f"| {task} | {p['sim_expert_success']:.0%} | {p['replay_success']:.0%} "
+                f"| {p['hand_divergence_cm_final']:.1f} | {p['object_divergence_cm_final']:.1f} |"
+            )
+    return "\n".join(lines) + "\n"

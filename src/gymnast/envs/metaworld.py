@@ -90,7 +90,10 @@ class MetaWorldEnv(gym.Env):
         self.observation_space = gym.spaces.Dict(
             {
                 "image": gym.spaces.Box(0, 255, (size, size, 3), np.uint8),
-                "state": gym.spaces.Box(-np.inf, np.inf, (STATE_DIM,), np.float32),
+                "state": gym.spaces.Box(
+                    np.append(self._mw._HAND_SPACE.low, -1.0).astype(np.float32),
+                    np.append(self._mw._HAND_SPACE.high, 1.0).astype(np.float32),
+                ),
             }
         )
         self.action_space = gym.spaces.Box(-1.0, 1.0, (ACTION_DIM,), np.float32)
