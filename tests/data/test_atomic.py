@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import json
+import os
 
 import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
-from gymnast.utils.atomic import atomic_path, is_temporary, write_json, write_parquet
+from gymnast.utils.atomic import atomic_path, is_temporary, write_bytes, write_json, write_parquet
 
 
 def test_writes_replace_the_file_and_leave_no_temporary(tmp_path):
@@ -36,3 +37,11 @@ def test_json_refuses_infinity(tmp_path):
     with pytest.raises(ValueError):
         write_json(tmp_path / "x.json", {"psnr": float("inf")})
     assert not any(tmp_path.iterdir())
+
+
+def test_written_files_get_ordinary_permissions_not_private_ones(tmp_path):
+    target = tmp_path / "shared.bin"
+    write_bytes(target, b"x")
+    mask = os.umask(0)
+    os.umask(mask)
+    assert target.stat().st_mode & 0o777 == 0o666 & ~mask
