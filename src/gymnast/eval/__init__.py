@@ -1,0 +1,1 @@
+"""Evaluation on the real world: success rates with confidence intervals, videos, reports."""
