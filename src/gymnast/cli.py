@@ -7,13 +7,14 @@ import json
 import logging
 import sys
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Literal
 
 import tyro
 
 import gymnast  # noqa: F401  (sets MUJOCO_GL before anything imports mujoco)
 from gymnast.config import EnvConfig
 from gymnast.data.collect import CollectConfig
+from gymnast.eval.evaluate import EvalConfig
 
 
 def collect(
@@ -33,6 +34,62 @@ def collect(
     table = run_collect(config, out)
     print(format_success_table(table))
     print(f"dataset: {out}")
+
+
+def evaluate_command(
+    policy: str,
+    out: Path,
+    config: Annotated[EvalConfig, tyro.conf.arg(name="")] = EvalConfig(),
+) -> None:
+    """Evaluate a policy in the real world on held-out seeds: success per task with 95% CIs.
+
+    Args:
+        policy: an SFT/RL run directory (its newest checkpoint), or 'expert' for the scripted reference.
+        out: JSON report (per-episode records included); videos are saved in a videos/ folder beside it.
+        config: tasks, episodes, perturbation, gap and workers.
+    """
+    from gymnast.eval.evaluate import evaluate, format_summary
+
+    report = evaluate(policy, config, out)
+    print(format_summary(report))
+    print(f"report: {out}")
+
+
+def sft(
+    data: Path,
+    out: Path,
+    preset: Literal["debug", "demo", "full"] = "full",
+    resume: bool = False,
+    demos_per_task: int | None = None,
+    steps: int | None = None,
+    vision: Literal["cnn", "efficientnet"] | None = None,
+    tasks: str | None = None,
+    seed: int | None = None,
+) -> None:
+    """Behaviour-clone the embedded VLA on N successful expert demonstrations per task.
+
+    Args:
+        data: dataset directory (from `gymnast collect`).
+        out: run directory: checkpoints, metrics.jsonl, config.json.
+        preset: debug (seconds), demo (minutes) or full (the default policy).
+        resume: continue the run in OUT from its last checkpoint, with the settings saved there.
+        demos_per_task: override the preset's demonstrations per task.
+        steps: override the preset's optimizer steps.
+        vision: override the image encoder.
+        tasks: restrict to these tasks (comma-separated).
+        seed: override the seed.
+    """
+    from gymnast.policy.sft import SFT_PRESETS, saved_sft_config, train_sft
+
+    if resume:
+        config = saved_sft_config(out)
+    else:
+        overrides = {"demos_per_task": demos_per_task, "steps": steps, "tasks": tasks, "seed": seed}
+        config = dataclasses.replace(SFT_PRESETS[preset], **{k: v for k, v in overrides.items() if v is not None})
+        if vision is not None:
+            config = dataclasses.replace(config, vla=dataclasses.replace(config.vla, vision=vision))
+    checkpoint = train_sft(data, out, config, resume=resume)
+    print(f"policy: {checkpoint}")
 
 
 def inspect(data: Path, sheet: Path | None = None, episodes: int = 10) -> None:
@@ -188,6 +245,8 @@ def format_success_table(table: dict) -> str:
 COMMANDS = {
     "collect": collect,
     "inspect": inspect,
+    "sft": sft,
+    "eval": evaluate_command,
     "contact-sheet": contact_sheet,
     "gap-report": gap_report,
     "tasks": tasks,

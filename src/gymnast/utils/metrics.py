@@ -1,0 +1,39 @@
+"""RUN/metrics.jsonl: one JSON object per logged step, with fixed prefixes (train/, eval/, time/ ...)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from gymnast.utils.atomic import write_bytes
+
+
+class MetricsLog:
+    """Appends metrics to ``RUN/metrics.jsonl``.
+
+    Args:
+        run: the run directory.
+        resume_step: when resuming from a checkpoint at this step, lines logged after it (by the
+            interrupted run, past its last checkpoint) are dropped, so the file reads as if the
+            run had never stopped. Without it the run starts afresh and an old file is removed.
+    """
+
+    def __init__(self, run: Path, resume_step: int | None = None) -> None:
+        self.path = Path(run) / "metrics.jsonl"
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        if resume_step is not None and self.path.exists():
+            kept = [line for line in self.path.read_text().splitlines() if line and json.loads(line)["step"] <= resume_step]
+            write_bytes(self.path, "".join(f"{line}\n" for line in kept).encode())
+        elif resume_step is None and self.path.exists():
+            self.path.unlink()
+
+    def log(self, step: int, values: dict[str, float]) -> None:
+        with self.path.open("a") as file:
+            file.write(json.dumps({"step": step, **values}) + "\n")
+
+
+
+def read_metrics(run: Path) -> list[dict]:
+    """Every line of ``RUN/metrics.jsonl`` (empty if the run logged nothing yet)."""
+    path = Path(run) / "metrics.jsonl"
+    return [json.loads(line) for line in path.read_text().splitlines() if line] if path.exists() else []

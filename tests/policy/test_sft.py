@@ -1,0 +1,79 @@
+"""Behaviour cloning: demo selection, augmentation, learning, checkpoints and exact resume."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import shutil
+
+import pytest
+import torch
+from safetensors.torch import load_file
+
+from gymnast.data.lerobot import EpisodeDataset
+from gymnast.policy.sft import SFT_PRESETS, SFTConfig, load_demos, random_shift, select_demos, train_sft
+from gymnast.policy.vla import VLAConfig, load_policy
+from gymnast.utils.metrics import read_metrics
+
+TINY = dataclasses.replace(SFT_PRESETS["debug"], demos_per_task=2, vla=VLAConfig(width=32, layers=1, heads=2, image_size=32))
+
+
+def test_only_successful_expert_episodes_are_imitated(tiny_dataset):
+    dataset = EpisodeDataset(tiny_dataset)
+    chosen = select_demos(dataset, per_task=2)
+    assert len(chosen) == 4
+    assert all(dataset.episodes[i].success and dataset.episodes[i].behaviour == "expert" for i in chosen)
+    with pytest.raises(ValueError, match="reach-v3.*2 successful.*asks for 3"):
+        select_demos(dataset, per_task=3, tasks="reach-v3")
+
+
+def test_action_chunks_past_the_episode_end_are_masked(tiny_dataset):
+    dataset = EpisodeDataset(tiny_dataset)
+    index = select_demos(dataset, 1, "reach-v3")[0]
+    demos = load_demos(dataset, [index], chunk_size=5)
+    episode = dataset.load(index)
+    assert len(demos.images) == episode.length
+    torch.testing.assert_close(demos.chunks[0], torch.from_numpy(episode.actions[:5]))
+    assert demos.valid[-1].tolist() == [True, False, False, False, False]
+
+
+def test_random_shift_moves_content_without_changing_shape():
+    images = torch.zeros(8, 16, 16, 3, dtype=torch.uint8)
+    images[:, 8, 8] = 255
+    shifted = random_shift(images, 2, torch.Generator().manual_seed(0))
+    assert shifted.shape == images.shape and shifted.dtype == torch.uint8
+    assert (shifted.flatten(1).amax(1) == 255).all()  # the bright pixel is still in every image
+    assert torch.equal(random_shift(images, 0, torch.Generator()), images)
+
+
+def test_sft_drives_the_loss_down(tiny_dataset, tmp_path):
+    config = dataclasses.replace(TINY, steps=60, batch_size=16, lr=2e-3, warmup_steps=5, log_every=1, checkpoint_every=60)
+    train_sft(tiny_dataset, tmp_path, config, progress=False)
+    losses = [row["train/loss"] for row in read_metrics(tmp_path)]
+    assert sum(losses[-10:]) / 10 < 0.75 * losses[0], losses
+    assert load_policy(tmp_path).config.image_size == 32
+
+
+def test_resume_from_a_checkpoint_continues_exactly(tiny_dataset, tmp_path):
+    config = dataclasses.replace(TINY, steps=6, checkpoint_every=3, log_every=1)
+    whole = tmp_path / "whole"
+    train_sft(tiny_dataset, whole, config, progress=False)
+    # A run that stopped after its step-3 checkpoint: copy what it would have left on disk.
+    interrupted = tmp_path / "interrupted"
+    (interrupted / "checkpoints").mkdir(parents=True)
+    shutil.copytree(whole / "checkpoints" / "000003", interrupted / "checkpoints" / "000003")
+    (interrupted / "checkpoints" / "last").write_text("000003")
+    rows = [json.loads(line) for line in (whole / "metrics.jsonl").read_text().splitlines()]
+    (interrupted / "metrics.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows[:4]))  # one line too many
+    train_sft(tiny_dataset, interrupted, config, resume=True, progress=False)
+    final_whole = load_file(whole / "checkpoints" / "000006" / "model.safetensors")
+    final_resumed = load_file(interrupted / "checkpoints" / "000006" / "model.safetensors")
+    for name, tensor in final_whole.items():
+        torch.testing.assert_close(final_resumed[name], tensor, rtol=0, atol=0, msg=name)
+    strip = lambda rs: [{k: v for k, v in r.items() if not k.startswith("time/")} for r in rs]  # noqa: E731
+    assert strip(read_metrics(interrupted)) == strip(rows)
+
+
+def test_presets_are_valid_configs():
+    assert set(SFT_PRESETS) == {"debug", "demo", "full"}
+    assert all(isinstance(c, SFTConfig) for c in SFT_PRESETS.values())
