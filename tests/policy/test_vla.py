@@ -105,3 +105,9 @@ def test_efficientnet_variant_builds_a_token_grid():
     model = make(config=VLAConfig(vision="efficientnet", width=32, layers=1, heads=2, chunk_size=2, image_size=32))
     obs, texts = observations()
     assert model.logits(obs, texts).shape == (2, 8, 256)
+
+
+def test_an_instruction_embeds_identically_alone_and_among_others():
+    alone = InstructionEncoder()(["open the drawer"])[0]
+    among = InstructionEncoder()(["a much longer instruction that pads the batch", "open the drawer"])[1]
+    assert torch.equal(alone, among)

@@ -52,7 +52,7 @@ class SFTConfig:
     shift_augment: int = 4
     """Random image shifts of up to this many pixels (padding by edge replication)."""
     bf16: bool = True
-    """bfloat16 autocast (about 2x faster on recent CPUs)."""
+    """Run the image encoder under bfloat16 autocast (faster on recent CPUs)."""
     checkpoint_every: int = 500
     """Steps between checkpoints."""
     log_every: int = 50
@@ -141,9 +141,11 @@ def random_shift(images: torch.Tensor, pad: int, generator: torch.Generator) -> 
     return shifted.to(torch.uint8)
 
 
-def sft_loss(model: EmbeddedVLA, images: torch.Tensor, texts: list[str], chunks: torch.Tensor, valid: torch.Tensor):
+def sft_loss(
+    model: EmbeddedVLA, images: torch.Tensor, texts: list[str], chunks: torch.Tensor, valid: torch.Tensor, bf16: bool = False
+):
     """Masked token cross-entropy; returns (loss, metrics)."""
-    logits = model.logits(images, texts).float()  # (B, N, V)
+    logits = model.logits(images, texts, bf16_vision=bf16)  # (B, N, V)
     targets = model.chunk_tokens(chunks)  # (B, N)
     mask = valid.repeat_interleave(model.action_dim, dim=1).float()  # (B, N): chunk-major like the tokens
     per_token = F.cross_entropy(logits.transpose(1, 2), targets, reduction="none")  # (B, N)
@@ -184,8 +186,7 @@ def train_sft(data: Path, out: Path, config: SFTConfig, resume: bool = False, pr
         batch = torch.randint(0, len(demos.images), (config.batch_size,), generator=sampler)
         images = random_shift(demos.images[batch], config.shift_augment, sampler)
         texts = [demos.instructions[i] for i in demos.instruction[batch].tolist()]
-        with torch.autocast("cpu", dtype=torch.bfloat16, enabled=config.bf16):
-            loss, values = sft_loss(model, images, texts, demos.chunks[batch], demos.valid[batch])
+        loss, values = sft_loss(model, images, texts, demos.chunks[batch], demos.valid[batch], config.bf16)
         optimizer.zero_grad(set_to_none=True)
         loss.backward()
         values["train/grad_norm"] = torch.nn.utils.clip_grad_norm_(model.parameters(), 1.0).item()

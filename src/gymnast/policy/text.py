@@ -38,11 +38,11 @@ class InstructionEncoder:
         self._cache: dict[str, torch.Tensor] = {}
 
     def __call__(self, instructions: Sequence[str]) -> torch.Tensor:
-        missing = sorted({s for s in instructions if s not in self._cache})
-        if missing:
-            vectors = _sentence_model().encode(
-                missing, normalize_embeddings=True, convert_to_numpy=True, show_progress_bar=False
-            )
-            for sentence, vector in zip(missing, vectors):
-                self._cache[sentence] = torch.from_numpy(vector).float()
+        for sentence in {s for s in instructions if s not in self._cache}:
+            # One sentence per call: in a batch, padding to the longest sentence changes the
+            # embedding in the last bits, and a sentence must embed identically in every run.
+            vector = _sentence_model().encode(
+                [sentence], normalize_embeddings=True, convert_to_numpy=True, show_progress_bar=False
+            )[0]
+            self._cache[sentence] = torch.from_numpy(vector).float()
         return torch.stack([self._cache[s] for s in instructions])

@@ -89,22 +89,29 @@ class EmbeddedVLA(nn.Module):
 
     # -- the network -----------------------------------------------------------------------------
 
-    def forward(self, images: torch.Tensor, text: torch.Tensor) -> torch.Tensor:
-        """(B, H, W, 3) uint8 images and (B, 384) instruction embeddings -> (B, N, V) logits."""
+    def forward(self, images: torch.Tensor, text: torch.Tensor, bf16_vision: bool = False) -> torch.Tensor:
+        """(B, H, W, 3) uint8 images and (B, 384) instruction embeddings -> (B, N, V) logits.
+
+        `bf16_vision` runs the image encoder under bfloat16 autocast: about 1.4x faster for the
+        convolutions on a CPU, while the small decoder is faster (and exact) in float32.
+        """
         expected = (self.config.image_size, self.config.image_size, 3)
         if tuple(images.shape[1:]) != expected:
             raise ValueError(f"images must be (B, {', '.join(map(str, expected))}), got {tuple(images.shape)}")
-        tokens = self.vision(to_float_image(images)) + self.vision_position  # (B, P, D)
+        with torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16_vision):
+            tokens = self.vision(to_float_image(images))
+        tokens = tokens.float() + self.vision_position  # (B, P, D)
         scale, shift = self.text_film(text).unsqueeze(1).chunk(2, dim=-1)
         tokens = tokens * (1 + scale) + shift
         memory = torch.cat([self.text_token(text).unsqueeze(1), tokens], dim=1)  # (B, 1 + P, D)
         queries = self.queries.expand(len(images), -1, -1)  # (B, N, D)
         return self.head(self.norm(self.decoder(queries, memory)))
 
-    def logits(self, obs: torch.Tensor, instructions: Sequence[str]) -> torch.Tensor:
+    def logits(self, obs: torch.Tensor, instructions: Sequence[str], bf16_vision: bool = False) -> torch.Tensor:
+        """(B, N, V) action-token logits for images and their instructions."""
         if len(instructions) != len(obs):
             raise ValueError(f"{len(obs)} images but {len(instructions)} instructions")
-        return self(obs, self.text(instructions).to(self.queries.dtype))
+        return self(obs, self.text(instructions).to(self.queries.dtype), bf16_vision)
 
     # -- the Policy protocol ------------------------------------------------------------------------
 
