@@ -77,3 +77,18 @@ def test_resume_from_a_checkpoint_continues_exactly(tiny_dataset, tmp_path):
 def test_presets_are_valid_configs():
     assert set(SFT_PRESETS) == {"debug", "demo", "full"}
     assert all(isinstance(c, SFTConfig) for c in SFT_PRESETS.values())
+
+
+def test_cli_sft_then_eval_runs_end_to_end(tiny_dataset, tmp_path, capsys):
+    from gymnast.cli import main
+
+    run = tmp_path / "run"
+    main(["sft", "--data", str(tiny_dataset), "--out", str(run), "--preset", "debug", "--demos-per-task", "2"])
+    assert (run / "checkpoints" / "last").read_text() == "000006"
+    main(["sft", "--data", str(tiny_dataset), "--out", str(run), "--resume"])  # already finished: no new steps
+    assert sorted(p.name for p in (run / "checkpoints").iterdir() if p.name != "last") == ["000003", "000006"]
+    report = tmp_path / "eval.json"
+    main(["eval", "--policy", str(run), "--tasks", "reach-v3", "--episodes", "2", "--workers", "1",
+          "--env.image-size", "32", "--env.horizon", "20", "--out", str(report)])
+    assert json.loads(report.read_text())["episodes"] == 2
+    assert "reach-v3" in capsys.readouterr().out
