@@ -24,10 +24,14 @@ setup: $(STAMP)
 test: $(STAMP)
 	$(BIN)/python -m pytest
 
+DEMO_TASKS := drawer-open-v3,reach-v3,push-v3
+
 demo: $(STAMP)
-	$(BIN)/gymnast collect --tasks drawer-open-v3,reach-v3,push-v3 --episodes-per-task 4 --out $(DEMO)/data
+	$(BIN)/gymnast collect --tasks $(DEMO_TASKS) --episodes-per-task 6 --out $(DEMO)/data
 	$(BIN)/gymnast inspect --data $(DEMO)/data --sheet $(DEMO)/episodes.png --episodes 6
 	$(BIN)/gymnast contact-sheet --tasks mt10 --out $(DEMO)/mt10.png
+	$(BIN)/gymnast sft --data $(DEMO)/data --out $(DEMO)/sft --preset demo --demos-per-task 4
+	$(BIN)/gymnast eval --policy $(DEMO)/sft --tasks $(DEMO_TASKS) --episodes 10 --out $(DEMO)/sft_eval.json
 
 clean:
 	rm -rf $(VENV) runs .pytest_cache
