@@ -45,7 +45,7 @@ def evaluate_command(
 
     Args:
         policy: an SFT/RL run directory (its newest checkpoint), or 'expert' for the scripted reference.
-        out: JSON report (per-episode records included); videos are saved in a videos/ folder beside it.
+        out: JSON report (per-episode records included); videos are saved beside it in <name>_videos/.
         config: tasks, episodes, perturbation, gap and workers.
     """
     from gymnast.eval.evaluate import evaluate, format_summary

@@ -92,12 +92,13 @@ def test_report_file_has_the_summary_records_and_resolved_config(expert_report):
 
 def test_first_episode_of_each_task_is_saved_as_a_decodable_video(expert_report):
     report, out = expert_report
-    assert report["videos"] == [f"videos/reach-v3_{eval_seed(0)}.mp4", f"videos/drawer-open-v3_{eval_seed(0)}.mp4"]
+    folder = f"{out.stem}_videos"  # one video folder per report, beside it
+    assert report["videos"] == [f"{folder}/reach-v3_{eval_seed(0)}.mp4", f"{folder}/drawer-open-v3_{eval_seed(0)}.mp4"]
     for path, task in zip(report["videos"], ("reach-v3", "drawer-open-v3")):
         frames = decode_video(out.parent / path)
         steps = next(r["steps"] for r in report["records"] if r["task"] == task and r["seed"] == eval_seed(0))
         assert frames.shape == (steps + 1, 32, 32, 3)  # the first frame, then one per step
-    assert len(list((out.parent / "videos").iterdir())) == 2
+    assert len(list((out.parent / folder).iterdir())) == 2
 
 
 def test_a_policy_that_never_moves_never_succeeds_and_acts_once_per_chunk(tmp_path: Path):
@@ -176,7 +177,7 @@ def test_cli_eval_prints_each_task_and_the_overall_rate(tmp_path: Path, capsys):
     printed = capsys.readouterr().out
     assert "reach-v3" in printed and "overall" in printed and "100.0%" in printed
     assert json.loads(out.read_text())["episodes"] == 2
-    assert (tmp_path / "videos" / f"reach-v3_{eval_seed(0)}.mp4").exists()
+    assert (tmp_path / "eval_videos" / f"reach-v3_{eval_seed(0)}.mp4").exists()
 
 
 def test_cli_eval_with_a_missing_run_directory_exits_with_a_message(tmp_path: Path, capsys):

@@ -44,8 +44,9 @@ logger = logging.getLogger(__name__)
 
 EXPERT = "expert"
 """The `policy` argument that evaluates Meta-World's scripted expert instead of a run."""
-VIDEO_DIR = "videos"
-"""Folder beside the JSON report that holds the episode videos."""
+VIDEO_DIR_SUFFIX = "_videos"
+"""Videos go beside the JSON report, in ``<report name>_videos/``: one folder per report, so two
+reports in one folder (say, with and without perturbation) never overwrite each other's videos."""
 VIDEO_CODEC = CODEC_PRESETS["h264-yuv420-crf18"]
 # Reports are watched in browsers, which play H.264 only in 4:2:0; the dataset's lossless 4:4:4
 # default would not play there, and these videos are for people, not for training.
@@ -233,7 +234,7 @@ def evaluate(policy: str | Policy, config: EvalConfig, out: str | Path, progress
             (its newest checkpoint is loaded once in each worker), or a `Policy` object, which
             runs in this process and therefore needs ``config.workers == 1``.
         config: tasks, episodes, perturbation, gap and workers.
-        out: JSON report to write (atomically); videos go to ``<out's folder>/videos/<task>_<seed>.mp4``.
+        out: JSON report to write (atomically); videos go to ``<out's folder>/<out's name>_videos/<task>_<seed>.mp4``.
         progress: show a progress bar with the running success rate.
 
     Returns:
@@ -248,7 +249,8 @@ def evaluate(policy: str | Policy, config: EvalConfig, out: str | Path, progress
     """
     out = Path(out)
     label, in_process = _resolve_policy(policy, config)
-    jobs = plan_episodes(config, label, out.parent / VIDEO_DIR)
+    video_dir = out.parent / f"{out.stem}{VIDEO_DIR_SUFFIX}"
+    jobs = plan_episodes(config, label, video_dir)
     run = run_episode if in_process is None else functools.partial(run_episode, policy=in_process)
     logger.info("evaluating %s: %d tasks x %d seeds, perturb=%s, gap=%s, %d workers",
                 label, len(config.task_list), config.episodes, config.perturb, config.gap, config.workers)
@@ -274,7 +276,7 @@ def evaluate(policy: str | Policy, config: EvalConfig, out: str | Path, progress
                                "seeds": list(config.seeds)}),
         "wall_s": wall_s,
         "real_interactions": sum(r["steps"] for r in records),
-        "videos": [f"{VIDEO_DIR}/{Path(job.video_path).name}" for job in jobs if job.video_path],
+        "videos": [f"{video_dir.name}/{Path(job.video_path).name}" for job in jobs if job.video_path],
     }
     write_json(out, report)
     logger.info("success %.1f%% [%.1f, %.1f] over %d episodes in %.0f s; report %s",
