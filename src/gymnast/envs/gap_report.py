@@ -9,6 +9,7 @@ how far the same commands drift when the physics differ.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import Iterator
 
@@ -52,9 +53,7 @@ def _expert_rollout(env: MetaWorldEnv, seed: int, actions: np.ndarray | None = N
 def measure_one(job: GapJob) -> dict:
     """Figures for one (task, seed) under one gap level."""
     # Replays must run the full recorded length, so the episodes here never stop on success.
-    config = EnvConfig(
-        image_size=job.config.image_size, horizon=job.config.horizon, terminate_on_success=False, camera=job.config.camera
-    )
+    config = dataclasses.replace(job.config, terminate_on_success=False)
     real = cached_env(job.task, config)
     sim = cached_env(job.task, config, gap=job.gap)
     real_success, actions, real_states, real_frame = _expert_rollout(real, job.seed)
