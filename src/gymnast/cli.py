@@ -242,11 +242,72 @@ def format_success_table(table: dict) -> str:
     return "\n".join(lines)
 
 
+def train_wm(
+    data: Path,
+    out: Path,
+    preset: Literal["debug", "demo", "full"] = "full",
+    resume: bool = False,
+    steps: int | None = None,
+    seed: int | None = None,
+) -> None:
+    """Train the embedded world model on every episode of a dataset (held-out scenes excepted).
+
+    Args:
+        data: dataset directory (from `gymnast collect`).
+        out: run directory: checkpoints, metrics.jsonl, config.json, videos/.
+        preset: debug (seconds), demo (minutes) or full (the default world model, under an hour on 2 cores).
+        resume: continue the run in OUT from its last checkpoint, with the settings saved there.
+        steps: override the preset's optimizer steps.
+        seed: override the seed.
+    """
+    from gymnast.world_model.train import WM_PRESETS, saved_train_config, train_world_model
+
+    if resume:
+        config = saved_train_config(out)
+    else:
+        overrides = {"steps": steps, "seed": seed}
+        config = dataclasses.replace(WM_PRESETS[preset], **{k: v for k, v in overrides.items() if v is not None})
+    checkpoint = train_world_model(data, out, config, resume=resume)
+    print(f"world model: {checkpoint}")
+
+
+def eval_wm(
+    wm: Path,
+    data: Path,
+    out: Path,
+    max_episodes: int = 0,
+    videos: int = 6,
+    gifs: int = 0,
+    control_scenes: int = 10,
+) -> None:
+    """Measure a world model's open-loop fidelity and controllability on held-out episodes.
+
+    Args:
+        wm: world-model run (or checkpoint) directory.
+        data: dataset directory; its episodes from held-out scenes are used.
+        out: report JSON; side-by-side videos go to <out stem>_videos/.
+        max_episodes: evaluate at most this many held-out episodes (0 = all).
+        videos: side-by-side videos (real | imagined | difference) to write.
+        gifs: also write the first GIFS of them as small looping GIFs.
+        control_scenes: held-out scenes for the controllability check (0 skips it).
+    """
+    from gymnast.world_model.controllability import ControllabilityConfig
+    from gymnast.world_model.evaluate import WorldModelEvalConfig, evaluate_world_model, format_report
+
+    config = WorldModelEvalConfig(max_episodes=max_episodes, videos=videos, gifs=gifs,
+                                  controllability=ControllabilityConfig(scenes=control_scenes))
+    report = evaluate_world_model(wm, data, out, config)
+    print(format_report(report))
+    print(f"report: {out}")
+
+
 COMMANDS = {
     "collect": collect,
     "inspect": inspect,
     "sft": sft,
     "eval": evaluate_command,
+    "train-wm": train_wm,
+    "eval-wm": eval_wm,
     "contact-sheet": contact_sheet,
     "gap-report": gap_report,
     "tasks": tasks,

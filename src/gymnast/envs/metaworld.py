@@ -26,6 +26,7 @@ from gymnast.envs.tasks import DATA_SEEDS, check_task
 
 ACTION_DIM = 4
 STATE_DIM = 4  # hand xyz + gripper opening
+CONTROL_FPS = 80  # actions (and rendered frames) per second: Meta-World's 12.5 ms control step
 ENV_STATE_DIM = 39  # Meta-World's full observation vector
 # Rejection sampling inside Meta-World's reset_model asks for new layouts until objects are far
 # enough apart; a perturbed layout that keeps failing that test gets a new direction this often.
@@ -49,7 +50,7 @@ class MetaWorldEnv(gym.Env):
         instruction_split: ``train`` or ``heldout`` paraphrases of the instruction.
     """
 
-    metadata = {"render_modes": ["rgb_array"], "render_fps": 80}
+    metadata = {"render_modes": ["rgb_array"], "render_fps": CONTROL_FPS}
 
     def __init__(
         self,

@@ -13,7 +13,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import logging
-import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -27,6 +26,7 @@ from gymnast.data.schema import EpisodeInfo
 from gymnast.policy.vla import EmbeddedVLA, VLAConfig
 from gymnast.utils.checkpoint import load_checkpoint, resolve_checkpoint, save_checkpoint, write_run_config
 from gymnast.utils.metrics import MetricsLog
+from gymnast.utils.schedule import warmup_cosine
 
 logger = logging.getLogger(__name__)
 
@@ -165,7 +165,7 @@ def train_sft(data: Path, out: Path, config: SFTConfig, resume: bool = False, pr
     torch.manual_seed(config.seed)
     model = EmbeddedVLA(config.vla)
     optimizer = torch.optim.AdamW(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
-    schedule = torch.optim.lr_scheduler.LambdaLR(optimizer, _warmup_cosine(config.warmup_steps, config.steps))
+    schedule = torch.optim.lr_scheduler.LambdaLR(optimizer, warmup_cosine(config.warmup_steps, config.steps))
     sampler = torch.Generator().manual_seed(config.seed)
     resolved = {"sft": dataclasses.asdict(config), "model": model.spec(), "data": str(data),
                 "demos": [info.key for info in demos.episodes]}
@@ -211,12 +211,3 @@ def saved_sft_config(run: Path) -> SFTConfig:
     saved = json.loads(path.read_text())["sft"]
     return SFTConfig(**{**saved, "vla": VLAConfig(**saved["vla"])})
 
-
-def _warmup_cosine(warmup: int, total: int):
-    def factor(step: int) -> float:
-        if step < warmup:
-            return (step + 1) / warmup
-        progress = (step - warmup) / max(1, total - warmup)
-        return 0.5 * (1 + math.cos(math.pi * min(progress, 1.0)))
-
-    return factor

@@ -1,0 +1,87 @@
+"""Imagined frames per second against the real env's rendered steps per second, on this machine.
+
+The world model imagines B rollouts at once (one `step` call per chunk of K actions, one frame per
+action); the real env renders one step at a time. Both are measured in the same run, so the
+ratio is not fooled by a busy machine. The real env is measured in one process and in as many
+processes as the world model has threads (the fair comparison: the same cores).
+
+    .venv/bin/python benchmarks/world_model.py [--wm RUN] [--chunk 5] [--steps 40]
+
+Without --wm, an untrained model of the default architecture is timed (the speed does not depend
+on the weights). Prints and writes benchmarks/results/world_model.json.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import resource
+import time
+from pathlib import Path
+
+import torch
+
+import gymnast  # noqa: F401  (sets MUJOCO_GL)
+from gymnast.config import EnvConfig
+from gymnast.utils.atomic import write_json
+from gymnast.world_model.base import load_world_model
+from gymnast.world_model.embedded import EmbeddedWorldModel, EmbeddedWorldModelConfig
+
+
+RESULTS = Path(__file__).parent / "results" / "world_model.json"
+
+
+def imagined_fps(model, batch: int, chunk: int, steps: int) -> tuple[float, float]:
+    """(frames per second, peak resident memory in MiB) for `steps` chunks of a batch of rollouts."""
+    size = model.image_size
+    context = torch.randint(0, 256, (batch, model.context_frames, size, size, 3), dtype=torch.uint8)
+    actions = torch.rand(steps, batch, chunk, model.action_dim) * 2 - 1
+    state = model.init_state(context)
+    model.step(state, actions[0])  # warm-up: first calls allocate and pick kernels
+    started = time.perf_counter()
+    for k in range(steps):
+        state, _ = model.step(state, actions[k])
+    elapsed = time.perf_counter() - started
+    return batch * chunk * steps / elapsed, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--wm", type=Path, default=None, help="world-model run to time (default: an untrained default model)")
+    parser.add_argument("--chunk", type=int, default=5, help="actions per step call (the policy's chunk)")
+    parser.add_argument("--steps", type=int, default=40, help="step calls per batch size")
+    parser.add_argument("--real-steps", type=int, default=1500, help="real env steps per process")
+    args = parser.parse_args()
+    from real_env import steps_per_second  # the same measurement as benchmarks/real_env.py
+
+    model = load_world_model(args.wm) if args.wm else EmbeddedWorldModel(EmbeddedWorldModelConfig()).eval()
+    threads = torch.get_num_threads()
+    result: dict = {}
+    for batch in (1, 64, 256):
+        steps = args.steps if batch > 1 else args.steps * 8
+        fps, peak = imagined_fps(model, batch, args.chunk, steps)
+        result[f"imagined_fps_b{batch}"] = round(fps, 1)
+        result[f"peak_rss_mib_b{batch}"] = round(peak, 1)
+    real_one = steps_per_second("drawer-open-v3", args.real_steps, model.image_size, 1)
+    real_all = steps_per_second("drawer-open-v3", args.real_steps, model.image_size, threads)
+    result |= {
+        "real_env_fps": round(real_one, 1),
+        f"real_env_fps_{threads}proc": round(real_all, 1),
+        "ratio_b64": round(result["imagined_fps_b64"] / real_one, 2),
+        f"ratio_b64_vs_{threads}proc": round(result["imagined_fps_b64"] / real_all, 2),
+        "torch_threads": threads,
+        "image_size": model.image_size,
+        "chunk": args.chunk,
+        "model": str(args.wm) if args.wm else "untrained default architecture",
+        "parameters": sum(p.numel() for p in model.parameters()),
+        "bf16": getattr(getattr(model, "config", None), "bf16", None),
+        "machine": {"cpu_count": os.cpu_count(), "platform": platform.platform()},
+    }
+    print(json.dumps(result, indent=2))
+    write_json(RESULTS, result)
+
+
+if __name__ == "__main__":
+    main()

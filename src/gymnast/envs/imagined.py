@@ -1,0 +1,249 @@
+"""Imagined environments: Gymnasium envs whose frames come from a world model, not a simulator.
+
+Legend: B batch (parallel rollouts), C start frames, K actions per chunk (one env step), T
+actions taken so far, H/W image size, A action dimensions.
+
+The RL loop drives `ImaginedEnv` like `MetaWorldEnv` (the same ``"image"`` (H, W, 3) uint8 and
+``info["instruction"]``; no ``"state"``, which a video model does not imagine), so it never knows
+where the frames come from. What differs, and why:
+
+- An episode starts from a *real* camera frame and instruction (`StartState`, or the reset
+  options): a world model can continue a scene but not invent a faithful one.
+- One step is one action chunk (K, A), imagined as K frames in one model call: all are in
+  ``info["frames"]``, and the whole video in `video()`.
+- ``reward`` is always 0.0 and ``terminated`` always False: the world model cannot tell success.
+  Rewards are computed afterwards by a judge (`gymnast.reward`) on the whole video, which also
+  decides success. ``truncated`` means the horizon of T actions was reached; the last chunk is cut
+  so that exactly ``horizon`` frames are imagined.
+- `BatchedImaginedEnv` steps B rollouts in one world-model call (where the speed is). It never
+  autoresets: after truncation `step` raises until `reset`, because new rollouts need new real
+  start frames, which only the RL loop has.
+
+Observations and infos are fresh arrays on every call (check_env insists, and users keep them).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import torch
+from gymnasium.spaces import Box, Dict
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+
+from gymnast.envs.metaworld import CONTROL_FPS
+from gymnast.world_model.base import WorldModel
+
+
+
+@dataclass(frozen=True)
+class StartState:
+    """A real start of an imagined episode.
+
+    Attributes:
+        frames: (C, H, W, 3) uint8 real camera frames, the last one being "now".
+        instruction: the task in words, as the policy (and the judge) will read it.
+    """
+
+    frames: np.ndarray
+    instruction: str
+
+
+def _spaces(model: WorldModel, chunk_size: int) -> tuple[Dict, Box]:
+    size = model.image_size
+    observation = Dict({"image": Box(0, 255, (size, size, 3), np.uint8)})
+    return observation, Box(-1.0, 1.0, (chunk_size, model.action_dim), np.float32)
+
+
+def _check_frames(frames: Any, size: int, batch: int | None = None) -> np.ndarray:
+    """Real start frames as a (B, C, H, W, 3) uint8 copy (B = 1 without `batch`), or ValueError."""
+    lead = "" if batch is None else f"{batch}, "
+    expected = f"({lead}{size}, {size}, 3) or ({lead}C, {size}, {size}, 3) uint8"
+    frames = np.asarray(frames)
+    shape = frames.shape
+    frames = frames if batch else frames[None]  # (B, [C,] H, W, 3)
+    frames = frames[:, None] if frames.ndim == 4 else frames  # (B, C, H, W, 3)
+    ok = frames.ndim == 5 and frames.shape[0] == (batch or 1) and frames.shape[1] >= 1
+    if not ok or frames.shape[2:] != (size, size, 3) or frames.dtype != np.uint8:
+        raise ValueError(f"start frames must be {expected}, got {shape} {frames.dtype}")
+    return frames.copy()
+
+
+def _check_actions(actions: Any, expected: tuple[int, ...], names: str) -> np.ndarray:
+    """Actions as a float32 array clipped to [-1, 1], or ValueError naming the shapes."""
+    actions = np.asarray(actions, dtype=np.float32)
+    if actions.shape != expected:
+        raise ValueError(f"actions must have shape {expected} {names}, got {actions.shape}")
+    if not np.isfinite(actions).all():
+        raise ValueError("actions must be finite")
+    return np.clip(actions, -1.0, 1.0)
+
+
+class _Imagination:
+    """What both envs share: B rollouts of one model, a step counter and the imagined video."""
+
+    def __init__(self, model: WorldModel, chunk_size: int, horizon: int) -> None:
+        if chunk_size < 1 or horizon < 1:
+            raise ValueError(f"need chunk_size >= 1 and horizon >= 1, got {chunk_size}, {horizon}")
+        self.model, self.horizon = model, horizon
+        parameters = getattr(model, "parameters", None)  # a module's device; modules store none
+        self.device = next(parameters(), torch.zeros(0)).device if parameters else torch.device("cpu")
+        self.steps, self.state = 0, None
+        self.chunks: list[np.ndarray] = []  # (B, k, H, W, 3) each; the first is the start frame
+
+    def start(self, context: np.ndarray, seed: int) -> np.ndarray:
+        """Starts from (B, C, H, W, 3) real frames; returns the (B, H, W, 3) start frame."""
+        self.generator = torch.Generator(self.device).manual_seed(seed)  # for stochastic backends
+        self.state = self.model.init_state(torch.from_numpy(context).to(self.device), generator=self.generator)
+        self.steps, self.chunks = 0, [context[:, -1:]]
+        return context[:, -1].copy()
+
+    def step(self, actions: np.ndarray) -> tuple[np.ndarray, bool]:
+        """Applies (B, K, A) actions, cut at the horizon; returns (B, k, H, W, 3) frames, truncated."""
+        if self.state is None:
+            raise RuntimeError("call reset() with real start frames before step()")
+        if self.steps >= self.horizon:
+            raise RuntimeError(f"the episode was truncated at its horizon of {self.horizon} actions; call reset()")
+        actions = actions[:, : self.horizon - self.steps]  # (B, k, A)
+        tensor = torch.from_numpy(actions).to(self.device)
+        self.state, frames = self.model.step(self.state, tensor, generator=self.generator)
+        frames = frames.cpu().numpy()  # (B, k, H, W, 3) uint8
+        self.steps += actions.shape[1]
+        self.chunks.append(frames)
+        return frames, self.steps >= self.horizon
+
+    def video(self) -> np.ndarray:
+        if self.state is None:
+            raise RuntimeError("call reset() before video()")
+        return np.concatenate(self.chunks, axis=1)  # (B, T + 1, H, W, 3)
+
+
+class ImaginedEnv(gym.Env):
+    """One imagined rollout as a Gymnasium environment (see the module docstring).
+
+    Observation: ``{"image": (H, W, 3) uint8}``. Action: (K, A) float32 in [-1, 1], one chunk.
+    ``info``: ``instruction``, ``step`` (actions taken) and, after `step`, ``frames`` (k, H, W, 3)
+    uint8, every frame imagined in that step.
+
+    Args:
+        model: any `WorldModel`.
+        starts: real start states that `reset` without options draws from (with `np_random`).
+        chunk_size: K, actions per step.
+        horizon: actions per episode; the episode is truncated when they are taken.
+        render_mode: None or ``rgb_array`` (the latest frame).
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": CONTROL_FPS}
+
+    def __init__(
+        self,
+        model: WorldModel,
+        starts: Sequence[StartState] = (),
+        chunk_size: int = 5,
+        horizon: int = 150,
+        render_mode: str | None = None,
+    ) -> None:
+        self._sim = _Imagination(model, chunk_size, horizon)
+        for start in starts:
+            _check_frames(start.frames, model.image_size)  # fail at construction, not mid-training
+        self.starts = tuple(starts)
+        self.render_mode = render_mode
+        # render() gives one frame per step, and a step spans `chunk_size` real-time actions.
+        self.metadata = {**self.metadata, "render_fps": CONTROL_FPS / chunk_size}
+        self.observation_space, self.action_space = _spaces(model, chunk_size)
+        self._instruction = ""
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        """Starts from ``options`` ``{"frames": ([C,] H, W, 3) uint8, "instruction": str}``, or else
+        from one of `starts`; ValueError without a start, or for frames of the wrong shape or dtype."""
+        super().reset(seed=seed)
+        if options:
+            if "frames" not in options or not isinstance(options.get("instruction"), str):
+                raise ValueError('reset options need both "frames" and an "instruction" string')
+            frames, instruction = options["frames"], options["instruction"]
+        elif self.starts:
+            start = self.starts[int(self.np_random.integers(len(self.starts)))]
+            frames, instruction = start.frames, start.instruction
+        else:
+            raise ValueError(
+                "the imagined env needs a real start frame and instruction: pass "
+                'reset(options={"frames": ..., "instruction": ...}) or build it with starts=[StartState(...)]'
+            )
+        context = _check_frames(frames, self._sim.model.image_size)
+        self._instruction = instruction
+        frame = self._sim.start(context, seed=int(self.np_random.integers(2**63)))[0]
+        return {"image": frame}, {"instruction": self._instruction, "step": 0}
+
+    def step(self, action):
+        """Imagines one chunk; reward 0.0 and terminated False always (a judge scores the video)."""
+        actions = _check_actions(action, self.action_space.shape, "(chunk_size, action_dim)")
+        frames, truncated = self._sim.step(actions[None])
+        frames = frames[0]  # (k, H, W, 3)
+        info = {"instruction": self._instruction, "step": self._sim.steps, "frames": frames.copy()}
+        return {"image": frames[-1].copy()}, 0.0, False, truncated, info
+
+    def render(self) -> np.ndarray | None:
+        if self.render_mode is None:
+            return None
+        if self._sim.state is None:
+            raise RuntimeError("call reset() before render()")
+        return self._sim.chunks[-1][0, -1].copy()
+
+    def video(self) -> np.ndarray:
+        """(T + 1, H, W, 3) uint8: the real start frame, then every imagined frame so far."""
+        return self._sim.video()[0]
+
+
+class BatchedImaginedEnv(VectorEnv):
+    """B imagined rollouts stepped together in one world-model call; no autoreset.
+
+    Observation: ``{"image": (B, H, W, 3) uint8}``. Action: (B, K, A) float32 in [-1, 1].
+    ``infos``: ``instruction`` (B,) str, ``step`` (B,) int and, after `step`, ``frames``
+    (B, k, H, W, 3) uint8. All rollouts start, and are truncated, together.
+    The arguments are `ImaginedEnv`'s, with ``num_envs`` B instead of starts (reset takes them).
+    """
+
+    metadata = {"autoreset_mode": AutoresetMode.DISABLED, "render_modes": [], "render_fps": CONTROL_FPS}
+
+    def __init__(self, model: WorldModel, num_envs: int, chunk_size: int = 5, horizon: int = 150) -> None:
+        self._sim = _Imagination(model, chunk_size, horizon)
+        self.num_envs = num_envs
+        self.single_observation_space, self.single_action_space = _spaces(model, chunk_size)
+        self.observation_space = batch_space(self.single_observation_space, num_envs)
+        self.action_space = batch_space(self.single_action_space, num_envs)
+        self._instructions = np.array([""] * num_envs, dtype=object)
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        """Starts all B rollouts from ``options`` ``{"frames": (B, [C,] H, W, 3) uint8, "instructions":
+        B strings}``; ValueError when they are missing or do not fit."""
+        super().reset(seed=seed)
+        options = options or {}
+        if "frames" not in options or "instructions" not in options:
+            shapes = f'{{"frames": ({self.num_envs}, [C,] H, W, 3) uint8, "instructions": {self.num_envs} strings}}'
+            raise ValueError(f"the imagined env needs real start frames and instructions: reset(options={shapes})")
+        context = _check_frames(options["frames"], self._sim.model.image_size, batch=self.num_envs)
+        instructions = list(options["instructions"])
+        if len(instructions) != self.num_envs or not all(isinstance(i, str) for i in instructions):
+            raise ValueError(f"instructions must be {self.num_envs} strings, got {instructions!r}")
+        self._instructions = np.array(instructions, dtype=object)
+        frames = self._sim.start(context, seed=int(self.np_random.integers(2**63)))
+        return {"image": frames}, self._info()
+
+    def step(self, actions):
+        """Imagines one chunk per rollout; rewards 0 and terminations False (a judge scores videos)."""
+        actions = _check_actions(actions, self.action_space.shape, "(num_envs, chunk_size, action_dim)")
+        frames, truncated = self._sim.step(actions)
+        infos = {**self._info(), "frames": frames.copy()}
+        zeros = np.zeros(self.num_envs)
+        return {"image": frames[:, -1].copy()}, zeros, zeros.astype(bool), np.full(self.num_envs, truncated), infos
+
+    def video(self) -> np.ndarray:
+        """(B, T + 1, H, W, 3) uint8: the real start frames, then every imagined frame so far."""
+        return self._sim.video()
+
+    def _info(self) -> dict[str, Any]:
+        return {"instruction": self._instructions.copy(), "step": np.full(self.num_envs, self._sim.steps)}

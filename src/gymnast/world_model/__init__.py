@@ -1,0 +1,1 @@
+"""World models: the `WorldModel` contract, the embedded CPU backend, its training and evaluation."""

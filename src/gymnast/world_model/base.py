@@ -1,0 +1,161 @@
+"""The `WorldModel` contract: an action-conditioned video model the policy can practise in.
+
+Legend: B batch, C context frames, T imagined steps, K actions per `step` call, H/W image size,
+A action dimensions.
+
+A world model starts from real context frames and imagines one frame per action:
+
+    state = model.init_state(context)            # context (B, C', H, W, 3) uint8, any 1 <= C'
+    state, frames = model.step(state, actions)   # actions (B, K, A) -> frames (B, K, H, W, 3) uint8
+
+The state is explicit and opaque (whatever the backend needs), so many rollouts can run side by
+side and a rollout can be branched. Frames are uint8 like the real camera's, so the policy, the
+reward and the videos never know where they came from. `rollout` drives a model either with
+fixed actions (open-loop fidelity evaluation) or with a policy callable (RL): one code path.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from dataclasses import dataclass
+from importlib import import_module
+from pathlib import Path
+from typing import Any, Protocol
+
+import torch
+from safetensors.torch import load_file
+
+from gymnast.policy.base import ActionSample
+from gymnast.utils.checkpoint import resolve_checkpoint
+
+
+class WorldModel(Protocol):
+    """An action-conditioned video model over uint8 RGB frames."""
+
+    context_frames: int  # C: the real frames `init_state` uses (the most recent C of those given)
+    image_size: int  # H = W
+    action_dim: int  # A
+
+    def init_state(self, context: torch.Tensor, generator: torch.Generator | None = None) -> Any:
+        """State after the real (B, C', H, W, 3) uint8 context frames, the last one being "now".
+
+        Fewer than C frames are allowed (a single start frame is the usual case): the first one is
+        repeated, as if the robot had been standing still.
+        """
+        ...
+
+    def step(self, state: Any, actions: torch.Tensor, generator: torch.Generator | None = None) -> tuple[Any, torch.Tensor]:
+        """Applies (B, K, A) actions in order; returns the new state and (B, K, H, W, 3) uint8 frames."""
+        ...
+
+
+def check_context(context: torch.Tensor, image_size: int) -> None:
+    """Raises ValueError unless `context` is (B, C, image_size, image_size, 3) uint8 with C >= 1."""
+    expected = f"(B, C, {image_size}, {image_size}, 3) uint8"
+    if not isinstance(context, torch.Tensor):
+        raise ValueError(f"context frames must be a tensor {expected}, got {type(context).__name__}")
+    if context.ndim != 5 or tuple(context.shape[2:]) != (image_size, image_size, 3) or context.shape[1] < 1:
+        raise ValueError(f"context frames must be {expected}, got {tuple(context.shape)}")
+    if context.dtype != torch.uint8:
+        raise ValueError(f"context frames must be {expected}, got dtype {context.dtype}")
+
+
+def check_actions(actions: torch.Tensor, action_dim: int, batch: int) -> None:
+    """Raises ValueError unless `actions` is (batch, K, action_dim) floating point with K >= 1."""
+    expected = f"({batch}, K, {action_dim}) float"
+    if not isinstance(actions, torch.Tensor):
+        raise ValueError(f"actions must be a tensor {expected}, got {type(actions).__name__}")
+    if actions.ndim != 3 or actions.shape[0] != batch or actions.shape[2] != action_dim or actions.shape[1] < 1:
+        raise ValueError(f"actions must be {expected}, got {tuple(actions.shape)}")
+    if not actions.is_floating_point():
+        raise ValueError(f"actions must be {expected}, got dtype {actions.dtype}")
+
+
+def pad_context(context: torch.Tensor, frames: int) -> torch.Tensor:
+    """The last `frames` of (B, C', H, W, 3), repeating the first frame in front when C' is short."""
+    missing = frames - context.shape[1]
+    if missing > 0:
+        context = torch.cat([context[:, :1].expand(-1, missing, -1, -1, -1), context], dim=1)
+    return context[:, -frames:]
+
+
+@dataclass(frozen=True)
+class ImaginedRollout:
+    """What `rollout` returns.
+
+    Attributes:
+        frames: (B, T, H, W, 3) uint8 imagined frames; frame t follows action t.
+        actions: (B, T, A) float32 the actions applied.
+        samples: with a policy, the `ActionSample` (or action tensor) it returned at each call, in
+            order (RL needs their tokens and log-probabilities); empty with fixed actions.
+    """
+
+    frames: torch.Tensor
+    actions: torch.Tensor
+    samples: tuple[ActionSample | torch.Tensor, ...] = ()
+
+
+PolicyFn = Callable[[torch.Tensor], "ActionSample | torch.Tensor"]
+"""Maps the latest (B, H, W, 3) uint8 frame to a (B, K, A) action chunk (or an ActionSample)."""
+
+
+def rollout(
+    model: WorldModel,
+    context: torch.Tensor,
+    actions: torch.Tensor | None = None,
+    policy: PolicyFn | None = None,
+    horizon: int | None = None,
+    generator: torch.Generator | None = None,
+) -> ImaginedRollout:
+    """Imagines a rollout from real context frames, under fixed actions or a policy.
+
+    Args:
+        model: the world model.
+        context: (B, C', H, W, 3) uint8 real frames; the last one is where the rollout starts.
+        actions: (B, T, A) fixed actions (open loop). Give either this or `policy`.
+        policy: called with the latest frame before every chunk (closed loop).
+        horizon: with a policy, the number of actions T to imagine (the last chunk is cut to fit).
+        generator: passed to the model (stochastic backends draw from it).
+    """
+    if (actions is None) == (policy is None):
+        raise ValueError("rollout needs exactly one of `actions` or `policy`")
+    state = model.init_state(context, generator=generator)
+    if actions is not None:
+        state, frames = model.step(state, actions, generator=generator)
+        return ImaginedRollout(frames, actions.float())
+    if horizon is None or horizon < 1:
+        raise ValueError(f"a policy rollout needs horizon >= 1, got {horizon}")
+    frame, frames, applied, samples = context[:, -1], [], [], []
+    while sum(a.shape[1] for a in applied) < horizon:
+        sample = policy(frame)
+        chunk = sample.actions if isinstance(sample, ActionSample) else sample
+        chunk = chunk[:, : horizon - sum(a.shape[1] for a in applied)]
+        state, new = model.step(state, chunk, generator=generator)
+        frame = new[:, -1]
+        frames.append(new)
+        applied.append(chunk.float())
+        samples.append(sample)
+    return ImaginedRollout(torch.cat(frames, dim=1), torch.cat(applied, dim=1), tuple(samples))
+
+
+BACKENDS = {"embedded": "gymnast.world_model.embedded:EmbeddedWorldModel"}
+"""Backend name -> "module:Class", imported only when a checkpoint asks for it."""
+
+
+def load_world_model(run: str | Path) -> WorldModel:
+    """The newest checkpoint of a world-model run (or a checkpoint directory), in eval mode.
+
+    Raises:
+        FileNotFoundError: no checkpoint there.
+        ValueError: the checkpoint names an unknown backend.
+    """
+    path = resolve_checkpoint(Path(run))
+    spec = json.loads((path / "config.json").read_text()).get("model", {})
+    backend = spec.get("backend")
+    if backend not in BACKENDS:
+        raise ValueError(f"{path}/config.json: model.backend is {backend!r}; known backends: {sorted(BACKENDS)}")
+    module, name = BACKENDS[backend].split(":")
+    model = getattr(import_module(module), name).from_spec(spec)
+    model.load_state_dict(load_file(path / "model.safetensors"))
+    return model.eval()

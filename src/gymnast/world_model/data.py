@@ -1,0 +1,114 @@
+"""Episodes for world-model training and evaluation: the held-out split and an in-memory bank.
+
+Legend: B batch, C context frames, F future frames, H/W image size, A action dimensions.
+
+The split is by scene, not by episode: every episode of a (task, seed) layout goes to the same
+side, because the experts, noisy experts and failures recorded on one seed share the scene, and
+a model evaluated on a scene it trained on would look better than it is. Episodes from
+evaluation seeds (`gymnast.envs.tasks.EVAL_SEEDS`) are never used at all.
+"""
+
+from __future__ import annotations
+
+import logging
+import zlib
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import torch
+from tqdm import tqdm
+
+from gymnast.data.lerobot import EpisodeDataset
+from gymnast.data.schema import EpisodeInfo
+from gymnast.envs.tasks import EVAL_SEEDS
+
+logger = logging.getLogger(__name__)
+
+
+def is_heldout(info: EpisodeInfo, fraction: float) -> bool:
+    """Whether the episode's scene (task, seed) belongs to the held-out part (a fixed hash)."""
+    return zlib.crc32(f"{info.task}/{info.seed}".encode()) % 10_000 < fraction * 10_000
+
+
+def split_episodes(infos: Sequence[EpisodeInfo], fraction: float) -> tuple[list[int], list[int]]:
+    """(train, held-out) episode indices; episodes recorded on evaluation seeds are in neither."""
+    if not 0 <= fraction < 1:
+        raise ValueError(f"the held-out fraction must be in [0, 1), got {fraction}")
+    usable = [i for i, info in enumerate(infos) if info.seed not in EVAL_SEEDS]
+    if len(usable) < len(infos):
+        logger.warning("ignoring %d episodes recorded on evaluation seeds", len(infos) - len(usable))
+    heldout = [i for i in usable if is_heldout(infos[i], fraction)]
+    return [i for i in usable if i not in set(heldout)], heldout
+
+
+@dataclass(frozen=True)
+class ClipBatch:
+    """Clips for training: C context frames, then F future frames and the F actions leading to them.
+
+    Attributes:
+        context: (B, C, H, W, 3) uint8.
+        actions: (B, F, A) float32; action f moves frame C-1+f to frame C+f.
+        future: (B, F, H, W, 3) uint8.
+    """
+
+    context: torch.Tensor
+    actions: torch.Tensor
+    future: torch.Tensor
+
+
+class EpisodeBank:
+    """Decoded episodes held in memory (about 28 KB per 96 px frame) for fast random clips.
+
+    Training draws clips from anywhere in the dataset at every step, so decoding on demand (as
+    `gymnast.data.windows.TrainingWindows` does for datasets too large for memory) would decode
+    a whole episode per clip; MT10 with 30 episodes per task fits in about 1 GB.
+
+    Args:
+        dataset: where the episodes are.
+        indices: which episodes to load.
+        progress: show a progress bar while decoding.
+    """
+
+    def __init__(self, dataset: EpisodeDataset, indices: Sequence[int], progress: bool = False) -> None:
+        if not indices:
+            raise ValueError(f"{dataset.root}: no episodes to load (is the held-out fraction too large?)")
+        self.indices = list(indices)
+        self.infos = [dataset.episodes[i] for i in self.indices]
+        self.frames, self.actions = [], []
+        for i in tqdm(self.indices, desc="loading episodes", disable=not progress):
+            episode = dataset.load(i)
+            self.frames.append(torch.from_numpy(episode.frames))  # (T+1, H, W, 3)
+            self.actions.append(torch.from_numpy(episode.actions).float())  # (T, A)
+
+    def __len__(self) -> int:
+        return len(self.indices)
+
+    def clip(self, k: int, start: int, context: int, future: int) -> ClipBatch:
+        """The clip of episode `k` (position in this bank) whose first context frame is `start`.
+
+        `start` may be negative down to 1 - C: frames before the episode repeat its first frame
+        and the actions between them are zero, which is exactly a robot standing still. This
+        teaches the model to start from a single real frame, as RL rollouts do.
+        """
+        frames, actions = self.frames[k], self.actions[k]
+        steps = len(actions)
+        if not 1 - context <= start <= steps + 1 - context - future:
+            raise IndexError(f"clip start {start} is outside episode {self.indices[k]} ({steps} steps)")
+        index = torch.arange(start, start + context + future).clamp(min=0)
+        action_index = torch.arange(start + context - 1, start + context - 1 + future)
+        clip_actions = torch.where((action_index >= 0)[:, None], actions[action_index.clamp(min=0)], 0.0)
+        clip_frames = frames[index]
+        return ClipBatch(clip_frames[None, :context], clip_actions[None], clip_frames[None, context:])
+
+    def sample(self, batch: int, context: int, future: int, generator: torch.Generator) -> ClipBatch:
+        """`batch` clips drawn uniformly over episodes, then over start positions."""
+        eligible = [k for k, a in enumerate(self.actions) if len(a) + 1 >= future + 1]
+        if not eligible:
+            raise ValueError(f"no episode has the {future + 1} frames a clip of {future} future frames needs")
+        clips = []
+        for _ in range(batch):
+            k = eligible[int(torch.randint(len(eligible), (1,), generator=generator))]
+            last_start = len(self.actions[k]) + 1 - context - future
+            start = int(torch.randint(1 - context, last_start + 1, (1,), generator=generator))
+            clips.append(self.clip(k, start, context, future))
+        return ClipBatch(*(torch.cat(parts) for parts in zip(*((c.context, c.actions, c.future) for c in clips))))

@@ -1,0 +1,146 @@
+"""`gymnast eval-wm`: how faithful is a world model on episodes it never trained on?
+
+For every held-out episode (scenes kept out of training, see `gymnast.world_model.data`) the model
+starts from real context frames at several points of the episode (t = 0, 32, 64, ...) and imagines
+open-loop, under the episode's real actions, to the episode's end. Each imagined frame is compared
+with the real one: PSNR, SSIM and a perceptual distance, and PSNR over the moving pixels only
+(where the real frame differs from the first context frame; the static table otherwise flatters
+whole-frame PSNR). The same figures are computed for the trivial predictor that repeats the last
+context frame, which the model must beat. Horizon h means the h-th imagined frame; "full" is the
+mean over every frame of the rollouts that start at t = 0, i.e. whole episodes.
+
+Legend: N rollouts, T imagined frames, H/W image size.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import time
+from collections import defaultdict
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from gymnast.data.lerobot import EpisodeDataset
+from gymnast.utils.atomic import write_json
+from gymnast.utils.checkpoint import resolve_checkpoint
+from gymnast.world_model.base import WorldModel, load_world_model
+from gymnast.world_model.controllability import ControllabilityConfig, check_controllability
+from gymnast.world_model.data import split_episodes
+from gymnast.world_model.metrics import PerceptualDistance, masked_psnr, moving_mask, psnr, ssim, summarize_horizons, to_unit_float
+from gymnast.world_model.videos import side_by_side, write_gif, write_side_by_side
+
+logger = logging.getLogger(__name__)
+
+MEASURES = ("psnr", "ssim", "perceptual", "moving_psnr")
+
+
+@dataclass(frozen=True)
+class WorldModelEvalConfig:
+    """What eval-wm measures."""
+
+    max_episodes: int = 0
+    """Evaluate at most this many held-out episodes (0 = all of them)."""
+    start_every: int = 32
+    """Open-loop rollouts start at t = 0, start_every, 2 * start_every, ... of each episode."""
+    videos: int = 6
+    """Side-by-side videos (real | imagined | difference) of whole held-out episodes."""
+    gifs: int = 0
+    """Also write the first this many of them as small looping GIFs (for docs and web pages)."""
+    controllability: ControllabilityConfig = ControllabilityConfig()
+    """The check that different actions give the simulator's different futures."""
+
+
+def evaluate_world_model(wm: Path, data: Path, out: Path, config: WorldModelEvalConfig = WorldModelEvalConfig(),
+                         progress: bool = True) -> dict:
+    """Measures `wm` on the held-out episodes of `data`; writes the report to `out` and returns it."""
+    started = time.perf_counter()
+    model = load_world_model(wm)
+    run_config = json.loads((resolve_checkpoint(Path(wm)) / "config.json").read_text())
+    dataset = EpisodeDataset(data)
+    if dataset.image_shape[:2] != (model.image_size, model.image_size):
+        raise ValueError(f"{data}: frames are {dataset.image_shape}, the world model makes {model.image_size}x{model.image_size}")
+    _, heldout = split_episodes(dataset.episodes, run_config["train"]["heldout_fraction"])
+    if config.max_episodes:
+        heldout = heldout[: config.max_episodes]
+    if not heldout:
+        raise ValueError(f"{data} has no held-out episodes for this run (held-out fraction {run_config['train']['heldout_fraction']})")
+    perceptual = PerceptualDistance()
+    rows: dict[str, list[np.ndarray]] = defaultdict(list)  # measure -> one (T,) array per rollout
+    tasks, full_rollout = [], []
+    video_dir = out.with_name(out.stem + "_videos")
+    for n, index in enumerate(tqdm(heldout, desc="eval-wm", disable=not progress)):
+        episode = dataset.load(index)
+        frames, actions = torch.from_numpy(episode.frames), torch.from_numpy(episode.actions).float()
+        for start in range(0, len(actions), config.start_every):
+            context = frames[max(0, start + 1 - model.context_frames) : start + 1][None]
+            imagined = model.step(model.init_state(context), actions[None, start:])[1][0]  # (T, H, W, 3)
+            real = frames[start + 1 :]
+            for name, values in _measure(imagined, real, context[0], perceptual).items():
+                rows[name].append(values)
+            for name, values in _measure(context[0, -1:].expand_as(real), real, context[0], perceptual).items():
+                rows[f"copy_last_{name}"].append(values)
+            tasks.append(episode.info.task)
+            full_rollout.append(start == 0)
+            name = f"{episode.info.task}_{episode.info.behaviour}_{episode.info.seed}"
+            if start == 0 and n < config.videos:
+                write_side_by_side(video_dir / f"{name}.mp4", real.numpy(), imagined.numpy(), dataset.fps)
+            if start == 0 and n < config.gifs:
+                # Every 2nd frame, played at half real speed: a small file, and motion easy to follow.
+                write_gif(video_dir / f"{name}.gif", side_by_side(real.numpy(), imagined.numpy())[::2], fps=dataset.fps // 4, scale=1)
+    table = {name: _pad(values) for name, values in rows.items()}  # name -> (N, T_max) with NaN
+    report = {**_summary(table, np.array(full_rollout)), "per_task": {}}
+    for task in sorted(set(tasks)):
+        chosen = np.array([t == task for t in tasks])
+        report["per_task"][task] = _summary({k: v[chosen] for k, v in table.items()}, np.array(full_rollout)[chosen])
+    report["controllability"] = check_controllability(model, dataset, heldout, config.controllability, progress=progress)
+    report |= {"wm": str(wm), "data": str(data), "episodes": len(heldout), "rollouts": len(tasks),
+               "config": asdict(config), "videos": str(video_dir) if config.videos else None,
+               "seconds": round(time.perf_counter() - started, 1)}
+    write_json(out, report)
+    return report
+
+
+def _measure(imagined: torch.Tensor, real: torch.Tensor, context: torch.Tensor, perceptual: PerceptualDistance) -> dict:
+    """Per-frame measures of (T, H, W, 3) uint8 `imagined` against `real`, as (T,) numpy arrays."""
+    pred, target = to_unit_float(imagined), to_unit_float(real)  # (T, 3, H, W)
+    mask = moving_mask(target, to_unit_float(context[:1]))  # moving w.r.t. the first context frame
+    return {"psnr": psnr(pred, target).numpy(), "ssim": ssim(pred, target).numpy(),
+            "perceptual": perceptual(pred, target).numpy(), "moving_psnr": masked_psnr(pred, target, mask).numpy()}
+
+
+def _pad(rows: list[np.ndarray]) -> np.ndarray:
+    table = np.full((len(rows), max(len(r) for r in rows)), np.nan)
+    for i, row in enumerate(rows):
+        table[i, : len(row)] = row
+    return table
+
+
+def _summary(table: dict[str, np.ndarray], full_rollout: np.ndarray) -> dict:
+    """Flat `<measure>_<horizon>` figures (e.g. psnr_h32, copy_last_moving_psnr_h32)."""
+    summary = {}
+    for name, values in table.items():
+        by_horizon = summarize_horizons(values)
+        by_horizon["full"] = summarize_horizons(values[full_rollout])["full"]
+        summary |= {f"{name}_{h}": (None if v is None else round(float(v), 4)) for h, v in by_horizon.items()}
+    return dict(sorted(summary.items()))
+
+
+def format_report(report: dict) -> str:
+    """A short table of the headline figures, model against repeat-last-frame."""
+    lines = [f"{'measure':<14}{'h1':>8}{'h8':>8}{'h32':>8}{'full':>8}   (world model / repeat last frame)"]
+    for name in MEASURES:
+        cells = []
+        for h in ("h1", "h8", "h32", "full"):
+            model, copy = report.get(f"{name}_{h}"), report.get(f"copy_last_{name}_{h}")
+            cells.append("-" if model is None else f"{model:.2f}/{copy:.2f}" if len(f"{model:.2f}") < 6 else f"{model:.1f}/{copy:.1f}")
+        lines.append(f"{name:<14}" + "".join(f"{c:>14}" for c in cells))
+    control = report.get("controllability", {})
+    if control:
+        lines.append(f"controllability: matched {control['matched_psnr']:.2f} dB vs mismatched {control['mismatched_psnr']:.2f} dB; "
+                     f"identified {control['identification_accuracy']:.0%} of action sequences")
+    return "\n".join(lines)
