@@ -32,6 +32,8 @@ demo: $(STAMP)
 	$(BIN)/gymnast contact-sheet --tasks mt10 --out $(DEMO)/mt10.png
 	$(BIN)/gymnast sft --data $(DEMO)/data --out $(DEMO)/sft --preset demo --demos-per-task 4
 	$(BIN)/gymnast eval --policy $(DEMO)/sft --tasks $(DEMO_TASKS) --episodes 10 --out $(DEMO)/sft_eval.json
+	$(BIN)/gymnast train-wm --data $(DEMO)/data --out $(DEMO)/wm --preset demo
+	$(BIN)/gymnast eval-wm --wm $(DEMO)/wm --data $(DEMO)/data --out $(DEMO)/wm_eval.json --control-scenes 2 --gifs 1
 
 clean:
 	rm -rf $(VENV) runs .pytest_cache

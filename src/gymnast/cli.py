@@ -279,6 +279,7 @@ def eval_wm(
     videos: int = 6,
     gifs: int = 0,
     control_scenes: int = 10,
+    reanchor_every: int | None = None,
 ) -> None:
     """Measure a world model's open-loop fidelity and controllability on held-out episodes.
 
@@ -290,12 +291,13 @@ def eval_wm(
         videos: side-by-side videos (real | imagined | difference) to write.
         gifs: also write the first GIFS of them as small looping GIFs.
         control_scenes: held-out scenes for the controllability check (0 skips it).
+        reanchor_every: override how often a long rollout re-encodes its own frames (0 = never).
     """
     from gymnast.world_model.controllability import ControllabilityConfig
     from gymnast.world_model.evaluate import WorldModelEvalConfig, evaluate_world_model, format_report
 
     config = WorldModelEvalConfig(max_episodes=max_episodes, videos=videos, gifs=gifs,
-                                  controllability=ControllabilityConfig(scenes=control_scenes))
+                                  controllability=ControllabilityConfig(scenes=control_scenes), reanchor_every=reanchor_every)
     report = evaluate_world_model(wm, data, out, config)
     print(format_report(report))
     print(f"report: {out}")

@@ -1,5 +1,7 @@
 """The embedded world model honours the WorldModel contract: shapes, seeding, chunking, saving, errors."""
 
+import dataclasses
+
 import pytest
 import torch
 
@@ -130,3 +132,17 @@ def test_rollout_needs_exactly_one_source_of_actions():
         rollout(make_model(), frames(1, 1))
     with pytest.raises(ValueError, match="horizon"):
         rollout(make_model(), frames(1, 1), policy=lambda frame: actions(1, 2))
+
+
+def test_long_rollouts_re_anchor_on_their_own_frames_at_the_trained_horizon():
+    model = make_model()
+    anchored = EmbeddedWorldModel(dataclasses.replace(TINY, reanchor_every=3)).eval()
+    anchored.load_state_dict(model.state_dict())
+    never = EmbeddedWorldModel(dataclasses.replace(TINY, reanchor_every=0)).eval()
+    never.load_state_dict(model.state_dict())
+    context, moves = frames(2, 2), actions(2, 7)
+    a = anchored.step(anchored.init_state(context), moves)[1]
+    b = never.step(never.init_state(context), moves)[1]
+    assert torch.equal(a[:, :3], b[:, :3]) and not torch.equal(a[:, 3:], b[:, 3:])
+    middle, first = anchored.step(anchored.init_state(context), moves[:, :2])  # re-anchoring spans step calls
+    assert torch.equal(torch.cat([first, anchored.step(middle, moves[:, 2:])[1]], dim=1), a)

@@ -143,15 +143,18 @@ BACKENDS = {"embedded": "gymnast.world_model.embedded:EmbeddedWorldModel"}
 """Backend name -> "module:Class", imported only when a checkpoint asks for it."""
 
 
-def load_world_model(run: str | Path) -> WorldModel:
+def load_world_model(run: str | Path, **overrides: Any) -> WorldModel:
     """The newest checkpoint of a world-model run (or a checkpoint directory), in eval mode.
+
+    `overrides` replace fields of the saved model spec that do not change the weights (e.g. the
+    embedded backend's ``reanchor_every``).
 
     Raises:
         FileNotFoundError: no checkpoint there.
         ValueError: the checkpoint names an unknown backend.
     """
     path = resolve_checkpoint(Path(run))
-    spec = json.loads((path / "config.json").read_text()).get("model", {})
+    spec = {**json.loads((path / "config.json").read_text()).get("model", {}), **overrides}
     backend = spec.get("backend")
     if backend not in BACKENDS:
         raise ValueError(f"{path}/config.json: model.backend is {backend!r}; known backends: {sorted(BACKENDS)}")
