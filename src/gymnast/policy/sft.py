@@ -24,9 +24,9 @@ from tqdm import tqdm
 from gymnast.data.lerobot import EpisodeDataset
 from gymnast.data.schema import EpisodeInfo
 from gymnast.policy.vla import EmbeddedVLA, VLAConfig
-from gymnast.utils.checkpoint import load_checkpoint, resolve_checkpoint, save_checkpoint, write_run_config
+from gymnast.utils.checkpoint import resolve_checkpoint, resume_training, save_training, write_run_config
 from gymnast.utils.metrics import MetricsLog
-from gymnast.utils.schedule import warmup_cosine
+from gymnast.utils.optim import gradient_step, warmup_cosine
 
 logger = logging.getLogger(__name__)
 
@@ -169,12 +169,8 @@ def train_sft(data: Path, out: Path, config: SFTConfig, resume: bool = False, pr
     sampler = torch.Generator().manual_seed(config.seed)
     resolved = {"sft": dataclasses.asdict(config), "model": model.spec(), "data": str(data),
                 "demos": [info.key for info in demos.episodes]}
-    start = 0
+    start = resume_training(out, model, optimizer, schedule, sampler) if resume else 0
     if resume:
-        trainer, rng = load_checkpoint(resolve_checkpoint(out), model, optimizer)
-        start = trainer["step"]
-        schedule.load_state_dict(trainer["schedule"])
-        sampler.set_state(rng["sampler"])
         logger.info("resumed %s at step %d", out, start)
     write_run_config(out, resolved)
     metrics = MetricsLog(out, resume_step=start if resume else None)
@@ -187,19 +183,14 @@ def train_sft(data: Path, out: Path, config: SFTConfig, resume: bool = False, pr
         images = random_shift(demos.images[batch], config.shift_augment, sampler)
         texts = [demos.instructions[i] for i in demos.instruction[batch].tolist()]
         loss, values = sft_loss(model, images, texts, demos.chunks[batch], demos.valid[batch], config.bf16)
-        optimizer.zero_grad(set_to_none=True)
-        loss.backward()
-        values["train/grad_norm"] = torch.nn.utils.clip_grad_norm_(model.parameters(), 1.0).item()
-        optimizer.step()
-        schedule.step()
+        values["train/grad_norm"] = gradient_step(loss, model, optimizer, schedule)
         done = step + 1
         if done % config.log_every == 0 or done == config.steps:
             values |= {"train/lr": schedule.get_last_lr()[0], "time/step_s": (time.perf_counter() - started) / (done - start)}
             metrics.log(done, values)
             bar.set_postfix(loss=f"{values['train/loss']:.3f}", acc=f"{values['train/token_accuracy']:.2f}")
         if done % config.checkpoint_every == 0 or done == config.steps:
-            checkpoint = save_checkpoint(out, done, model, resolved, optimizer, {"sampler": sampler.get_state()},
-                                         {"schedule": schedule.state_dict()})
+            checkpoint = save_training(out, done, model, resolved, optimizer, schedule, sampler)
     return checkpoint or resolve_checkpoint(out)
 
 

@@ -83,3 +83,19 @@ def load_checkpoint(checkpoint: Path, model: nn.Module, optimizer: torch.optim.O
 def write_run_config(run: Path, config: dict) -> None:
     """Saves the resolved configuration of a run at its root (every checkpoint has it too)."""
     write_json(Path(run) / "config.json", config)
+
+
+def save_training(run: Path, step: int, model: nn.Module, config: dict, optimizer: torch.optim.Optimizer,
+                  schedule: torch.optim.lr_scheduler.LRScheduler, sampler: torch.Generator) -> Path:
+    """A trainer's checkpoint: weights, config, optimizer, learning-rate schedule and batch sampler."""
+    return save_checkpoint(run, step, model, config, optimizer, {"sampler": sampler.get_state()},
+                           {"schedule": schedule.state_dict()})
+
+
+def resume_training(run: Path, model: nn.Module, optimizer: torch.optim.Optimizer,
+                    schedule: torch.optim.lr_scheduler.LRScheduler, sampler: torch.Generator) -> int:
+    """Restores what `save_training` wrote last into the live objects; returns the step to go on from."""
+    trainer, rng = load_checkpoint(resolve_checkpoint(run), model, optimizer)
+    schedule.load_state_dict(trainer["schedule"])
+    sampler.set_state(rng["sampler"])
+    return trainer["step"]

@@ -23,9 +23,9 @@ import torch
 from tqdm import tqdm
 
 from gymnast.data.lerobot import EpisodeDataset
-from gymnast.utils.checkpoint import load_checkpoint, resolve_checkpoint, save_checkpoint, write_run_config
+from gymnast.utils.checkpoint import resolve_checkpoint, resume_training, save_training, write_run_config
 from gymnast.utils.metrics import MetricsLog
-from gymnast.utils.schedule import warmup_cosine
+from gymnast.utils.optim import gradient_step, warmup_cosine
 from gymnast.world_model.data import ClipBatch, EpisodeBank, split_episodes
 from gymnast.world_model.embedded import EmbeddedWorldModel, EmbeddedWorldModelConfig
 from gymnast.world_model.metrics import psnr, to_unit_float
@@ -98,12 +98,8 @@ def train_world_model(data: Path, out: Path, config: WorldModelTrainConfig, resu
     validation = heldout.sample(_VALIDATION_CLIPS, context, config.future, torch.Generator().manual_seed(1)) if heldout else None
     resolved = {"train": dataclasses.asdict(config), "model": model.spec(), "data": str(data),
                 "train_episodes": len(train_ids), "heldout_episodes": len(heldout_ids)}
-    start = 0
+    start = resume_training(out, model, optimizer, schedule, sampler) if resume else 0
     if resume:
-        trainer, rng = load_checkpoint(resolve_checkpoint(out), model, optimizer)
-        start = trainer["step"]
-        schedule.load_state_dict(trainer["schedule"])
-        sampler.set_state(rng["sampler"])
         logger.info("resumed %s at step %d", out, start)
     write_run_config(out, resolved)
     metrics = MetricsLog(out, resume_step=start if resume else None)
@@ -115,11 +111,7 @@ def train_world_model(data: Path, out: Path, config: WorldModelTrainConfig, resu
         future = future_at(step, config)
         loss, values = clip_loss(model, bank.sample(config.batch_size, context, future, sampler))
         values["train/future"] = future
-        optimizer.zero_grad(set_to_none=True)
-        loss.backward()
-        values["train/grad_norm"] = torch.nn.utils.clip_grad_norm_(model.parameters(), 1.0).item()
-        optimizer.step()
-        schedule.step()
+        values["train/grad_norm"] = gradient_step(loss, model, optimizer, schedule)
         done = step + 1
         if validation is not None and (done % config.validate_every == 0 or done == config.steps):
             values |= validate(model, validation)
@@ -130,8 +122,7 @@ def train_world_model(data: Path, out: Path, config: WorldModelTrainConfig, resu
         if heldout is not None and (done % config.video_every == 0 or done == config.steps):
             _write_video(model, heldout, out / "videos" / f"step_{done:06d}.mp4", dataset.fps)
         if done % config.checkpoint_every == 0 or done == config.steps:
-            checkpoint = save_checkpoint(out, done, model, resolved, optimizer, {"sampler": sampler.get_state()},
-                                         {"schedule": schedule.state_dict()})
+            checkpoint = save_training(out, done, model, resolved, optimizer, schedule, sampler)
     return checkpoint or resolve_checkpoint(out)
 
 
