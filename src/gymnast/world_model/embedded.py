@@ -15,9 +15,8 @@ Why this shape (docs/world_model.md has the measurements):
   backends fit the same protocol later.
 - Pixels move more than they change. The decoder predicts where each pixel of the last real frame
   has moved to (a flow field, relative to "now", so sampling never compounds blur) and paints only
-  what the move cannot explain (alpha, rgb), such as the table behind the arm. Without the warp the
-  same network settles on repeating the last frame: measured on MT10 after 400 steps, its error
-  stayed at the repeat-last-frame level (ratio 1.00) while the warping model's fell to 0.48.
+  what the move cannot explain (alpha, rgb), such as the table behind the arm. Without the warp a
+  prototype of this network settled on repeating the last frame (docs/world_model.md).
 - The skip features come from the context only, so their part of the decoder's convolutions is
   computed once per rollout (`init_state`), not once per frame: the decoder's per-frame cost is a
   few small convolutions, which is what makes imagination ~10x faster than rendering on a CPU.
