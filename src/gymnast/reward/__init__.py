@@ -1,0 +1,1 @@
+"""Rewards for rollouts: the `Reward` contract and its implementations."""

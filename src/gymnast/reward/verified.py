@@ -1,0 +1,63 @@
+"""The verified reward of VLA-RFT: how close is the policy's imagined future to the expert's?
+
+Legend: B rollouts, T frames, H/W image size, A action dimensions.
+
+From the same real start frame the world model is rolled out twice, each conditioned step by step
+on its own actions: once under the policy's actions (the rollout being scored, `frames`) and once
+under the reference actions recorded in the dataset. The reward is
+
+    r = -(mean |policy frame - reference frame| + mean perceptual distance)
+
+over the first min(T, T_ref) frames (pixels in [0, 1]; the perceptual distance is
+`gymnast.world_model.metrics.PerceptualDistance`, LPIPS-like on ImageNet EfficientNet-Lite0
+features, since LPIPS's own weights cannot be downloaded here). Identical actions give 0, and the
+reward falls as the actions diverge. Comparing imagined with imagined (not with real frames)
+cancels the world model's own errors, which VLA-RFT found to matter most.
+
+Where it departs from the paper: the paper's public code appears to condition the reference
+rollout on the first action chunk only; here it is conditioned on every reference action, as the
+paper describes.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import torch
+
+from gymnast.reward.base import RewardContext
+from gymnast.world_model.base import WorldModel, rollout
+from gymnast.world_model.metrics import PerceptualDistance, to_unit_float
+
+
+class VerifiedReward:
+    """`Reward` that compares a rollout with the world model's rollout of the reference actions.
+
+    Reads `RewardContext.start` and `RewardContext.reference_actions`. A rollout whose reference
+    has no actions scores NaN.
+
+    Args:
+        model: the world model that imagined the policy's rollouts (the same one, or the
+            comparison would measure two models' differences).
+        perceptual: the perceptual distance (built once; loading it takes a second).
+    """
+
+    def __init__(self, model: WorldModel, perceptual: PerceptualDistance | None = None) -> None:
+        self.model = model
+        self.perceptual = perceptual or PerceptualDistance()
+
+    def score(self, frames: torch.Tensor, instructions: Sequence[str], context: RewardContext) -> torch.Tensor:
+        if context.start is None or context.reference_actions is None:
+            raise ValueError("the verified reward needs RewardContext.start and RewardContext.reference_actions")
+        batch, steps = frames.shape[:2]
+        if context.start.shape[0] != batch or context.reference_actions.shape[0] != batch:
+            raise ValueError(f"frames {tuple(frames.shape)}, start {tuple(context.start.shape)} and reference_actions "
+                             f"{tuple(context.reference_actions.shape)} must have the same batch size")
+        overlap = min(steps, context.reference_actions.shape[1])
+        if overlap == 0:
+            return torch.full((batch,), float("nan"))
+        reference = rollout(self.model, context.start, actions=context.reference_actions[:, :overlap].float()).frames
+        policy, expert = to_unit_float(frames[:, :overlap]), to_unit_float(reference)  # (B, T, 3, H, W)
+        pixel = (policy - expert).abs().mean(dim=(1, 2, 3, 4))
+        perceptual = self.perceptual(policy, expert).mean(dim=1)
+        return -(pixel + perceptual)
