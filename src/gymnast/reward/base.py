@@ -25,10 +25,15 @@ class RewardContext:
         start: (B, C', H, W, 3) uint8 the real frames each rollout started from.
         reference_actions: (B, T_ref, A) float the dataset's actions from the same start (the
             verified reward imagines them); T_ref may differ from the rollout's T.
+        success: (B,) bool whether a simulator reported success (software sim or real world).
+        env_rewards: (B, T) float the simulator's per-step rewards; steps after an episode ended
+            are NaN.
     """
 
     start: torch.Tensor | None = None
     reference_actions: torch.Tensor | None = None
+    success: torch.Tensor | None = None
+    env_rewards: torch.Tensor | None = None
 
 
 class Reward(Protocol):
