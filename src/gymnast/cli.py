@@ -303,6 +303,56 @@ def eval_wm(
     print(f"report: {out}")
 
 
+def train_judge(
+    data: Path,
+    out: Path,
+    wm: Path | None = None,
+    preset: Literal["debug", "demo", "full"] = "full",
+    resume: bool = False,
+    steps: int | None = None,
+) -> None:
+    """Train the embedded success judge on real episodes (and their re-imaginings with --wm), then
+    report its TPR and FPR on held-out real and imagined videos.
+
+    Args:
+        data: dataset directory (from `gymnast collect`).
+        out: run directory: checkpoints, metrics.jsonl, metrics.json (the held-out figures).
+        wm: world-model run: also train and measure on its re-imagining of every episode.
+        preset: debug (seconds), demo (minutes) or full.
+        resume: continue the run in OUT from its last checkpoint, with the settings saved there.
+        steps: override the preset's optimizer steps.
+    """
+    from gymnast.reward.train_judge import JUDGE_PRESETS, saved_judge_config, train_judge as train
+
+    config = saved_judge_config(out) if resume else JUDGE_PRESETS[preset]
+    if steps is not None and not resume:
+        config = dataclasses.replace(config, steps=steps)
+    report = train(data, out, config, wm=wm, resume=resume)
+    print(json.dumps({k: v for k, v in report.items() if k.startswith(("real", "imagined"))}, indent=2))
+    print(f"judge: {out}")
+
+
+def serve_judge(judge: Path, port: int = 8000, host: str = "127.0.0.1") -> None:
+    """Serve the learned judge over the OpenAI chat-completions protocol (POST /v1/chat/completions).
+
+    Args:
+        judge: judge run (or checkpoint) directory, from `gymnast train-judge`.
+        port: TCP port to listen on.
+        host: address to bind (127.0.0.1: this machine only).
+    """
+    import time
+
+    from gymnast.reward.serve import judge_server
+
+    with judge_server(judge, host, port) as server:
+        print(f"judge: {judge} at {server.url} (model gymnast-judge); Ctrl-C stops", flush=True)
+        try:
+            while True:
+                time.sleep(3600)
+        except KeyboardInterrupt:
+            pass
+
+
 COMMANDS = {
     "collect": collect,
     "inspect": inspect,
@@ -310,6 +360,8 @@ COMMANDS = {
     "eval": evaluate_command,
     "train-wm": train_wm,
     "eval-wm": eval_wm,
+    "train-judge": train_judge,
+    "serve-judge": serve_judge,
     "contact-sheet": contact_sheet,
     "gap-report": gap_report,
     "tasks": tasks,

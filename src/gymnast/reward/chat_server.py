@@ -22,7 +22,7 @@ from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 import numpy as np
 from PIL import Image
 
-log = logging.getLogger(__name__)
+logger = logging.getLogger(__name__)
 
 Answer = Callable[[str, list[np.ndarray]], str]
 
@@ -54,7 +54,7 @@ class _Handler(BaseHTTPRequestHandler):
     protocol_version = "HTTP/1.1"  # keep-alive, as the openai client expects
 
     def log_message(self, format: str, *args: object) -> None:
-        log.debug("%s %s", self.address_string(), format % args)
+        logger.debug("%s %s", self.address_string(), format % args)
 
     def _send(self, status: int, body: bytes, headers: dict[str, str] | None = None) -> None:
         self.send_response(status)
@@ -119,7 +119,7 @@ class _Server(ThreadingHTTPServer):
 
     def handle_error(self, request: object, client_address: object) -> None:
         # Clients that time out and hang up are expected (the timeout tests); do not spray tracebacks.
-        log.debug("chat server: error while serving %s", client_address, exc_info=True)
+        logger.debug("chat server: error while serving %s", client_address, exc_info=True)
 
 
 class ChatServer:
@@ -166,7 +166,7 @@ class ChatServer:
         self._thread = threading.Thread(target=self._httpd.serve_forever, kwargs={"poll_interval": 0.05},
                                         name="chat-server", daemon=True)  # poll often: stop() waits a poll
         self._thread.start()
-        log.info("chat server listening at %s", self.url)
+        logger.info("chat server listening at %s", self.url)
         return self
 
     def stop(self) -> None:

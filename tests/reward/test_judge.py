@@ -1,0 +1,76 @@
+"""The learned judge: its metrics on known labels, training end to end, and serving it over HTTP."""
+
+import dataclasses
+
+import pytest
+import torch
+
+from gymnast.cli import main
+from gymnast.data.lerobot import EpisodeDataset
+from gymnast.reward.judge import JudgeConfig, LearnedJudge, judged_frame_indices
+from gymnast.reward.serve import judge_server
+from gymnast.reward.train_judge import JUDGE_PRESETS, evaluate_judge, load_judge, load_videos, train_judge
+from gymnast.reward.vlm import VLMJudge, VLMJudgeConfig
+from gymnast.world_model.train import WM_PRESETS, train_world_model
+
+# The tiny dataset's scene drawer-close/0 is held out at 0.25 (see tests/world_model/test_train.py).
+DEBUG = dataclasses.replace(JUDGE_PRESETS["debug"], heldout_fraction=0.25)
+
+
+def always(answer: bool) -> LearnedJudge:
+    """A real judge whose head ignores its input and says `answer` with certainty."""
+    judge = LearnedJudge(JudgeConfig(width=32, image_size=32))
+    last = judge.head[-1]
+    torch.nn.init.zeros_(last.weight)
+    torch.nn.init.constant_(last.bias, 20.0 if answer else -20.0)
+    return judge.eval()
+
+
+@pytest.fixture(scope="module")
+def videos(tiny_dataset):
+    dataset = EpisodeDataset(tiny_dataset)
+    return load_videos(dataset, list(range(len(dataset.lengths))), wm=None, progress=False)
+
+
+def test_the_judge_looks_at_the_first_middle_and_last_two_frames():
+    assert judged_frame_indices(11) == [0, 5, 9, 10]
+    assert judged_frame_indices(2) == [0, 0, 0, 1]
+
+
+def test_metrics_on_known_labels(videos):
+    positives = sum(bool(v.success[-1]) for v in videos)
+    yes, no = evaluate_judge(always(True), videos), evaluate_judge(always(False), videos)
+    assert yes["real_tpr"] == 1.0 and yes["real_fpr"] == 1.0
+    assert no["real_tpr"] == 0.0 and no["real_fpr"] == 0.0
+    assert yes["real_positives"] == positives > 0 and yes["real_negatives"] > yes["real_whole_failures"]
+    assert yes["real_accuracy"] == pytest.approx(positives / (positives + yes["real_negatives"]), abs=1e-4)
+    assert "imagined_tpr" not in yes  # no world model, no imagined videos
+
+
+def test_training_with_a_world_model_reports_real_and_imagined_figures(tiny_dataset, tmp_path):
+    train_world_model(tiny_dataset, tmp_path / "wm", dataclasses.replace(WM_PRESETS["debug"], heldout_fraction=0.25), progress=False)
+    report = train_judge(tiny_dataset, tmp_path / "judge", DEBUG, wm=tmp_path / "wm", progress=False)
+    for key in ("real_tpr", "real_fpr", "imagined_tpr", "imagined_fpr"):
+        assert 0.0 <= report[key] <= 1.0
+    assert (tmp_path / "judge" / "metrics.json").exists()
+    assert load_judge(tmp_path / "judge").config.image_size == 32
+
+
+def test_the_vlm_client_scores_videos_through_serve_judge(tiny_dataset, tmp_path, videos):
+    train_judge(tiny_dataset, tmp_path / "judge", DEBUG, progress=False)
+    judge = load_judge(tmp_path / "judge")
+    video = torch.stack([videos[0].frames[:10], videos[1].frames[:10]])  # (2, 10, 32, 32, 3)
+    instructions = [videos[0].instruction, videos[1].instruction]
+    with judge_server(tmp_path / "judge") as server:
+        client = VLMJudge(VLMJudgeConfig(model="gymnast-judge", base_url=server.url, samples=1, frame_every=3))
+        scores = client.score(video, instructions)
+        assert server.requests_served == 2
+    # The server judged the JPEG-decoded frames 0, 3, 6, 9: the judge's own answer on those frames.
+    direct = judge.score(video[:, [0, 3, 6, 9]], instructions)
+    assert set(scores.tolist()) <= {0.0, 1.0} and client.stats["malformed"] == 0
+    assert (scores == direct).float().mean() >= 0.5  # JPEG may flip a borderline call, not both
+
+
+def test_cli_train_judge_runs(tiny_dataset, tmp_path, capsys):
+    main(["train-judge", "--data", str(tiny_dataset), "--out", str(tmp_path / "j"), "--preset", "debug"])
+    assert "judge:" in capsys.readouterr().out
