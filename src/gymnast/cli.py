@@ -353,6 +353,36 @@ def serve_judge(judge: Path, port: int = 8000, host: str = "127.0.0.1") -> None:
             pass
 
 
+def eval_judge(
+    reward: str,
+    data: Path,
+    out: Path,
+    wm: Path | None = None,
+    heldout_fraction: float = 0.1,
+) -> None:
+    """Measure a 0/1 judge (judge:RUN or vlm:MODEL@BASE_URL) on held-out episodes: TPR and FPR on
+    real videos and, with --wm, on the world model's re-imagining of the same episodes.
+
+    Args:
+        reward: the judge, e.g. judge:runs/judge or vlm:gpt-4o@https://api.openai.com/v1 (key from OPENAI_API_KEY).
+        data: dataset directory; the episodes of its held-out scenes are judged.
+        out: report JSON.
+        wm: world-model run whose imagined videos are judged too.
+        heldout_fraction: the held-out share of scenes (the world model's, so its videos are unseen).
+    """
+    from gymnast.data.lerobot import EpisodeDataset
+    from gymnast.reward.select import make_reward
+    from gymnast.reward.train_judge import evaluate_judge, heldout_videos
+    from gymnast.utils.atomic import write_json
+
+    if not reward.startswith(("judge:", "vlm:")):
+        raise ValueError(f"eval-judge measures judges (judge:RUN or vlm:MODEL@BASE_URL), got {reward!r}")
+    report = evaluate_judge(make_reward(reward), heldout_videos(EpisodeDataset(data), heldout_fraction, wm))
+    report |= {"reward": reward, "data": str(data), "wm": str(wm) if wm else None}
+    write_json(out, report)
+    print(json.dumps(report, indent=2))
+
+
 COMMANDS = {
     "collect": collect,
     "inspect": inspect,
@@ -362,6 +392,7 @@ COMMANDS = {
     "eval-wm": eval_wm,
     "train-judge": train_judge,
     "serve-judge": serve_judge,
+    "eval-judge": eval_judge,
     "contact-sheet": contact_sheet,
     "gap-report": gap_report,
     "tasks": tasks,

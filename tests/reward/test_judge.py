@@ -1,6 +1,7 @@
 """The learned judge: its metrics on known labels, training end to end, and serving it over HTTP."""
 
 import dataclasses
+import json
 
 import pytest
 import torch
@@ -74,3 +75,15 @@ def test_the_vlm_client_scores_videos_through_serve_judge(tiny_dataset, tmp_path
 def test_cli_train_judge_runs(tiny_dataset, tmp_path, capsys):
     main(["train-judge", "--data", str(tiny_dataset), "--out", str(tmp_path / "j"), "--preset", "debug"])
     assert "judge:" in capsys.readouterr().out
+
+
+def test_cli_eval_judge_measures_a_judge_through_its_name(tiny_dataset, tmp_path, capsys):
+    train_judge(tiny_dataset, tmp_path / "judge", DEBUG, progress=False)
+    out = tmp_path / "eval.json"
+    main(["eval-judge", "--reward", f"judge:{tmp_path / 'judge'}", "--data", str(tiny_dataset), "--out", str(out),
+          "--heldout-fraction", "0.25"])
+    report = json.loads(out.read_text())
+    assert report["real_positives"] + report["real_negatives"] > 0 and report["real_unscored"] == 0
+    with pytest.raises(SystemExit):
+        main(["eval-judge", "--reward", "sim", "--data", str(tiny_dataset), "--out", str(out)])
+    assert "measures judges" in capsys.readouterr().err

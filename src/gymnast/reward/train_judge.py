@@ -22,6 +22,7 @@ import torch
 from tqdm import tqdm
 
 from gymnast.data.lerobot import EpisodeDataset
+from gymnast.reward.base import Reward, RewardContext
 from gymnast.reward.judge import JudgeConfig, LearnedJudge, judge_loss, judged_frame_indices
 from gymnast.utils.atomic import write_json
 from gymnast.utils.checkpoint import resolve_checkpoint, resume_training, save_training, write_run_config
@@ -97,6 +98,11 @@ def load_videos(dataset: EpisodeDataset, indices: list[int], wm: Path | None, pr
     return videos
 
 
+def heldout_videos(dataset: EpisodeDataset, fraction: float, wm: Path | None = None) -> list[Video]:
+    """The videos of the held-out scenes' episodes (and their re-imaginings with a world model)."""
+    return load_videos(dataset, split_episodes(dataset.episodes, fraction)[1], wm, progress=False)
+
+
 def _sample(videos: list[Video], batch: int, whole_share: float, ambiguous: int, generator: torch.Generator):
     """(B, F, H, W, 3) judged frames of random (possibly cut) videos, their instructions and labels."""
     frames, texts, labels = [], [], []
@@ -143,15 +149,16 @@ def train_judge(data: Path, out: Path, config: JudgeTrainConfig, wm: Path | None
             bar.set_postfix(loss=f"{values['train/loss']:.3f}", acc=f"{values['train/accuracy']:.2f}")
         if done % config.checkpoint_every == 0 or done == config.steps:
             save_training(out, done, judge, resolved, optimizer, schedule, sampler)
-    report = evaluate_judge(judge.eval(), load_videos(dataset, heldout_ids, wm, progress=False))
+    report = evaluate_judge(judge.eval(), heldout_videos(dataset, config.heldout_fraction, wm))
     report |= {"data": str(data), "wm": str(wm) if wm else None, "heldout_episodes": len(heldout_ids),
                "train_episodes": len(train_ids), "seconds": round(time.perf_counter() - started, 1)}
     write_json(out / "metrics.json", report)
     return report
 
 
-def evaluate_judge(judge: LearnedJudge, videos: list[Video]) -> dict:
-    """TPR, FPR and accuracy, real and imagined apart; FPR over all negatives and over whole failed episodes."""
+def evaluate_judge(judge: Reward, videos: list[Video]) -> dict:
+    """TPR, FPR and accuracy of any 0/1 judge, real and imagined apart; FPR over all negatives and over
+    whole failed episodes. A NaN verdict (could not score) counts as "not success" and is counted."""
     report = {}
     for imagined in (False, True):
         cases = []  # (frames, instruction, label, whole episode?)
@@ -164,7 +171,8 @@ def evaluate_judge(judge: LearnedJudge, videos: list[Video]) -> dict:
                         cases.append((video.frames[:cut], video.instruction, False, False))
         if not cases:
             continue
-        predicted = torch.stack([judge.probability(f[None], [text])[0] for f, text, _, _ in cases]) >= 0.5
+        verdicts = torch.stack([judge.score(f[None], [text], RewardContext())[0] for f, text, _, _ in cases])
+        predicted = verdicts >= 0.5  # NaN compares False
         truth = torch.tensor([label for _, _, label, _ in cases])
         whole = torch.tensor([w for _, _, _, w in cases])
         prefix = "imagined" if imagined else "real"
@@ -176,6 +184,7 @@ def evaluate_judge(judge: LearnedJudge, videos: list[Video]) -> dict:
             f"{prefix}_positives": int(truth.sum()),
             f"{prefix}_negatives": int((~truth).sum()),
             f"{prefix}_whole_failures": int((~truth & whole).sum()),
+            f"{prefix}_unscored": int(torch.isnan(verdicts).sum()),
         }
     return report
 
