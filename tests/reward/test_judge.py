@@ -87,3 +87,16 @@ def test_cli_eval_judge_measures_a_judge_through_its_name(tiny_dataset, tmp_path
     with pytest.raises(SystemExit):
         main(["eval-judge", "--reward", "sim", "--data", str(tiny_dataset), "--out", str(out)])
     assert "measures judges" in capsys.readouterr().err
+
+
+def test_serve_judge_survives_faults_and_the_client_recovers_or_says_nan(tiny_dataset, tmp_path, videos):
+    train_judge(tiny_dataset, tmp_path / "judge", DEBUG, progress=False)
+    video, instruction = videos[0].frames[None, :10], [videos[0].instruction]
+    config = VLMJudgeConfig(model="gymnast-judge", base_url="", samples=1, frame_every=3, max_retries=2, backoff_s=0.01, timeout_s=0.5)
+    with judge_server(tmp_path / "judge", faults=["429", "500"]) as server:
+        client = VLMJudge(dataclasses.replace(config, base_url=server.url))
+        assert client.score(video, instruction).item() in (0.0, 1.0) and client.stats["retries"] == 2
+    with judge_server(tmp_path / "judge", faults=["slow:2", "500", "garbage"]) as server:
+        client = VLMJudge(dataclasses.replace(config, base_url=server.url))
+        assert torch.isnan(client.score(video, instruction)).all()  # timeout, 500, then no ANSWER line
+        assert client.stats["malformed"] == 1

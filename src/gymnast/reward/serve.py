@@ -9,6 +9,7 @@ ends with the line ``ANSWER: 1`` or ``ANSWER: 0`` the rubric asks for.
 from __future__ import annotations
 
 import re
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -20,8 +21,8 @@ from gymnast.reward.train_judge import load_judge
 _TASK = re.compile(r"^Task:\s*(.+)$", re.MULTILINE)
 
 
-def judge_server(run: Path, host: str = "127.0.0.1", port: int = 0) -> ChatServer:
-    """A (not yet started) chat server answering with the judge trained in `run`."""
+def judge_server(run: Path, host: str = "127.0.0.1", port: int = 0, faults: Sequence[str] = ()) -> ChatServer:
+    """A (not yet started) chat server answering with the judge trained in `run` (`faults`: see `ChatServer`)."""
     judge = load_judge(run)
 
     def answer(text: str, frames: list[np.ndarray]) -> str:
@@ -34,4 +35,4 @@ def judge_server(run: Path, host: str = "127.0.0.1", port: int = 0) -> ChatServe
         probability = judge.probability(video, [task.group(1).strip()]).item()
         return f"P(success) = {probability:.3f}\nANSWER: {int(probability >= 0.5)}"
 
-    return ChatServer(answer, host=host, port=port, model="gymnast-judge")
+    return ChatServer(answer, host=host, port=port, faults=faults, model="gymnast-judge")
