@@ -11,7 +11,6 @@ Legend: M samples, B batch, H/W image size, K chunk length, A action dimensions,
 from __future__ import annotations
 
 import dataclasses
-import json
 import logging
 import time
 from dataclasses import dataclass, field
@@ -24,7 +23,7 @@ from tqdm import tqdm
 from gymnast.data.lerobot import EpisodeDataset
 from gymnast.data.schema import EpisodeInfo
 from gymnast.policy.vla import EmbeddedVLA, VLAConfig
-from gymnast.utils.checkpoint import resolve_checkpoint, resume_training, save_training, write_run_config
+from gymnast.utils.checkpoint import resolve_checkpoint, resume_training, save_training, saved_settings, write_run_config
 from gymnast.utils.metrics import MetricsLog
 from gymnast.utils.optim import gradient_step, warmup_cosine
 
@@ -196,9 +195,6 @@ def train_sft(data: Path, out: Path, config: SFTConfig, resume: bool = False, pr
 
 def saved_sft_config(run: Path) -> SFTConfig:
     """The settings an SFT run was started with (from RUN/config.json), for ``--resume``."""
-    path = Path(run) / "config.json"
-    if not path.exists():
-        raise FileNotFoundError(f"nothing to resume: {path} does not exist")
-    saved = json.loads(path.read_text())["sft"]
+    saved = saved_settings(run, "sft")
     return SFTConfig(**{**saved, "vla": VLAConfig(**saved["vla"])})
 

@@ -13,13 +13,11 @@ P vision tokens, D width, V bins.
 from __future__ import annotations
 
 import dataclasses
-import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
 
 import torch
-from safetensors.torch import load_file
 from torch import nn
 
 from gymnast.policy.action_tokenizer import ActionTokenizer
@@ -167,10 +165,6 @@ def load_policy(run: str | Path) -> EmbeddedVLA:
     Raises:
         FileNotFoundError: no checkpoint there (the message names the directory).
     """
-    from gymnast.utils.checkpoint import resolve_checkpoint
+    from gymnast.utils.checkpoint import load_model
 
-    path = resolve_checkpoint(Path(run))
-    spec = json.loads((path / "config.json").read_text())
-    model = EmbeddedVLA.from_spec(spec["model"])
-    model.load_state_dict(load_file(path / "model.safetensors"))
-    return model.eval()
+    return load_model(Path(run), EmbeddedVLA.from_spec)

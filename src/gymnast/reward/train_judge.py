@@ -12,7 +12,6 @@ Legend: B batch, T steps, H/W image size.
 from __future__ import annotations
 
 import dataclasses
-import json
 import logging
 import time
 from dataclasses import dataclass, field
@@ -25,7 +24,7 @@ from gymnast.data.lerobot import EpisodeDataset
 from gymnast.reward.base import Reward, RewardContext
 from gymnast.reward.judge import JudgeConfig, LearnedJudge, judge_loss, judged_frame_indices
 from gymnast.utils.atomic import write_json
-from gymnast.utils.checkpoint import resolve_checkpoint, resume_training, save_training, write_run_config
+from gymnast.utils.checkpoint import load_model, resume_training, save_training, saved_settings, write_run_config
 from gymnast.utils.metrics import MetricsLog
 from gymnast.utils.optim import gradient_step, warmup_cosine
 from gymnast.world_model.base import load_world_model, rollout
@@ -196,18 +195,10 @@ def _rate(predicted: torch.Tensor, among: torch.Tensor) -> float | None:
 
 def saved_judge_config(run: Path) -> JudgeTrainConfig:
     """The settings a run was started with (RUN/config.json), for ``--resume``."""
-    path = Path(run) / "config.json"
-    if not path.exists():
-        raise FileNotFoundError(f"nothing to resume: {path} does not exist")
-    saved = json.loads(path.read_text())["train"]
+    saved = saved_settings(run, "train")
     return JudgeTrainConfig(**{**saved, "judge": JudgeConfig(**saved["judge"])})
 
 
 def load_judge(run: Path) -> LearnedJudge:
     """The newest checkpoint of a judge run (or a checkpoint directory), in eval mode."""
-    from safetensors.torch import load_file
-
-    path = resolve_checkpoint(Path(run))
-    judge = LearnedJudge.from_spec(json.loads((path / "config.json").read_text())["model"])
-    judge.load_state_dict(load_file(path / "model.safetensors"))
-    return judge.eval()
+    return load_model(Path(run), LearnedJudge.from_spec)

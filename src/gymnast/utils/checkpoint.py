@@ -14,6 +14,7 @@ import json
 import os
 import shutil
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
 
 import torch
@@ -99,3 +100,24 @@ def resume_training(run: Path, model: nn.Module, optimizer: torch.optim.Optimize
     schedule.load_state_dict(trainer["schedule"])
     sampler.set_state(rng["sampler"])
     return trainer["step"]
+
+
+def load_model(run: Path, build: Callable[[dict], nn.Module]) -> nn.Module:
+    """The newest checkpoint of `run` (or a checkpoint directory): `build(saved model spec)`, its
+    weights loaded, in eval mode.
+
+    Raises:
+        FileNotFoundError: no checkpoint there.
+    """
+    path = resolve_checkpoint(Path(run))
+    model = build(json.loads((path / "config.json").read_text()).get("model", {}))
+    model.load_state_dict(load_file(path / "model.safetensors"))
+    return model.eval()
+
+
+def saved_settings(run: Path, section: str) -> dict:
+    """Section `section` of ``RUN/config.json``: the settings a run was started with, for ``--resume``."""
+    path = Path(run) / "config.json"
+    if not path.exists():
+        raise FileNotFoundError(f"nothing to resume: {path} does not exist")
+    return json.loads(path.read_text())[section]

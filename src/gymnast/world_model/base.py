@@ -16,7 +16,6 @@ fixed actions (open-loop fidelity evaluation) or with a policy callable (RL): on
 
 from __future__ import annotations
 
-import json
 from collections.abc import Callable
 from dataclasses import dataclass
 from importlib import import_module
@@ -24,10 +23,9 @@ from pathlib import Path
 from typing import Any, Protocol
 
 import torch
-from safetensors.torch import load_file
 
 from gymnast.policy.base import ActionSample
-from gymnast.utils.checkpoint import resolve_checkpoint
+from gymnast.utils.checkpoint import load_model
 
 
 class WorldModel(Protocol):
@@ -153,12 +151,13 @@ def load_world_model(run: str | Path, **overrides: Any) -> WorldModel:
         FileNotFoundError: no checkpoint there.
         ValueError: the checkpoint names an unknown backend.
     """
-    path = resolve_checkpoint(Path(run))
-    spec = {**json.loads((path / "config.json").read_text()).get("model", {}), **overrides}
-    backend = spec.get("backend")
-    if backend not in BACKENDS:
-        raise ValueError(f"{path}/config.json: model.backend is {backend!r}; known backends: {sorted(BACKENDS)}")
-    module, name = BACKENDS[backend].split(":")
-    model = getattr(import_module(module), name).from_spec(spec)
-    model.load_state_dict(load_file(path / "model.safetensors"))
-    return model.eval()
+
+    def build(spec: dict) -> WorldModel:
+        spec = {**spec, **overrides}
+        backend = spec.get("backend")
+        if backend not in BACKENDS:
+            raise ValueError(f"{run}: model.backend is {backend!r}; known backends: {sorted(BACKENDS)}")
+        module, name = BACKENDS[backend].split(":")
+        return getattr(import_module(module), name).from_spec(spec)
+
+    return load_model(Path(run), build)

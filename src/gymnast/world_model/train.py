@@ -12,7 +12,6 @@ Legend: B batch, C context frames, F future frames, H/W image size.
 from __future__ import annotations
 
 import dataclasses
-import json
 import logging
 import math
 import time
@@ -23,7 +22,7 @@ import torch
 from tqdm import tqdm
 
 from gymnast.data.lerobot import EpisodeDataset
-from gymnast.utils.checkpoint import resolve_checkpoint, resume_training, save_training, write_run_config
+from gymnast.utils.checkpoint import resolve_checkpoint, resume_training, save_training, saved_settings, write_run_config
 from gymnast.utils.metrics import MetricsLog
 from gymnast.utils.optim import gradient_step, warmup_cosine
 from gymnast.world_model.data import ClipBatch, EpisodeBank, split_episodes
@@ -166,10 +165,7 @@ def _write_video(model: EmbeddedWorldModel, heldout: EpisodeBank, path: Path, fp
 
 def saved_train_config(run: Path) -> WorldModelTrainConfig:
     """The settings a run was started with (from RUN/config.json), for ``--resume``."""
-    path = Path(run) / "config.json"
-    if not path.exists():
-        raise FileNotFoundError(f"nothing to resume: {path} does not exist")
-    saved = json.loads(path.read_text())["train"]
+    saved = saved_settings(run, "train")
     model = {**saved["model"], "widths": tuple(saved["model"]["widths"])}
     return WorldModelTrainConfig(**{**saved, "model": EmbeddedWorldModelConfig(**model)})
 
