@@ -383,6 +383,67 @@ def eval_judge(
     print(json.dumps(report, indent=2))
 
 
+def rl(
+    out: Path,
+    policy: Path | None = None,
+    env: Literal["imagined", "sim", "real"] | None = None,
+    reward: str | None = None,
+    wm: Path | None = None,
+    data: Path | None = None,
+    preset: Literal["debug", "demo", "full"] = "full",
+    resume: bool = False,
+    steps: int | None = None,
+    tasks: str | None = None,
+    gap: str | None = None,
+    lr: float | None = None,
+    temperature: float | None = None,
+    group_size: int | None = None,
+    starts_per_step: int | None = None,
+    eval_every: int | None = None,
+    eval_episodes: int | None = None,
+    workers: int | None = None,
+    seed: int | None = None,
+) -> None:
+    """Fine-tune a policy with GRPO in the world model (imagined), the software simulator or the real world.
+
+    Args:
+        out: run directory: checkpoints, metrics.jsonl, tensorboard/, videos/, summary.json.
+        policy: the SFT (or RL) run or checkpoint to start from (required unless --resume).
+        env: where rollouts happen: imagined (in --wm), sim (the software simulator, --gap) or real.
+        reward: judge:RUN | vlm:MODEL@BASE_URL | verified | sim | sim-dense.
+        wm: the world model run (needed by --env imagined and --reward verified).
+        data: dataset whose scenes are the start states (default: the one the policy was trained on).
+        preset: debug (seconds), demo (minutes) or full.
+        resume: continue the run in OUT from its last checkpoint, with the settings saved there.
+        steps: override the number of RL steps.
+        tasks: override the training tasks (comma-separated names or sets).
+        gap: override the software simulator's gap (mild, strong).
+        lr: override the learning rate.
+        temperature: override the rollout temperature.
+        group_size: override the rollouts per start state.
+        starts_per_step: override the start states per step.
+        eval_every: override the steps between evaluations.
+        eval_episodes: override the evaluation episodes per task.
+        workers: override the simulator processes.
+        seed: override the seed.
+    """
+    from gymnast.rl.train import RL_PRESETS, RLRun, saved_rl_settings, train_rl
+
+    if resume:
+        run_spec, config = saved_rl_settings(out)
+    elif policy is None or env is None or reward is None:
+        raise ValueError("gymnast rl needs --policy, --env and --reward (or --resume to continue OUT)")
+    else:
+        run_spec = RLRun(str(policy), env, reward, str(wm) if wm else None, str(data) if data else None)
+        overrides = {"steps": steps, "tasks": tasks, "gap": gap, "lr": lr, "temperature": temperature,
+                     "group_size": group_size, "starts_per_step": starts_per_step, "eval_every": eval_every,
+                     "eval_episodes": eval_episodes, "workers": workers, "seed": seed}
+        config = dataclasses.replace(RL_PRESETS[preset], **{k: v for k, v in overrides.items() if v is not None})
+    summary = train_rl(run_spec, out, config, resume=resume)
+    summary.pop("curve")
+    print(json.dumps(summary, indent=2))
+
+
 COMMANDS = {
     "collect": collect,
     "inspect": inspect,
@@ -393,6 +454,7 @@ COMMANDS = {
     "train-judge": train_judge,
     "serve-judge": serve_judge,
     "eval-judge": eval_judge,
+    "rl": rl,
     "contact-sheet": contact_sheet,
     "gap-report": gap_report,
     "tasks": tasks,

@@ -60,6 +60,16 @@ class Policy(Protocol):
         """
         ...
 
+    def log_prob_and_entropy(
+        self, obs: torch.Tensor, instructions: Sequence[str], tokens: torch.Tensor, temperature: float = 1.0
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """`log_prob`, and the (B, N) entropy of each token's whole distribution (one forward pass)."""
+        ...
+
+    def chunk_tokens(self, actions: torch.Tensor) -> torch.Tensor:
+        """(B, K, A) actions -> (B, N) the tokens that decode to the nearest bins."""
+        ...
+
     def act(self, obs: torch.Tensor, instructions: Sequence[str]) -> torch.Tensor:
         """(B, K, A) the most likely action chunk (greedy decoding), for evaluation."""
         ...

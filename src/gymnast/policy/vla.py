@@ -135,6 +135,13 @@ class EmbeddedVLA(nn.Module):
         log_probs = torch.log_softmax(self.logits(obs, instructions).float() / temperature, dim=-1)
         return log_probs.gather(-1, tokens.unsqueeze(-1)).squeeze(-1)  # (B, N)
 
+    def log_prob_and_entropy(
+        self, obs: torch.Tensor, instructions: Sequence[str], tokens: torch.Tensor, temperature: float = 1.0
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        log_probs = torch.log_softmax(self.logits(obs, instructions).float() / temperature, dim=-1)  # (B, N, V)
+        entropy = -(log_probs.exp() * log_probs).sum(-1)  # (B, N)
+        return log_probs.gather(-1, tokens.unsqueeze(-1)).squeeze(-1), entropy
+
     @torch.no_grad()
     def act(self, obs: torch.Tensor, instructions: Sequence[str]) -> torch.Tensor:
         return self._decode(self.logits(obs, instructions).argmax(-1))

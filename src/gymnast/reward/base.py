@@ -39,6 +39,10 @@ class RewardContext:
 class Reward(Protocol):
     """Scores B rollouts."""
 
+    binary: bool
+    """Scores are 0/1 verdicts (success or not), not degrees: RL's dynamic sampling filters groups
+    by their success rate only for binary rewards."""
+
     def score(self, frames: torch.Tensor, instructions: Sequence[str], context: RewardContext) -> torch.Tensor:
         """(B,) float32 scores for (B, T, H, W, 3) uint8 rollout videos; NaN where one cannot be scored."""
         ...

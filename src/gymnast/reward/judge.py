@@ -51,6 +51,7 @@ class LearnedJudge(nn.Module):
     """`Reward` whose score is 1.0 when P(success) >= 0.5 (see `probability` for the raw value)."""
 
     backend = "embedded-judge"
+    binary = True
 
     def __init__(self, config: JudgeConfig = JudgeConfig()) -> None:
         super().__init__()

@@ -21,6 +21,8 @@ META_WORLD_MAX_STEP_REWARD = 10.0  # Meta-World v3 shapes every step's reward in
 class SimSuccess:
     """`Reward`: 1.0 if the simulator reported success during the rollout, else 0.0."""
 
+    binary = True
+
     def score(self, frames: torch.Tensor, instructions: Sequence[str], context: RewardContext) -> torch.Tensor:
         if context.success is None:
             raise ValueError("the sim reward needs RewardContext.success: the rollout must come from a simulator")
@@ -35,6 +37,8 @@ class SimDense:
     the goal without finishing would pay more than finishing early (the episode stops at success).
     Steps after any other end are ignored.
     """
+
+    binary = False
 
     def score(self, frames: torch.Tensor, instructions: Sequence[str], context: RewardContext) -> torch.Tensor:
         if context.env_rewards is None:

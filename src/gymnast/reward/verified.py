@@ -42,6 +42,8 @@ class VerifiedReward:
         perceptual: the perceptual distance (built once; loading it takes a second).
     """
 
+    binary = False
+
     def __init__(self, model: WorldModel, perceptual: PerceptualDistance | None = None) -> None:
         self.model = model
         self.perceptual = perceptual or PerceptualDistance()

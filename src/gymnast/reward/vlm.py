@@ -140,6 +140,8 @@ class VLMJudge:
         client: an `openai.OpenAI` client to use instead of building one (its retries should be 0).
     """
 
+    binary = True  # majority votes of 0/1 answers (NaN where none could be had)
+
     def __init__(self, config: VLMJudgeConfig, client: openai.OpenAI | None = None) -> None:
         self.config = config
         self.client = client or openai.OpenAI(

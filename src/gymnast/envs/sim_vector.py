@@ -1,0 +1,292 @@
+"""B Meta-World episodes stepped one action chunk at a time: RL in the real world or the simulator.
+
+Legend: B batch (parallel episodes), K actions per chunk (one env step), A action dimensions,
+H/W image size.
+
+Gymnasium's own vector envs do not fit RL rollouts: they autoreset a sub-env when it ends (or
+assert that none ends alone), while GRPO rollouts must end independently, at success or at the
+horizon, and must start from chosen (task, seed) pairs so that a group shares one initial state.
+`SimVectorEnv` keeps `BatchedImaginedEnv`'s contract (one step is a (B, K, A) chunk, its frames
+in ``infos["frames"]``, no autoreset) so the RL loop drives either without knowing which; unlike
+the imagined env it knows rewards and success, so each episode ends on its own and then stays
+frozen: never stepped again, its final frame repeated, NaN rewards, ``executed`` 0.
+
+MuJoCo stepping and rendering are single-threaded, so ``workers > 1`` splits the B episodes into
+contiguous slices over ``spawn`` processes (see `gymnast.envs.parallel`); the episodes run the
+same code in either case, so the results are identical.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import itertools
+import multiprocessing
+import traceback
+from collections import Counter
+from collections.abc import Callable
+from dataclasses import dataclass
+from multiprocessing.connection import Connection
+from multiprocessing.process import BaseProcess
+from typing import Any, ClassVar, Self
+
+import numpy as np
+from gymnasium.spaces import Box, Dict
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+
+from gymnast.config import EnvConfig
+from gymnast.envs.gap import get_gap
+from gymnast.envs.instructions import SPLITS
+from gymnast.envs.metaworld import ACTION_DIM, CONTROL_FPS, MetaWorldEnv
+from gymnast.envs.tasks import check_task
+
+
+@dataclass
+class _Episode:
+    env: MetaWorldEnv
+    frame: np.ndarray  # (H, W, 3) uint8, the latest
+    instruction: str
+    step: int = 0  # actions taken
+    success: bool = False  # at any step so far
+    terminated: bool = False
+    truncated: bool = False
+
+
+class _Episodes:
+    """A contiguous slice of the B episodes, run in this process (the parent's or a worker's).
+
+    Environments are cached per (task, n), n counting the slice's earlier episodes of that task,
+    because building a Meta-World scene costs far more than resetting one.
+    """
+
+    def __init__(self, config: EnvConfig, gap: str, instruction_split: str) -> None:
+        self._args = {"config": config, "gap": gap, "instruction_split": instruction_split}
+        self._envs: dict[tuple[str, int], MetaWorldEnv] = {}
+        self._episodes: list[_Episode] = []
+
+    def reset(self, tasks: list[str], seeds: list[int], instructions: list[str | None]) -> dict[str, np.ndarray]:
+        counts: Counter[str] = Counter()
+        self._episodes = []
+        for task, seed, instruction in zip(tasks, seeds, instructions):
+            key = (task, counts[task])
+            counts[task] += 1
+            if key not in self._envs:
+                self._envs[key] = MetaWorldEnv(task, **self._args)
+            obs, info = self._envs[key].reset(seed=seed, options={"instruction": instruction})
+            self._episodes.append(_Episode(self._envs[key], obs["image"], info["instruction"]))
+        frames = np.stack([e.frame for e in self._episodes])  # (b, H, W, 3)
+        instructions = np.array([e.instruction for e in self._episodes], dtype=object)
+        return {"image": frames, "instruction": instructions, **self._status()}
+
+    def step(self, actions: np.ndarray) -> dict[str, np.ndarray]:
+        """Runs each episode's (K, A) actions open-loop until the chunk or the episode ends."""
+        b, k = actions.shape[:2]
+        size = self._args["config"].image_size
+        frames = np.empty((b, k, size, size, 3), np.uint8)
+        rewards = np.full((b, k), np.nan)
+        executed = np.zeros(b, np.int64)
+        for i, episode in enumerate(self._episodes):
+            for j in range(k):
+                if episode.terminated or episode.truncated:
+                    break
+                obs, reward, episode.terminated, episode.truncated, info = episode.env.step(actions[i, j])
+                episode.frame, rewards[i, j] = obs["image"], reward
+                episode.success |= bool(info["success"])
+                episode.step += 1
+                frames[i, j] = episode.frame
+                executed[i] += 1
+            frames[i, executed[i] :] = episode.frame  # an ended episode shows its final frame
+        return {"frames": frames, "rewards": rewards, "executed": executed, **self._status()}
+
+    def _status(self) -> dict[str, np.ndarray]:
+        names = {"step": np.int64, "success": bool, "terminated": bool, "truncated": bool}
+        return {name: np.array([getattr(e, name) for e in self._episodes], dtype) for name, dtype in names.items()}
+
+    def close(self) -> None:
+        for env in self._envs.values():
+            env.close()
+        self._envs.clear()
+
+
+def _work(conn: Connection, config: EnvConfig, gap: str, instruction_split: str) -> None:
+    """A worker's loop: answers ``(method, args)`` with ``("ok", result)`` or ``("error", text)``."""
+    episodes = _Episodes(config, gap, instruction_split)
+    try:
+        while True:
+            method, args = conn.recv()
+            if method == "close":
+                break
+            try:
+                conn.send(("ok", getattr(episodes, method)(*args)))
+            except Exception:  # noqa: BLE001  (any failure goes back to the parent, which raises it)
+                conn.send(("error", traceback.format_exc()))
+    except (EOFError, KeyboardInterrupt):  # the parent is gone or interrupted: just exit
+        pass
+    finally:
+        episodes.close()
+        conn.close()
+
+
+class SimVectorEnv(VectorEnv):
+    """B Meta-World episodes (of any tasks) stepped one action chunk at a time; no autoreset.
+
+    Observation: ``{"image": (B, H, W, 3) uint8}``. Action: (B, K, A) float32 in [-1, 1].
+    ``rewards`` (B,) are the dense rewards summed over the actions executed in the chunk;
+    ``terminated`` (B,) means success, ``truncated`` (B,) the horizon; whichever ended an episode
+    stays True. ``infos``: ``instruction`` (B,) str, ``task`` (B,) str, ``seed`` (B,) int,
+    ``step`` (B,) int actions taken so far, ``success`` (B,) bool succeeded at any step so far and,
+    after `step`, ``frames`` (B, K, H, W, 3) uint8, ``rewards`` (B, K) float (NaN where no action
+    was executed) and ``executed`` (B,) int actions executed in the chunk.
+
+    Args:
+        num_envs: B, episodes stepped together.
+        chunk_size: K, actions per step.
+        config: image size, horizon and camera (and whether success ends an episode).
+        gap: ``none`` (the real world), or a simulator gap such as ``mild``.
+        instruction_split: ``train`` or ``heldout`` paraphrases of the default instructions.
+        workers: processes to step the episodes in; 1 runs them in this process.
+    """
+
+    metadata: ClassVar[dict[str, Any]] = {
+        "autoreset_mode": AutoresetMode.DISABLED, "render_modes": [], "render_fps": CONTROL_FPS
+    }
+
+    def __init__(self, num_envs: int, chunk_size: int = 5, config: EnvConfig | None = None, gap: str = "none",
+                 instruction_split: str = "train", workers: int = 1) -> None:
+        if num_envs < 1 or chunk_size < 1 or workers < 1:
+            raise ValueError(f"need num_envs, chunk_size and workers >= 1, got {num_envs}, {chunk_size}, {workers}")
+        if instruction_split not in SPLITS:
+            raise ValueError(f"instruction_split must be one of {SPLITS}, got {instruction_split!r}")
+        get_gap(gap)  # fail here, with its own message, rather than inside a worker
+        self.config = config or EnvConfig()
+        self.num_envs = num_envs
+        size = self.config.image_size
+        self.single_observation_space = Dict({"image": Box(0, 255, (size, size, 3), np.uint8)})
+        self.single_action_space = Box(-1.0, 1.0, (chunk_size, ACTION_DIM), np.float32)
+        self.observation_space = batch_space(self.single_observation_space, num_envs)
+        self.action_space = batch_space(self.single_action_space, num_envs)
+        bounds = np.linspace(0, num_envs, min(workers, num_envs) + 1).astype(int)
+        self._slices = [slice(a, b) for a, b in itertools.pairwise(bounds)]  # contiguous
+        self._info: dict[str, np.ndarray] | None = None
+        self._local: _Episodes | None = None
+        self._workers: list[tuple[BaseProcess, Connection]] = []  # (process, parent end of its pipe)
+        if len(self._slices) == 1:
+            self._local = _Episodes(self.config, gap, instruction_split)
+            return
+        context = multiprocessing.get_context("spawn")  # forking a process holding GL is unsafe
+        for _ in self._slices:
+            conn, child = context.Pipe()
+            process = context.Process(target=_work, args=(child, self.config, gap, instruction_split), daemon=True)
+            process.start()
+            child.close()
+            self._workers.append((process, conn))
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        """Starts episode i as ``MetaWorldEnv(tasks[i]).reset(seed=seeds[i])`` would.
+
+        Args:
+            seed: seeds `np_random` only; the episodes' initial states come from ``options``.
+            options: ``{"tasks": B task names, "seeds": B non-negative ints, "instructions": B
+                strings}``, instructions optional (default: each episode's own). Other keys are
+                ignored, so one dict can describe a real start for this env and the imagined one.
+
+        Raises:
+            ValueError: naming the field that is missing or has the wrong length or type.
+        """
+        super().reset(seed=seed)
+        self._info = None  # until every slice has reset
+        options = options or {}
+        tasks = self._field(options, "tasks", "task names", lambda t: isinstance(t, str))
+        for task in tasks:
+            check_task(task)
+        seeds = self._field(options, "seeds", "non-negative ints", _is_seed)
+        instructions = [None] * self.num_envs
+        if options.get("instructions") is not None:
+            instructions = self._field(options, "instructions", "strings", lambda s: isinstance(s, str))
+        seeds = [int(s) for s in seeds]
+        result = self._call("reset", [(tasks[s], seeds[s], instructions[s]) for s in self._slices])
+        result["task"] = np.array(tasks, dtype=object)
+        result["seed"] = np.array(seeds, np.int64)
+        self._info = result
+        return {"image": result["image"]}, self._infos()
+
+    def step(self, actions):
+        """Runs one (K, A) chunk in every running episode; see the class docstring for the outputs."""
+        if self._info is None:
+            raise RuntimeError("call reset() with tasks and seeds before step()")
+        actions = np.asarray(actions, dtype=np.float32)
+        if actions.shape != self.action_space.shape:  # (B, K, A)
+            raise ValueError(f"actions must have shape (num_envs, chunk_size, action_dim) = "
+                             f"{self.action_space.shape}, got {actions.shape}")
+        if not np.isfinite(actions).all():
+            raise ValueError("actions must be finite")
+        actions = np.clip(actions, -1.0, 1.0)
+        result = self._call("step", [(actions[s],) for s in self._slices])
+        self._info.update(step=result["step"], success=result["success"])
+        infos = {**self._infos(), **{key: result[key] for key in ("frames", "rewards", "executed")}}
+        obs = {"image": result["frames"][:, -1].copy()}  # not a view into infos["frames"]
+        rewards = np.nansum(result["rewards"], axis=1)  # (B,); 0 where nothing was executed
+        return obs, rewards, result["terminated"], result["truncated"], infos
+
+    def close_extras(self, **kwargs: Any) -> None:
+        """Stops the workers (or closes the in-process environments)."""
+        if self._local is not None:
+            self._local.close()
+            self._local = None
+        for _, conn in self._workers:
+            with contextlib.suppress(OSError):  # already dead
+                conn.send(("close", None))
+        for process, conn in self._workers:
+            process.join(timeout=10)
+            if process.is_alive():
+                process.terminate()
+                process.join()
+            conn.close()
+        self._workers = []
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+    def _field(self, options: dict[str, Any], name: str, kind: str, valid: Callable[[Any], bool]) -> list[Any]:
+        """``options[name]`` as a list of B valid values, or ValueError naming the field."""
+        values = options.get(name)
+        if isinstance(values, str) or not hasattr(values, "__len__") or len(values) != self.num_envs:
+            raise ValueError(f'reset options need "{name}": {self.num_envs} {kind}, got {values!r}')
+        values = list(values)
+        if not all(valid(v) for v in values):
+            raise ValueError(f'reset options "{name}" must be {self.num_envs} {kind}, got {values!r}')
+        return values
+
+    def _call(self, method: str, args: list[tuple[Any, ...]]) -> dict[str, np.ndarray]:
+        """Runs ``method`` on every slice (one args tuple each); returns the results joined over B."""
+        if self._local is not None:
+            return getattr(self._local, method)(*args[0])
+        if not self._workers:
+            raise RuntimeError("the env is closed")
+        for (_, conn), slice_args in zip(self._workers, args):
+            with contextlib.suppress(OSError):  # a dead worker; recv below reports it
+                conn.send((method, slice_args))
+        parts, errors = [], []
+        for index, (_, conn) in enumerate(self._workers):  # read every answer: keeps pipes in step
+            try:
+                status, value = conn.recv()
+            except (EOFError, OSError):
+                status, value = "error", "the worker process died"
+            if status == "ok":
+                parts.append(value)
+            else:
+                errors.append(f"sim worker {index} failed in {method}():\n{value}")
+        if errors:
+            raise RuntimeError("\n".join(errors))
+        return {key: np.concatenate([part[key] for part in parts]) for key in parts[0]}
+
+    def _infos(self) -> dict[str, np.ndarray]:
+        keys = ("instruction", "step", "task", "seed", "success")
+        return {key: self._info[key].copy() for key in keys}
+
+
+def _is_seed(value: Any) -> bool:
+    return isinstance(value, (int, np.integer)) and not isinstance(value, bool) and value >= 0

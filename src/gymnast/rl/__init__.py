@@ -1,0 +1,1 @@
+"""Reinforcement learning of the policy (GRPO) in the real, simulated or imagined world."""

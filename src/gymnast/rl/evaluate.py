@@ -1,0 +1,174 @@
+"""What an RL run measures besides its training reward: success on the evaluation seeds, in its
+own env and in the real world, and how often an imagined verdict survives the real world.
+
+Legend: R rollouts, T actions, K actions per chunk, A action dimensions.
+
+Evaluation here uses the training loop's machinery (vector envs, batched greedy chunks) rather
+than `gymnast eval`, so that it runs in any env, imagined ones included: an imagined evaluation
+starts from the real first frame of an evaluation seed and is judged by the run's reward. Its
+protocol matches `gymnast eval` (greedy chunks executed open-loop, success at any step, the same
+horizon and seeds), so real-world figures are comparable with it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import torch
+from gymnasium.vector import VectorEnv
+
+from gymnast.config import EnvConfig
+from gymnast.eval.stats import wilson_interval
+from gymnast.reward.base import Reward
+from gymnast.rl.rollout import Rollouts, Start, collect_rollouts, start_options
+
+
+class EnvFactory:
+    """Builds the vector envs a run needs, once each, by kind (imagined, sim, real) and size.
+
+    Args:
+        kind: the run's own env.
+        chunk_size: K, the policy's chunk.
+        config: image size and horizon of the simulators (the imagined env uses the same horizon).
+        gap: the software simulator's gap.
+        workers: simulator processes per env.
+        world_model: what the imagined env imagines with.
+    """
+
+    def __init__(self, kind: str, chunk_size: int, config: EnvConfig, gap: str, workers: int, world_model=None) -> None:
+        self.kind, self.chunk_size, self.config, self.gap, self.workers = kind, chunk_size, config, gap, workers
+        self.world_model = world_model
+        self.batch = 1
+        self._envs: dict[tuple[str, int], VectorEnv] = {}
+
+    def train(self, num_envs: int) -> VectorEnv:
+        """The run's own env with `num_envs` rollouts (evaluations then run in batches of that size)."""
+        self.batch = num_envs
+        return self.get(self.kind, num_envs)
+
+    def get(self, kind: str, num_envs: int) -> VectorEnv:
+        key = (kind, num_envs)
+        if key not in self._envs:
+            if kind == "imagined":
+                from gymnast.envs.imagined import BatchedImaginedEnv
+
+                self._envs[key] = BatchedImaginedEnv(self.world_model, num_envs, self.chunk_size, self.config.horizon)
+            else:
+                from gymnast.envs.sim_vector import SimVectorEnv
+
+                self._envs[key] = SimVectorEnv(num_envs, self.chunk_size, self.config, gap="none" if kind == "real" else self.gap,
+                                               workers=self.workers)
+        return self._envs[key]
+
+    def close(self) -> None:
+        for env in self._envs.values():
+            env.close()
+        self._envs.clear()
+
+
+def evaluation_starts(tasks: Sequence[str], episodes: int, config: EnvConfig) -> list[Start]:
+    """`episodes` starts per task from the evaluation seeds, with their real first frames.
+
+    Rendering a first frame is a reset, not an interaction: no action is taken.
+    """
+    from gymnast.envs.metaworld import MetaWorldEnv
+    from gymnast.envs.tasks import eval_seed
+
+    starts = []
+    for task in tasks:
+        env = MetaWorldEnv(task, config)
+        for i in range(episodes):
+            obs, info = env.reset(seed=eval_seed(i))
+            starts.append(Start(task, info["seed"], info["instruction"], obs["image"][None].copy(),
+                                np.zeros((0, env.action_space.shape[0]), np.float32)))
+        env.close()
+    return starts
+
+
+def verdicts(rollouts: Rollouts, scores: torch.Tensor, reward: Reward) -> torch.Tensor:
+    """(R,) success as the run's env sees it: a simulator's own verdict, else a binary reward's
+    (a judge's), else NaN (a continuous reward on imagined video says nothing about success)."""
+    if rollouts.success is not None:
+        return rollouts.success.float()
+    if getattr(reward, "binary", False):
+        return scores.float()
+    return torch.full_like(scores, float("nan"), dtype=torch.float32)
+
+
+def evaluate_in_env(envs: EnvFactory, kind: str, policy, reward: Reward, starts: Sequence[Start],
+                    prefix: str) -> dict[str, float]:
+    """Greedy rollouts from `starts` in env `kind`; success with its 95% Wilson interval.
+
+    Returns ``{prefix}_episodes`` (judged), ``_interactions`` (actions taken, which are real
+    interactions when `kind` is ``real``) and, when any episode could be judged, ``_success``,
+    ``_ci_low`` and ``_ci_high``.
+    """
+    from gymnast.rl.train import score_groups
+
+    env = envs.get(kind, envs.batch)
+    outcomes, interactions = [], 0
+    for first in range(0, len(starts), env.num_envs):
+        batch = list(starts[first: first + env.num_envs])
+        real = len(batch)
+        batch += [batch[0]] * (env.num_envs - real)  # the env has a fixed size; extra rollouts are dropped
+        rollouts = collect_rollouts(env, policy, batch, 0.0, torch.Generator())
+        scores = score_groups(reward, rollouts, 1) if rollouts.success is None else torch.zeros(len(batch))
+        outcomes.append(verdicts(rollouts, scores, reward)[:real])
+        interactions += int(rollouts.lengths[:real].sum())
+    success = torch.cat(outcomes)
+    judged = success[torch.isfinite(success)]
+    wins, total = int(judged.sum()), len(judged)
+    values = {f"{prefix}_episodes": total, f"{prefix}_interactions": interactions}
+    if total:  # nothing judged: a continuous reward on imagined video has no notion of success
+        low, high = wilson_interval(wins, total)
+        values |= {f"{prefix}_success": wins / total, f"{prefix}_ci_low": low, f"{prefix}_ci_high": high}
+    return values
+
+
+def watch_hacking(envs: EnvFactory, rollouts: Rollouts, scores: torch.Tensor, verdict: torch.Tensor,
+                  count: int) -> dict[str, float]:
+    """Replays the actions of `count` rollouts in the real world from the same start states and
+    compares the real outcome with what the rollouts were trained on.
+
+    A rollout that ended early (a simulator's success) is judged in the real world at the end of
+    the chunk holding its last action.
+
+    Returns ``eval/watch_real_success`` and ``eval/watch_interactions`` (real actions taken);
+    where the rollouts have verdicts (binary rewards, simulators), ``eval/watch_agreement`` (share
+    whose real outcome equals the verdict), ``eval/watch_imagined_success`` and
+    ``eval/watch_false_success`` (the share judged successful that failed in the real world:
+    reward hacking, or judge error); and where replays both succeeded and failed,
+    ``eval/watch_reward_gap``: mean reward of real successes minus that of real failures (a
+    continuous reward that tracks the real outcome has a positive gap).
+    """
+    count = min(count, len(rollouts.starts))
+    pick = torch.linspace(0, len(rollouts.starts) - 1, count).round().long()
+    chosen = rollouts.select(pick)
+    env = envs.get("real", count)
+    chunk = env.single_action_space.shape[0]
+    env.reset(seed=0, options=start_options(chosen.starts))
+    last_chunk = (chosen.lengths - 1).clamp(min=0) // chunk  # (R,) the chunk that ends each replay
+    real = torch.zeros(count, dtype=torch.bool)
+    interactions = 0
+    for index in range(int(last_chunk.max()) + 1):
+        actions = chosen.actions[:, index * chunk: (index + 1) * chunk]  # (R, k, A)
+        if actions.shape[1] < chunk:
+            actions = torch.cat([actions, torch.zeros(count, chunk - actions.shape[1], actions.shape[2])], 1)
+        _, _, terminated, truncated, infos = env.step(actions.numpy())
+        interactions += int(np.asarray(infos["executed"]).sum())
+        now = torch.from_numpy(np.asarray(infos["success"], dtype=bool))
+        real = torch.where(last_chunk >= index, now, real)  # success only accumulates
+        if (np.asarray(terminated) | np.asarray(truncated)).all():
+            break
+    values = {"eval/watch_real_success": real.float().mean().item(), "eval/watch_interactions": interactions}
+    judged = torch.isfinite(verdict[pick])
+    if judged.any():
+        imagined, outcome = verdict[pick][judged] > 0.5, real[judged]
+        values |= {"eval/watch_agreement": (imagined == outcome).float().mean().item(),
+                   "eval/watch_imagined_success": imagined.float().mean().item(),
+                   "eval/watch_false_success": (imagined & ~outcome).float().sum().item() / max(1, int(imagined.sum()))}
+    picked_scores = scores[pick]
+    if real.any() and (~real).any():
+        values["eval/watch_reward_gap"] = (picked_scores[real].nanmean() - picked_scores[~real].nanmean()).item()
+    return values

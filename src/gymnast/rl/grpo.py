@@ -1,0 +1,216 @@
+"""The pure maths of GRPO for a VLA whose action chunk is N discrete tokens decoded in parallel.
+
+Legend: B start states (groups), G rollouts per group, M policy calls (rows) in a batch, N action
+tokens per call.
+
+Implemented: critic-free GRPO. Each rollout's advantage is its reward normalised within the group
+of G rollouts from one start state; every action token of every policy call in that rollout is
+then trained under that one advantage with the PPO-clipped surrogate, with DAPO's separate lower
+and upper bounds ("clip-higher"). The two papers this follows:
+
+- World-Gymnast (Sharma et al., 2026): GRPO, group 8, clip 0.2 low / 0.28 high, no KL, no entropy
+  bonus, rollout temperature 1.6, dynamic sampling that keeps groups whose success rate lies in
+  [0.1, 0.9] (`keep_groups`), one gradient step per iteration, lr 5e-6.
+- VLA-RFT (2025): GRPO, 400 steps, 16 start states x group 16, clip 0.2, no KL, entropy 0.003.
+
+Where this departs from them:
+
+- Token-level averaging over all tokens of the batch (DAPO): the loss is a sum over the batch's
+  unmasked tokens divided by their count, not a mean per sequence then over sequences. Every token
+  weighs the same, and micro-batching is exact when each micro-batch gets the batch's count.
+- NaN rewards ("could not score") get advantage exactly 0 and are left out of their group's mean
+  and std, so one failed score neither trains the policy nor shifts its siblings' advantages.
+- A group with no spread in its finite rewards (or fewer than 2 of them) gets advantage 0: it
+  carries no signal, and dividing by a std of ~0 would turn rounding noise into huge advantages.
+- The entropy bonus takes the exact entropy of each token's categorical distribution (our action
+  tokens are categorical), unlike VLA-RFT, whose flow-matching head gets its log-prob from the
+  Gaussian noise of its integration steps.
+- An optional k3 KL penalty to a frozen reference policy, off by default as in both papers.
+
+With one gradient step per iteration old_logp equals logp at that step, so the ratio is 1 and the
+clip acts only once a batch is reused for several steps. Both log-probs of the ratio (and the
+entropy) must come from the same distribution: the policy at the rollout temperature.
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+from torch import Tensor
+
+
+def _at_least_float32(x: Tensor) -> Tensor:
+    # exp(logp - old_logp) in bf16 keeps ~3 significant digits, coarser than the clip bounds.
+    return x.to(torch.promote_types(x.dtype, torch.float32))
+
+
+def group_advantages(rewards: Tensor, normalize_std: bool = True, eps: float = 1e-6) -> tuple[Tensor, dict[str, float]]:
+    """GRPO's group-normalised advantage, (r - mean) / (std + eps), per group over finite rewards.
+
+    The std is the population std (unbiased=False) of the group's finite rewards. Non-finite
+    rewards (NaN: the reward could not score) are excluded from the mean and std and get advantage
+    exactly 0; so does every member of a group with fewer than 2 finite rewards or no spread.
+
+    Args:
+        rewards: (B, G) rewards, NaN where unscored.
+        normalize_std: divide by the group std; False gives r - mean (Dr. GRPO).
+        eps: added to the std so small spreads do not explode.
+
+    Returns:
+        (advantages (B, G) in at least float32, metrics) with "train/zero_variance_groups" (the
+        fraction of groups without signal) and "reward/nan_fraction".
+
+    Raises:
+        ValueError: rewards is not (B, G) with G >= 1.
+    """
+    if rewards.ndim != 2 or rewards.shape[1] < 1:
+        raise ValueError(f"rewards must be (B, G) with G >= 1, got {tuple(rewards.shape)}")
+    rewards = _at_least_float32(rewards)
+    finite = rewards.isfinite()  # (B, G)
+    count = finite.sum(dim=1, keepdim=True).clamp_min(1)  # (B, 1); the clamp only guards 0 / 0
+    mean = torch.where(finite, rewards, 0.0).sum(dim=1, keepdim=True) / count
+    centred = torch.where(finite, rewards - mean, 0.0)
+    # "No spread" is max == min, not std == 0: the float mean of equal rewards can round, leaving
+    # |r - mean| ~ 1e-8 and small spurious advantages (of order 1 with eps = 0).
+    top = torch.where(finite, rewards, -math.inf).amax(dim=1, keepdim=True)
+    bottom = torch.where(finite, rewards, math.inf).amin(dim=1, keepdim=True)
+    signal = (finite.sum(dim=1, keepdim=True) >= 2) & (top > bottom)  # (B, 1)
+    if normalize_std:
+        std = (centred.square().sum(dim=1, keepdim=True) / count).sqrt()  # population std
+        centred = centred / (std + eps)
+    advantages = torch.where(signal, centred, 0.0)
+    groups = max(rewards.shape[0], 1)
+    metrics = {"train/zero_variance_groups": (~signal).sum().item() / groups,
+               "reward/nan_fraction": (~finite).sum().item() / (groups * rewards.shape[1])}
+    return advantages, metrics
+
+
+def keep_groups(success: Tensor, low: float, high: float) -> Tensor:
+    """Dynamic sampling (DAPO, World-Gymnast): which groups still carry a learning signal.
+
+    Args:
+        success: (B, G) float, 1 success / 0 failure / NaN unknown.
+        low: smallest success rate kept (inclusive).
+        high: largest success rate kept (inclusive).
+
+    Returns:
+        (B,) bool: the success rate over the group's finite entries lies in [low, high]. A group
+        with no finite entry is dropped.
+
+    Raises:
+        ValueError: success is not 2-D, or low > high.
+    """
+    if success.ndim != 2:
+        raise ValueError(f"success must be (B, G), got {tuple(success.shape)}")
+    if low > high:
+        raise ValueError(f"keep_groups needs low <= high, got [{low}, {high}]")
+    finite = success.isfinite()  # (B, G)
+    count = finite.sum(dim=1)  # (B,)
+    # float64 so that k / G compares with the bounds as Python's k / G would: 1 / 10 >= 0.1 holds.
+    rate = torch.where(finite, success.double(), 0.0).sum(dim=1) / count.clamp_min(1)
+    return (count > 0) & (rate >= low) & (rate <= high)
+
+
+def k3_kl(logp: Tensor, ref_logp: Tensor) -> Tensor:
+    """Schulman's k3 estimator of KL(pi || ref) per token, from log-probs of tokens sampled from pi.
+
+    k3 = exp(ref - logp) - (ref - logp) - 1: unbiased, non-negative, and 0 where the two agree.
+
+    Args:
+        logp: log-probs under the policy pi, any shape.
+        ref_logp: log-probs of the same tokens under the reference, same shape.
+
+    Returns:
+        k3 per token, same shape. Raises ValueError if the shapes differ.
+    """
+    if logp.shape != ref_logp.shape:
+        raise ValueError(f"logp {tuple(logp.shape)} and ref_logp {tuple(ref_logp.shape)} must match")
+    log_ratio = ref_logp - logp
+    # expm1 avoids the cancellation in exp(x) - 1 near 0; the clamp absorbs a last-ulp negative.
+    return (torch.expm1(log_ratio) - log_ratio).clamp_min(0.0)
+
+
+def policy_loss(
+    logp: Tensor,
+    old_logp: Tensor,
+    advantages: Tensor,
+    mask: Tensor,
+    clip_low: float,
+    clip_high: float,
+    total_tokens: int | None = None,
+    ref_logp: Tensor | None = None,
+    kl_coef: float = 0.0,
+    entropy: Tensor | None = None,
+    entropy_coef: float = 0.0,
+) -> tuple[Tensor, dict[str, float]]:
+    """The PPO-clipped surrogate with separate bounds, averaged over tokens (DAPO).
+
+    Per token, with ratio = exp(logp - old_logp) and A the row's advantage:
+    objective = min(ratio A, clip(ratio, 1 - clip_low, 1 + clip_high) A), and the loss is
+    -(objective - kl_coef k3 + entropy_coef entropy) summed over masked tokens / total_tokens.
+    Given the full batch's total_tokens, the losses (and gradients) of micro-batches sum to those
+    of the batch; every metric is likewise a sum over this call's tokens / total_tokens.
+
+    Args:
+        logp: (M, N) log-probs of the sampled tokens under the policy being trained.
+        old_logp: (M, N) their log-probs under the policy that sampled them (treated as constant).
+        advantages: (M,) one advantage per row, shared by its N tokens (treated as constant).
+        mask: (M, N) bool, True for tokens that count.
+        clip_low: the ratio is clipped below at 1 - clip_low.
+        clip_high: the ratio is clipped above at 1 + clip_high.
+        total_tokens: the divisor; default mask.sum(). Pass the whole batch's when micro-batching.
+        ref_logp: (M, N) log-probs under a frozen reference, for the k3 KL penalty and metric.
+        kl_coef: weight of the KL penalty.
+        entropy: (M, N) entropy of each token's categorical distribution (gradient flows).
+        entropy_coef: weight of the entropy bonus.
+
+    Returns:
+        (loss scalar, metrics): "train/policy_loss" (the surrogate part), "train/clip_fraction"
+        (tokens where the clipped term is the smaller), "train/ratio", and "train/kl" /
+        "train/entropy" when ref_logp / entropy are given.
+
+    Raises:
+        ValueError: shapes disagree, mask is not bool, total_tokens < 1, or a clip bound is < 0.
+    """
+    tokens = {"logp": logp, "old_logp": old_logp, "mask": mask, "ref_logp": ref_logp, "entropy": entropy}
+    tokens = {name: x for name, x in tokens.items() if x is not None}
+    if logp.ndim != 2 or advantages.shape != logp.shape[:1] or any(x.shape != logp.shape for x in tokens.values()):
+        got = ", ".join(f"{name} {tuple(x.shape)}" for name, x in (tokens | {"advantages": advantages}).items())
+        raise ValueError(f"policy_loss expects (M, N) token tensors and (M,) advantages, got {got}")
+    if mask.dtype != torch.bool:
+        raise ValueError(f"mask must be bool, got {mask.dtype}")
+    if clip_low < 0 or clip_high < 0:
+        raise ValueError(f"clip bounds must be >= 0, got clip_low={clip_low}, clip_high={clip_high}")
+    if total_tokens is None:
+        total_tokens = int(mask.sum().item())
+    if total_tokens < 1:
+        raise ValueError(f"total_tokens must be >= 1, got {total_tokens}")
+
+    # Masked-out entries may hold anything (padding, inf): zero them before exp, because masking only
+    # after it would still send 0 * inf = NaN into their gradient through torch.where.
+    def clean(x: Tensor) -> Tensor:
+        return torch.where(mask, _at_least_float32(x), 0.0)
+
+    logp = clean(logp)
+    old_logp = clean(old_logp).detach()
+    adv = _at_least_float32(advantages).detach()[:, None]  # (M, 1), broadcast over the N tokens
+    ratio = torch.exp(logp - old_logp)  # (M, N)
+    unclipped = ratio * adv
+    clipped = ratio.clamp(1.0 - clip_low, 1.0 + clip_high) * adv
+    objective = torch.minimum(unclipped, clipped)  # pessimistic: the clip only ever removes gain
+    per_token = -objective
+    sums = {"train/policy_loss": -objective, "train/clip_fraction": (clipped < unclipped).float(),
+            "train/ratio": ratio}
+    if ref_logp is not None:
+        kl = k3_kl(logp, clean(ref_logp).detach())
+        per_token = per_token + kl_coef * kl
+        sums["train/kl"] = kl
+    if entropy is not None:
+        entropy = clean(entropy)
+        per_token = per_token - entropy_coef * entropy
+        sums["train/entropy"] = entropy
+    loss = torch.where(mask, per_token, 0.0).sum() / total_tokens
+    # One stack and one transfer for all metrics, rather than a device sync per metric.
+    stacked = torch.stack([torch.where(mask, v.detach(), 0.0).sum() for v in sums.values()]) / total_tokens
+    return loss, dict(zip(sums, stacked.tolist(), strict=True))

@@ -1,0 +1,220 @@
+"""Rollouts for RL: B real start states, G rollouts each, in any chunked vector environment.
+
+Legend: R rollouts (= B starts x G), S policy calls per rollout, N action tokens per call, K
+actions per chunk, A action dimensions, T actions per rollout, C start frames, H/W image size.
+
+The environment is anything with the contract both `gymnast.envs.imagined.BatchedImaginedEnv`
+and `gymnast.envs.sim_vector.SimVectorEnv` follow: a gymnasium `VectorEnv` without autoreset whose
+step takes one (R, K, A) action chunk and reports the chunk's frames in ``infos["frames"]``. The
+loop here never asks which one it drives. Simulators also report ``executed``, ``rewards`` and
+``success`` in their infos, and a rollout carries them when they are there (the simulator rewards
+read them); a world model reports none, and its rollouts are judged on their video alone.
+
+A start state is real in every environment: the imagined env starts from its camera frames, a
+simulator from the (task, seed) that produced them.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+from gymnasium.vector import VectorEnv
+
+from gymnast.policy.base import Policy
+
+
+@dataclass(frozen=True)
+class Start:
+    """A real start state.
+
+    Attributes:
+        task: Meta-World task name.
+        seed: the episode seed that fixes the initial state (a data seed for training).
+        instruction: the task in words, as the policy and the judge read it.
+        frames: (C, H, W, 3) uint8 real camera frames, the last one being "now".
+        reference_actions: (T_ref, A) float32 a demonstration's actions from this state (what the
+            verified reward imagines); empty where there is none.
+    """
+
+    task: str
+    seed: int
+    instruction: str
+    frames: np.ndarray
+    reference_actions: np.ndarray
+
+
+def start_options(starts: Sequence[Start]) -> dict:
+    """Reset options that describe `starts` to every environment (each reads what it needs)."""
+    return {
+        "frames": np.stack([start.frames for start in starts]),  # (R, C, H, W, 3)
+        "instructions": [start.instruction for start in starts],
+        "tasks": [start.task for start in starts],
+        "seeds": [start.seed for start in starts],
+    }
+
+
+@dataclass(frozen=True)
+class Rollouts:
+    """R finished rollouts: what the policy saw and sampled, and what happened.
+
+    Attributes:
+        starts: the R start states.
+        observations: (R, S, H, W, 3) uint8 the image the policy saw at each call.
+        tokens: (R, S, N) int64 sampled action tokens (greedy rollouts: the argmax tokens).
+        logp: (R, S, N) float32 their log-probabilities at the sampling temperature (0 if greedy).
+        token_mask: (R, S, N) bool tokens whose action was executed (False after the end).
+        frames: (R, T + 1, H, W, 3) uint8 the start frame, then one frame per action; after a
+            rollout's end its last frame repeats.
+        actions: (R, T, A) float32 the actions executed (0 after the end).
+        lengths: (R,) int64 actions each rollout executed.
+        success: (R,) bool the simulator's verdict, or None (a world model has none).
+        env_rewards: (R, T) float32 the simulator's per-action rewards (NaN after the end), or None.
+    """
+
+    starts: tuple[Start, ...]
+    observations: torch.Tensor
+    tokens: torch.Tensor
+    logp: torch.Tensor
+    token_mask: torch.Tensor
+    frames: torch.Tensor
+    actions: torch.Tensor
+    lengths: torch.Tensor
+    success: torch.Tensor | None
+    env_rewards: torch.Tensor | None
+
+    @property
+    def instructions(self) -> list[str]:
+        return [start.instruction for start in self.starts]
+
+    def select(self, index: torch.Tensor) -> Rollouts:
+        """The rollouts at `index` (R',) int64, in that order."""
+        pick = index.tolist()
+        optional = {name: None if getattr(self, name) is None else getattr(self, name)[index]
+                    for name in ("success", "env_rewards")}
+        return Rollouts(tuple(self.starts[i] for i in pick), self.observations[index], self.tokens[index],
+                        self.logp[index], self.token_mask[index], self.frames[index], self.actions[index],
+                        self.lengths[index], **optional)
+
+
+def collect_rollouts(
+    env: VectorEnv,
+    policy: Policy,
+    starts: Sequence[Start],
+    temperature: float,
+    generator: torch.Generator,
+    seed: int = 0,
+    calls: int | None = None,
+    timer: dict[str, float] | None = None,
+) -> Rollouts:
+    """Runs one rollout per start until every one has ended (success or horizon).
+
+    Args:
+        env: a chunked vector env with ``num_envs == len(starts)`` (see the module docstring).
+        policy: samples each chunk from the latest frame and the instruction.
+        starts: R real start states.
+        temperature: sampling temperature; 0 takes the greedy chunk (`Policy.act`), for evaluation.
+        generator: the policy's sampling generator (the RL run's own, so resumes repeat draws).
+        seed: the environment's reset seed (stochastic world models draw from it).
+        calls: pad to this many policy calls S when every rollout ended sooner (a simulator's
+            successes), so rollouts of one env always have the same shape.
+        timer: if given, ``policy_s`` (time spent sampling actions) is added to it.
+    """
+    if env.num_envs != len(starts):
+        raise ValueError(f"the env runs {env.num_envs} rollouts but {len(starts)} starts were given")
+    obs, infos = env.reset(seed=seed, options=start_options(starts))
+    instructions = [str(i) for i in infos["instruction"]]
+    count, (chunk, action_dim) = env.num_envs, env.single_action_space.shape
+    ended = np.zeros(count, dtype=bool)
+    frames = [torch.from_numpy(obs["image"])[:, None]]  # (R, 1, H, W, 3)
+    seen, tokens, logp, masks, actions, rewards, success = [], [], [], [], [], [], None
+    while not ended.all():
+        image = torch.from_numpy(obs["image"])  # (R, H, W, 3)
+        began = time.perf_counter()
+        sample = _sample(policy, image, instructions, temperature, generator)
+        if timer is not None:
+            timer["policy_s"] = timer.get("policy_s", 0.0) + time.perf_counter() - began
+        obs, _, terminated, truncated, infos = env.step(sample.actions.numpy())
+        new = torch.from_numpy(infos["frames"])  # (R, k, H, W, 3); k < K only at the horizon
+        executed = np.where(ended, 0, infos.get("executed", np.full(count, new.shape[1])))
+        done_before = torch.from_numpy(executed)[:, None]  # (R, 1)
+        valid = torch.arange(chunk)[None] < done_before  # (R, K) actions really executed
+        seen.append(image)
+        tokens.append(sample.tokens)
+        logp.append(sample.logp)
+        masks.append(valid.repeat_interleave(action_dim, dim=1))  # (R, N), tokens are chunk-major
+        frames.append(new)
+        actions.append(sample.actions[:, : new.shape[1]].float() * valid[:, : new.shape[1], None])
+        if "rewards" in infos:
+            rewards.append(torch.from_numpy(np.asarray(infos["rewards"], dtype=np.float32)))
+        if "success" in infos:
+            success = torch.from_numpy(np.asarray(infos["success"], dtype=bool))
+        ended |= np.asarray(terminated) | np.asarray(truncated)
+    for _ in range(len(tokens), calls or 0):  # nothing happens after the end: repeat, mask, NaN
+        seen.append(seen[-1])
+        tokens.append(torch.zeros_like(tokens[-1]))
+        logp.append(torch.zeros_like(logp[-1]))
+        masks.append(torch.zeros_like(masks[-1]))
+        frames.append(frames[-1][:, -1:].expand(-1, chunk, -1, -1, -1))
+        actions.append(torch.zeros(count, chunk, action_dim))
+        if rewards:
+            rewards.append(torch.full((count, chunk), float("nan")))
+    mask = torch.stack(masks, dim=1)  # (R, S, N)
+    return Rollouts(
+        starts=tuple(starts),
+        observations=torch.stack(seen, dim=1),
+        tokens=torch.stack(tokens, dim=1),
+        logp=torch.stack(logp, dim=1),
+        token_mask=mask,
+        frames=torch.cat(frames, dim=1),
+        actions=torch.cat(actions, dim=1),
+        lengths=mask[:, :, ::action_dim].sum(dim=(1, 2)),
+        success=success,
+        env_rewards=torch.cat(rewards, dim=1) if rewards else None,
+    )
+
+
+def _sample(policy: Policy, image: torch.Tensor, instructions: list[str], temperature: float,
+            generator: torch.Generator):
+    from gymnast.policy.base import ActionSample
+
+    if temperature > 0:
+        return policy.sample(image, instructions, temperature, generator)
+    with torch.inference_mode():
+        actions = policy.act(image, instructions)  # (R, K, A)
+    tokens = policy.chunk_tokens(actions)
+    return ActionSample(actions, tokens, torch.zeros(tokens.shape))
+
+
+def dataset_starts(data: Path, tasks: Sequence[str] | None = None) -> list[Start]:
+    """One start per (task, seed) scene of a dataset: its first frame, instruction and reference.
+
+    The reference is the successful scripted-expert episode with the least action noise in that
+    scene; scenes with no successful expert episode are left out (they have no reference, and an
+    imagined start should be one the expert solved in the real world).
+
+    Raises:
+        ValueError: no scene of `tasks` has a successful expert episode.
+    """
+    from gymnast.data.lerobot import EpisodeDataset
+
+    dataset = EpisodeDataset(data)
+    best: dict[tuple[str, int], int] = {}
+    for i, info in enumerate(dataset.episodes):
+        if info.behaviour != "expert" or not info.success or (tasks and info.task not in tasks):
+            continue
+        key = (info.task, info.seed)
+        if key not in best or info.noise < dataset.episodes[best[key]].noise:
+            best[key] = i
+    if not best:
+        raise ValueError(f"{data} has no successful expert episode of {', '.join(tasks or ['any task'])} to start from")
+    starts = []
+    for key in sorted(best):
+        episode = dataset.load(best[key])
+        starts.append(Start(episode.info.task, episode.info.seed, episode.info.instruction,
+                            episode.frames[:1].copy(), episode.actions.astype(np.float32)))
+    return starts

@@ -1,0 +1,440 @@
+"""`gymnast rl`: GRPO fine-tuning of a VLA policy in the world model, the software simulator or
+the real world, through one loop.
+
+Each step: draw B real start states, roll the policy out G times from each (temperature > 1
+for exploration), score every video with the reward, keep the groups with something to learn
+from (dynamic sampling, refilling from fresh starts), normalise rewards within each group and
+take one clipped policy-gradient step (`gymnast.rl.grpo`). The loop drives a vector env and a
+`Reward`; it never asks where the frames come from.
+
+Around the loop: atomic checkpoints with every random state and the sampler position (``--resume``
+continues exactly), metrics.jsonl and TensorBoard, rollout videos with their rewards, a
+reward-hacking watch that replays imagined actions in the real world, and evaluations on the
+evaluation seeds in the run's own env and in the real world, whose real interactions are counted
+apart from training's.
+
+Legend: B start states per step, G rollouts per start, R = B * G rollouts, S policy calls,
+N action tokens per call, T actions.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import logging
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from gymnast.config import EnvConfig
+from gymnast.rl import grpo
+from gymnast.rl.evaluate import EnvFactory, evaluate_in_env, evaluation_starts, verdicts, watch_hacking
+from gymnast.rl.rollout import Rollouts, Start, collect_rollouts, dataset_starts
+from gymnast.rl.videos import write_group_video
+from gymnast.reward.base import Reward, RewardContext
+from gymnast.utils.atomic import write_json
+from gymnast.utils.checkpoint import (load_checkpoint, resolve_checkpoint, save_checkpoint, saved_settings,
+                                      write_run_config)
+from gymnast.utils.metrics import MetricsLog
+from gymnast.utils.optim import warmup_cosine
+
+logger = logging.getLogger(__name__)
+
+EnvName = Literal["imagined", "sim", "real"]
+
+
+@dataclass(frozen=True)
+class RLConfig:
+    """GRPO settings. Defaults follow World-Gymnast except where docs/rl.md says why not."""
+
+    steps: int = 100
+    """RL steps (one policy update each)."""
+    tasks: str = "mt10"
+    """Tasks whose start states are trained on (task names or sets, comma-separated)."""
+    starts_per_step: int = 4
+    """Start states B per step (groups)."""
+    group_size: int = 8
+    """Rollouts G per start state."""
+    temperature: float = 1.0
+    """Sampling temperature of the rollouts (the log-probabilities use the same). World-Gymnast's 1.6
+    halves our policy's success (docs/rl.md), so we sample at 1.0."""
+    horizon: int = 150
+    """Actions per rollout, as in evaluation."""
+    clip_low: float = 0.2
+    """PPO ratio clip below 1."""
+    clip_high: float = 0.28
+    """PPO ratio clip above 1 (clip-higher)."""
+    kl_coef: float = 0.0
+    """Weight of the k3 KL to the starting policy (0: no reference model is kept)."""
+    entropy_coef: float = 0.0
+    """Weight of the entropy bonus."""
+    normalize_std: bool = True
+    """Divide group advantages by the group's standard deviation."""
+    keep_low: float = 0.1
+    """Dynamic sampling: keep groups whose success rate is at least this (binary rewards)."""
+    keep_high: float = 0.9
+    """... and at most this."""
+    max_rounds: int = 3
+    """Rollout rounds per step at most while refilling dropped groups."""
+    lr: float = 1e-5
+    """Peak learning rate (AdamW; linear warm-up, then constant)."""
+    warmup_steps: int = 5
+    """Linear warm-up steps."""
+    max_grad_norm: float = 1.0
+    """Gradient-norm clip."""
+    minibatches: int = 1
+    """Optimizer steps per RL step (1: on-policy, the ratio is 1 and clipping is inert)."""
+    micro_batch: int = 256
+    """Policy calls per forward/backward pass (gradients accumulate; results do not depend on it)."""
+    gap: str = "mild"
+    """Sim-to-real gap of the software simulator (``--env sim``)."""
+    workers: int = 2
+    """Simulator processes (sim/real rollouts, evaluation, the watch)."""
+    eval_every: int = 25
+    """Steps between evaluations (also at the start and the end); 0 evaluates only at both ends."""
+    eval_episodes: int = 10
+    """Evaluation episodes per task, from the evaluation seeds."""
+    real_eval: bool = True
+    """Also evaluate in the real world when training elsewhere (its interactions are counted)."""
+    watch_every: int = 10
+    """Steps between reward-hacking checks (0: never): imagined actions replayed in the real world."""
+    watch_rollouts: int = 16
+    """Rollouts replayed per check."""
+    video_every: int = 25
+    """Steps between rollout videos (RUN/videos/)."""
+    checkpoint_every: int = 10
+    """Steps between checkpoints."""
+    tensorboard: bool = True
+    """Also write TensorBoard event files (RUN/tensorboard/)."""
+    seed: int = 0
+    """Seed of start sampling, rollouts and environment resets."""
+
+    def __post_init__(self) -> None:
+        for name in ("steps", "starts_per_step", "group_size", "horizon", "max_rounds", "minibatches", "micro_batch",
+                     "workers", "eval_episodes", "checkpoint_every", "video_every"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"RLConfig.{name} must be at least 1, got {getattr(self, name)}")
+        if self.group_size < 2:
+            raise ValueError(f"RLConfig.group_size must be at least 2 (advantages compare a group), got {self.group_size}")
+        if self.temperature <= 0:
+            raise ValueError(f"RLConfig.temperature must be positive, got {self.temperature}")
+        if not 0 <= self.keep_low <= self.keep_high <= 1:
+            raise ValueError(f"need 0 <= keep_low <= keep_high <= 1, got {self.keep_low}, {self.keep_high}")
+
+
+RL_PRESETS: dict[str, RLConfig] = {
+    "debug": RLConfig(steps=2, tasks="reach-v3", starts_per_step=2, group_size=2, horizon=10, max_rounds=1,
+                      warmup_steps=1, micro_batch=3, workers=1, eval_episodes=1, watch_every=1, watch_rollouts=2,
+                      video_every=1, checkpoint_every=1, keep_low=0.0, keep_high=1.0),
+    "demo": RLConfig(steps=30, tasks="reach-v3,push-v3", eval_every=10, video_every=10),
+    "full": RLConfig(),
+}
+
+
+@dataclass(frozen=True)
+class RLRun:
+    """What one run trains with: the policy's run, the env and the reward, by name."""
+
+    policy: str
+    env: EnvName
+    reward: str
+    wm: str | None = None
+    data: str | None = None
+
+
+def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False, progress: bool = True) -> dict:
+    """Trains (or resumes) an RL run in `out`; returns the summary (also RUN/summary.json)."""
+    from gymnast.policy.vla import load_policy
+    from gymnast.reward.select import make_reward
+    from gymnast.world_model.base import load_world_model
+
+    policy = load_policy(run_spec.policy)
+    world_model = load_world_model(run_spec.wm) if run_spec.wm else None
+    _check_combination(run_spec, world_model)
+    reward = make_reward(run_spec.reward, world_model)
+    data = Path(run_spec.data or _policy_data(run_spec.policy))
+    from gymnast.envs.tasks import resolve_tasks
+
+    tasks = resolve_tasks(config.tasks)
+    starts = dataset_starts(data, tasks)
+    env_config = EnvConfig(image_size=policy.config.image_size, horizon=config.horizon)
+    envs = EnvFactory(run_spec.env, policy.chunk_size, env_config, config.gap, config.workers, world_model)
+    resolved = {"rl": dataclasses.asdict(config), "run": dataclasses.asdict(run_spec), "model": policy.spec(),
+                "data": str(data), "starts": len(starts)}
+
+    optimizer = torch.optim.AdamW(policy.parameters(), lr=config.lr, weight_decay=0.0)
+    schedule = torch.optim.lr_scheduler.LambdaLR(optimizer, warmup_cosine(config.warmup_steps, 10**12))
+    sampler = torch.Generator().manual_seed(config.seed)  # start states and env seeds
+    actions = torch.Generator().manual_seed(config.seed + 1)  # the policy's token draws
+    reference = _frozen_copy(policy) if config.kl_coef > 0 else None
+    state = {"real_interactions": 0, "eval_real_interactions": 0, "watch_real_interactions": 0, "curve": [],
+             "wall_s": 0.0}
+    start_step = 0
+    if resume:
+        trainer, rng = load_checkpoint(resolve_checkpoint(out), policy, optimizer)
+        schedule.load_state_dict(trainer["schedule"])
+        sampler.set_state(rng["sampler"])
+        actions.set_state(rng["actions"])
+        state = trainer["state"]
+        start_step = trainer["step"]
+        logger.info("resumed %s at step %d", out, start_step)
+    write_run_config(out, resolved)
+    metrics = MetricsLog(out, resume_step=start_step if resume else None)
+    board = _tensorboard(out, start_step) if config.tensorboard else None
+    eval_starts = evaluation_starts(tasks, config.eval_episodes, env_config)
+
+    def log(step: int, values: dict[str, float]) -> None:
+        values = {key: value for key, value in values.items() if np.isfinite(value)}  # NaN: nothing to report
+        metrics.log(step, values)
+        for key, value in values.items():
+            if board is not None:
+                board.add_scalar(key, value, step)
+
+    def evaluate(step: int) -> None:
+        values = evaluate_in_env(envs, run_spec.env, policy, reward, eval_starts, prefix="eval/own")
+        if config.real_eval and run_spec.env != "real":
+            real = evaluate_in_env(envs, "real", policy, reward, eval_starts, prefix="eval/real")
+            state["eval_real_interactions"] += int(real.pop("eval/real_interactions"))
+            values |= real
+        values.pop("eval/own_interactions", None)
+        values["eval/real_interactions"] = state["eval_real_interactions"]
+        state["curve"].append({"step": step, **values})
+        log(step, values)
+
+    if start_step == 0:
+        began = time.perf_counter()
+        evaluate(0)
+        state["wall_s"] += time.perf_counter() - began
+    bar = tqdm(range(start_step, config.steps), initial=start_step, total=config.steps, desc=f"rl {run_spec.env}",
+               disable=not progress)
+    for step in bar:
+        done = step + 1
+        started = time.perf_counter()
+        batch, scores, values = _gather(envs.train(config.starts_per_step * config.group_size), policy, reward, starts,
+                                        config, sampler, actions)
+        state["real_interactions"] += int(values.pop("rollout/interactions")) if run_spec.env == "real" else 0
+        values.pop("rollout/interactions", None)
+        updated = time.perf_counter()
+        if batch is not None:
+            advantages, advantage_metrics = grpo.group_advantages(scores.view(-1, config.group_size), config.normalize_std)
+            values |= advantage_metrics | update_policy(policy, optimizer, batch, advantages.reshape(-1), config, reference)
+        schedule.step()
+        values["time/update_s"] = time.perf_counter() - updated
+        values["time/step_s"] = time.perf_counter() - started
+        values["train/lr"] = schedule.get_last_lr()[0]
+        values["rollout/real_interactions"] = state["real_interactions"]
+        if batch is not None and config.watch_every and done % config.watch_every == 0 and run_spec.env != "real":
+            watched = watch_hacking(envs, batch, scores, verdicts(batch, scores, reward), config.watch_rollouts)
+            state["watch_real_interactions"] += int(watched.pop("eval/watch_interactions"))
+            values |= watched | {"eval/watch_real_interactions": state["watch_real_interactions"]}
+        if batch is not None and (done % config.video_every == 0 or done == config.steps):
+            write_group_video(out / "videos" / f"step_{done:06d}.mp4", batch, scores, config.group_size)
+        log(done, values)
+        bar.set_postfix(reward=f"{values.get('reward/mean', float('nan')):.2f}", step_s=f"{values['time/step_s']:.1f}")
+        if (config.eval_every and done % config.eval_every == 0) or done == config.steps:
+            evaluate(done)
+        state["wall_s"] += time.perf_counter() - started
+        if done % config.checkpoint_every == 0 or done == config.steps:
+            save_checkpoint(out, done, policy, resolved, optimizer,
+                            {"sampler": sampler.get_state(), "actions": actions.get_state()},
+                            {"schedule": schedule.state_dict(), "state": state})
+    envs.close()
+    if board is not None:
+        board.close()
+    return write_summary(out, run_spec, config, state)
+
+
+def _gather(env, policy, reward: Reward, starts: list[Start], config: RLConfig, sampler: torch.Generator,
+            actions: torch.Generator) -> tuple[Rollouts | None, torch.Tensor | None, dict[str, float]]:
+    """Rollouts of B groups with something to learn from, refilled from fresh starts for at most
+    `max_rounds` rounds; returns (kept rollouts or None, their (R,) scores, metrics).
+
+    Dynamic sampling: with a binary reward a group is kept when its success rate lies in
+    [keep_low, keep_high]; with a continuous one (dense, verified) when its rewards differ at all,
+    since a group of failures still ranks its rollouts by how close they came.
+    """
+    groups, size = config.starts_per_step, config.group_size
+    kept: list[Rollouts] = []
+    kept_scores: list[torch.Tensor] = []
+    values: dict[str, float] = {"rollout/interactions": 0, "time/rollout_s": 0.0, "time/policy_s": 0.0,
+                                "time/reward_s": 0.0}
+    binary = getattr(reward, "binary", False)
+    for round_ in range(config.max_rounds):
+        pick = torch.randint(len(starts), (groups,), generator=sampler).tolist()
+        seed = int(torch.randint(2**31 - 1, (1,), generator=sampler))
+        timer: dict[str, float] = {}
+        began = time.perf_counter()
+        rollouts = collect_rollouts(env, policy, [starts[i] for i in pick for _ in range(size)], config.temperature,
+                                    actions, seed, calls=-(-config.horizon // policy.chunk_size), timer=timer)
+        values["time/rollout_s"] += time.perf_counter() - began
+        values["time/policy_s"] += timer.get("policy_s", 0.0)
+        began = time.perf_counter()
+        scores = score_groups(reward, rollouts, size)  # (R,)
+        values["time/reward_s"] += time.perf_counter() - began
+        values["rollout/interactions"] += int(rollouts.lengths.sum())
+        if round_ == 0:  # the first round is an unbiased sample of the current policy
+            finite = scores[torch.isfinite(scores)]
+            values |= {"reward/mean": finite.mean().item() if len(finite) else float("nan"),
+                       "reward/std": finite.std().item() if len(finite) > 1 else float("nan"),
+                       "rollout/success": torch.nanmean(verdicts(rollouts, scores, reward)).item(),
+                       "rollout/length": rollouts.lengths.float().mean().item()}
+        grouped = scores.view(groups, size)
+        if binary:
+            keep = grpo.keep_groups(grouped, config.keep_low, config.keep_high)
+        else:
+            keep = torch.tensor([len(set(row[torch.isfinite(row)].tolist())) > 1 for row in grouped])
+        for g in keep.nonzero().flatten().tolist()[: groups - len(kept)]:
+            index = torch.arange(g * size, (g + 1) * size)
+            kept.append(rollouts.select(index))
+            kept_scores.append(scores[index])
+        if len(kept) == groups:
+            break
+    values |= {"rollout/kept_groups": len(kept), "rollout/rounds": round_ + 1}
+    if not kept:
+        return None, None, values
+    return concat_rollouts(kept), torch.cat(kept_scores), values
+
+
+def score_groups(reward: Reward, rollouts: Rollouts, size: int) -> torch.Tensor:
+    """(R,) scores, reward called once per block of `size` rollouts that share a start state."""
+    scores = []
+    for first in range(0, len(rollouts.starts), size):
+        block = rollouts.select(torch.arange(first, min(first + size, len(rollouts.starts))))
+        scores.append(reward.score(block.frames, block.instructions, reward_context(block)).float().reshape(-1))
+    return torch.cat(scores)
+
+
+def reward_context(rollouts: Rollouts) -> RewardContext:
+    """What the rewards may read besides the video (see `RewardContext`)."""
+    references = [start.reference_actions for start in rollouts.starts]
+    shortest = min(len(r) for r in references)  # a block shares one start, so all have one length
+    return RewardContext(
+        start=torch.from_numpy(np.stack([start.frames for start in rollouts.starts])),
+        reference_actions=torch.from_numpy(np.stack([r[:shortest] for r in references])),
+        success=rollouts.success,
+        env_rewards=rollouts.env_rewards,
+    )
+
+
+def concat_rollouts(parts: list[Rollouts]) -> Rollouts:
+    """One `Rollouts` of the parts in order (rollouts of one env share their shapes)."""
+    tensors = {}
+    for field in dataclasses.fields(Rollouts):
+        values = [getattr(part, field.name) for part in parts]
+        if field.name != "starts":
+            tensors[field.name] = None if values[0] is None else torch.cat(values)
+    return Rollouts(starts=tuple(start for part in parts for start in part.starts), **tensors)
+
+
+def update_policy(policy, optimizer: torch.optim.Optimizer, batch: Rollouts, advantages: torch.Tensor,
+                  config: RLConfig, reference=None) -> dict[str, float]:
+    """`minibatches` clipped policy-gradient steps on the batch's policy calls; returns metrics.
+
+    Every policy call (r, s) that executed at least one action is a row; rows are processed in
+    micro-batches whose gradients accumulate, normalised by the token count of the whole
+    minibatch, so the step does not depend on `micro_batch`.
+    """
+    rows_r, rows_s = batch.token_mask.any(-1).nonzero(as_tuple=True)  # (M,) each
+    instructions = batch.instructions
+    totals: dict[str, float] = {}
+    parts = torch.tensor_split(torch.arange(len(rows_r)), config.minibatches)
+    for part in parts:
+        total = int(batch.token_mask[rows_r[part], rows_s[part]].sum())
+        if total == 0:
+            continue
+        optimizer.zero_grad(set_to_none=True)
+        for micro in part.split(config.micro_batch):
+            r, s = rows_r[micro], rows_s[micro]
+            obs, texts, tokens = batch.observations[r, s], [instructions[i] for i in r.tolist()], batch.tokens[r, s]
+            entropy = None
+            if config.entropy_coef > 0:
+                logp, entropy = policy.log_prob_and_entropy(obs, texts, tokens, config.temperature)
+            else:
+                logp = policy.log_prob(obs, texts, tokens, config.temperature)
+            ref_logp = None
+            if reference is not None:
+                with torch.no_grad():
+                    ref_logp = reference.log_prob(obs, texts, tokens, config.temperature)
+            loss, values = grpo.policy_loss(logp, batch.logp[r, s], advantages[r], batch.token_mask[r, s],
+                                            config.clip_low, config.clip_high, total, ref_logp, config.kl_coef,
+                                            entropy, config.entropy_coef)
+            loss.backward()
+            for key, value in values.items():
+                totals[key] = totals.get(key, 0.0) + value / len(parts)
+        norm = torch.nn.utils.clip_grad_norm_(policy.parameters(), config.max_grad_norm).item()
+        totals["train/grad_norm"] = totals.get("train/grad_norm", 0.0) + norm / len(parts)
+        optimizer.step()
+    totals["train/policy_calls"] = float(len(rows_r))
+    return totals
+
+
+def write_summary(out: Path, run_spec: RLRun, config: RLConfig, state: dict) -> dict:
+    """RUN/summary.json: the run's env, reward, steps, success before and after, and the curve.
+
+    Success is measured on the evaluation seeds in the run's own env (``start_success``,
+    ``end_success``; None where the reward cannot tell success, as the verified reward on imagined
+    video) and, when the run trained elsewhere, in the real world (``start_real_success``...).
+    """
+    first, last = state["curve"][0], state["curve"][-1]
+    where = {"": "own", "_real": "own" if run_spec.env == "real" else "real"}
+    summary = {"env": run_spec.env, "reward": run_spec.reward, "steps": config.steps, "policy": run_spec.policy,
+               "wm": run_spec.wm}
+    for suffix, env in where.items():
+        for moment, point in (("start", first), ("end", last)):
+            summary[f"{moment}{suffix}_success"] = point.get(f"eval/{env}_success")
+            summary[f"{moment}{suffix}_ci"] = [point.get(f"eval/{env}_ci_low"), point.get(f"eval/{env}_ci_high")]
+    summary |= {
+        "eval_episodes": first.get("eval/own_episodes"),
+        "real_interactions": state["real_interactions"],
+        "eval_real_interactions": state["eval_real_interactions"],
+        "watch_real_interactions": state["watch_real_interactions"],
+        "wall_s": state["wall_s"],
+        "curve": state["curve"],
+    }
+    write_json(out / "summary.json", summary)
+    return summary
+
+
+def _check_combination(run_spec: RLRun, world_model) -> None:
+    kind = run_spec.reward.partition(":")[0]
+    if run_spec.env == "imagined" and world_model is None:
+        raise ValueError("--env imagined practises in a world model: give it with --wm RUN")
+    if kind in ("sim", "sim-dense") and run_spec.env == "imagined":
+        raise ValueError(f"--reward {run_spec.reward} reads the simulator's own verdict; a world model has none "
+                         "(use --env sim or real, or a judge / the verified reward)")
+    if kind == "verified" and run_spec.env != "imagined":
+        raise ValueError("--reward verified compares imagined videos: it needs --env imagined")
+
+
+def _policy_data(policy_run: str) -> str:
+    """The dataset the policy was trained on (recorded in its config.json)."""
+    checkpoint = resolve_checkpoint(Path(policy_run))
+    for path in (Path(policy_run) / "config.json", checkpoint / "config.json"):
+        if path.exists() and "data" in (saved := json.loads(path.read_text())):
+            return saved["data"]
+    raise ValueError(f"{policy_run} does not say which dataset it was trained on; give the start states with --data DIR")
+
+
+def _frozen_copy(policy):
+    import copy
+
+    reference = copy.deepcopy(policy).eval()
+    reference.requires_grad_(False)
+    return reference
+
+
+def _tensorboard(out: Path, start_step: int):
+    from torch.utils.tensorboard import SummaryWriter
+
+    # purge_step drops events past the resumed checkpoint, as metrics.jsonl does.
+    return SummaryWriter(str(out / "tensorboard"), purge_step=start_step or None)
+
+
+def saved_rl_settings(run: Path) -> tuple[RLRun, RLConfig]:
+    """The run and settings an RL run was started with (RUN/config.json), for ``--resume``."""
+    return RLRun(**saved_settings(run, "run")), RLConfig(**saved_settings(run, "rl"))

@@ -1,0 +1,123 @@
+"""The RL loop end to end: the CLI on every env, resume after SIGKILL, and the update's invariances."""
+
+import copy
+import dataclasses
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+import torch
+
+from gymnast.cli import main
+from gymnast.policy.vla import load_policy
+from gymnast.rl.rollout import collect_rollouts, dataset_starts
+from gymnast.rl.train import RL_PRESETS, update_policy
+from gymnast.utils.metrics import read_metrics
+
+from rl_helpers import JUDGE, POLICY, WORLD_MODEL
+
+SUMMARY_KEYS = {"env", "reward", "steps", "start_success", "end_success", "curve"}
+
+
+def _rl_args(env, reward, out, data, *extra):
+    args = ["rl", "--policy", str(POLICY), "--env", env, "--reward", reward, "--out", str(out), "--data", str(data),
+            "--preset", "debug", *extra]
+    return args + (["--wm", str(WORLD_MODEL)] if env == "imagined" or reward == "verified" else [])
+
+
+@pytest.mark.parametrize("env, reward", [("imagined", f"judge:{JUDGE}"), ("imagined", "verified"),
+                                         ("sim", "sim-dense"), ("real", "sim")])
+def test_rl_debug_preset_runs_on_every_env(env, reward, rl_dataset, tmp_path, capsys):
+    out = tmp_path / "run"
+    main(_rl_args(env, reward, out, rl_dataset))
+    summary = json.loads((out / "summary.json").read_text())
+    assert SUMMARY_KEYS <= summary.keys()
+    assert summary["env"] == env and summary["reward"] == reward and summary["steps"] == 2
+    assert [point["step"] for point in summary["curve"]] == [0, 2]
+    metrics = read_metrics(out)
+    assert [m["step"] for m in metrics if "time/step_s" in m] == [1, 2]
+    assert all(m["rollout/kept_groups"] >= 0 for m in metrics if "rollout/kept_groups" in m)
+    assert (out / "checkpoints" / "000002" / "model.safetensors").exists()
+    assert list((out / "videos").glob("*.mp4")) and list((out / "tensorboard").iterdir())
+    if env == "real":
+        assert summary["real_interactions"] > 0 and summary["watch_real_interactions"] == 0
+    else:
+        assert summary["real_interactions"] == 0
+        assert summary["eval_real_interactions"] > 0  # evaluated in the real world too, counted apart
+        watched = [m for m in metrics if "eval/watch_real_success" in m]
+        assert [m["step"] for m in watched] == [1, 2]
+        assert all(("eval/watch_agreement" in m) == (reward != "verified") for m in watched)
+
+
+def test_rl_rejects_a_reward_the_env_cannot_give(rl_dataset, tmp_path, capsys):
+    with pytest.raises(SystemExit):
+        main(_rl_args("imagined", "sim", tmp_path / "run", rl_dataset))
+    assert "simulator" in capsys.readouterr().err
+
+
+def _comparable(metrics):
+    return [{k: v for k, v in m.items() if not k.startswith("time/")} for m in metrics]
+
+
+def test_rl_killed_and_resumed_matches_an_uninterrupted_run(rl_dataset, tmp_path):
+    args = ["--steps", "5"]
+    whole, broken = tmp_path / "whole", tmp_path / "broken"
+    main(_rl_args("real", "sim-dense", whole, rl_dataset, *args))
+    command = [sys.executable, "-m", "gymnast.cli", *_rl_args("real", "sim-dense", broken, rl_dataset, *args)]
+    process = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    last = broken / "checkpoints" / "last"
+    deadline = time.monotonic() + 300
+    while not (last.exists() and last.read_text() >= "000002") and process.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.02)
+    os.kill(process.pid, signal.SIGKILL)
+    assert process.wait() == -signal.SIGKILL, "the run finished before it could be killed"
+    killed_at = int(last.read_text())
+    assert killed_at < 5
+    main(["rl", "--out", str(broken), "--resume"])
+    resumed_metrics, expected_metrics = _comparable(read_metrics(broken)), _comparable(read_metrics(whole))
+    assert [m.keys() for m in resumed_metrics] == [m.keys() for m in expected_metrics]
+    for resumed_line, expected_line in zip(resumed_metrics, expected_metrics):
+        assert resumed_line == pytest.approx(expected_line, rel=1e-5, abs=1e-7)
+    resumed = json.loads((broken / "summary.json").read_text())
+    expected = json.loads((whole / "summary.json").read_text())
+    assert resumed["curve"] == expected["curve"] and resumed["end_success"] == expected["end_success"]
+
+
+def test_update_does_not_depend_on_the_micro_batch_size(rl_dataset):
+    from gymnast.envs.sim_vector import SimVectorEnv
+    from gymnast.config import EnvConfig
+
+    policy = load_policy(POLICY)
+    starts = [s for s in dataset_starts(rl_dataset) for _ in range(2)]
+    with SimVectorEnv(len(starts), policy.chunk_size, EnvConfig(image_size=96, horizon=15)) as env:
+        batch = collect_rollouts(env, policy, starts, 1.6, torch.Generator().manual_seed(0))
+    advantages = torch.tensor([1.0, -1.0, 0.5, -0.5])
+    results = []
+    for micro_batch in (1, 5, 1000):
+        model = copy.deepcopy(policy)
+        optimizer = torch.optim.SGD(model.parameters(), lr=0.1)
+        config = dataclasses.replace(RL_PRESETS["debug"], micro_batch=micro_batch, max_grad_norm=1e9)
+        metrics = update_policy(model, optimizer, batch, advantages, config)
+        results.append((torch.cat([p.detach().flatten() for p in model.parameters()]), metrics))
+    for params, metrics in results[1:]:
+        assert torch.allclose(params, results[0][0], atol=1e-6)
+        assert metrics == pytest.approx(results[0][1], rel=1e-4, abs=1e-6)
+
+
+def test_a_positive_advantage_makes_the_sampled_chunk_more_likely(rl_dataset):
+    from gymnast.envs.sim_vector import SimVectorEnv
+    from gymnast.config import EnvConfig
+
+    policy = load_policy(POLICY)
+    starts = dataset_starts(rl_dataset)[:1] * 2
+    with SimVectorEnv(2, policy.chunk_size, EnvConfig(image_size=96, horizon=5)) as env:
+        batch = collect_rollouts(env, policy, starts, 1.6, torch.Generator().manual_seed(0))
+    config = RL_PRESETS["debug"]
+    before = policy.log_prob(batch.observations[:, 0], batch.instructions, batch.tokens[:, 0], 1.6).sum(-1)
+    update_policy(policy, torch.optim.SGD(policy.parameters(), lr=0.05), batch, torch.tensor([1.0, -1.0]), config)
+    after = policy.log_prob(batch.observations[:, 0], batch.instructions, batch.tokens[:, 0], 1.6).sum(-1)
+    assert after[0] > before[0] and after[1] < before[1]
