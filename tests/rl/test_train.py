@@ -53,6 +53,17 @@ def test_rl_debug_preset_runs_on_every_env(env, reward, rl_dataset, tmp_path, ca
         assert all(("eval/watch_agreement" in m) == (reward != "verified") for m in watched)
 
 
+def test_rl_with_the_vlm_judge_talks_to_a_served_judge(rl_dataset, tmp_path):
+    from gymnast.reward.serve import judge_server
+
+    with judge_server(JUDGE) as server:
+        main(_rl_args("imagined", f"vlm:gymnast-judge@{server.url}", tmp_path / "run", rl_dataset))
+    metrics = read_metrics(tmp_path / "run")
+    assert [m["step"] for m in metrics if "reward/mean" in m] == [1, 2]
+    assert all(m["reward/nan_fraction"] == 0 for m in metrics if "reward/nan_fraction" in m)
+    assert [m["reward/vlm_requests"] for m in metrics if "reward/vlm_requests" in m][-1] > 0
+
+
 def test_rl_rejects_a_reward_the_env_cannot_give(rl_dataset, tmp_path, capsys):
     with pytest.raises(SystemExit):
         main(_rl_args("imagined", "sim", tmp_path / "run", rl_dataset))

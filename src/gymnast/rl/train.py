@@ -228,6 +228,8 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
         values["time/step_s"] = time.perf_counter() - started
         values["train/lr"] = schedule.get_last_lr()[0]
         values["rollout/real_interactions"] = state["real_interactions"]
+        if hasattr(reward, "metrics"):  # a VLM judge's request, retry, cache and token counts
+            values |= reward.metrics()
         if batch is not None and config.watch_every and done % config.watch_every == 0 and run_spec.env != "real":
             watched = watch_hacking(envs, batch, scores, verdicts(batch, scores, reward), config.watch_rollouts)
             state["watch_real_interactions"] += int(watched.pop("eval/watch_interactions"))
