@@ -162,6 +162,7 @@ def rl(
     resume: bool = False,
     steps: int | None = None,
     tasks: str | None = None,
+    fresh_scenes: bool = False,
     gap: str | None = None,
     lr: float | None = None,
     temperature: float | None = None,
@@ -185,6 +186,7 @@ def rl(
         resume: continue the run in OUT from its last checkpoint, with the settings saved there.
         steps: override the number of RL steps.
         tasks: override the training tasks (comma-separated names or sets).
+        fresh_scenes: sim/real only: start each group from a new scene instead of the dataset's (no dataset needed).
         gap: override the software simulator's gap (mild, strong).
         lr: override the learning rate.
         temperature: override the rollout temperature.
@@ -207,6 +209,7 @@ def rl(
                      "group_size": group_size, "starts_per_step": starts_per_step, "eval_every": eval_every,
                      "eval_episodes": eval_episodes, "workers": workers, "seed": seed}
         config = dataclasses.replace(RL_PRESETS[preset], **{k: v for k, v in overrides.items() if v is not None})
+        config = dataclasses.replace(config, fresh_scenes=fresh_scenes or config.fresh_scenes)
     summary = train_rl(run_spec, out, config, resume=resume)
     summary.pop("curve")
     print(json.dumps(summary, indent=2))

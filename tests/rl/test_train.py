@@ -64,6 +64,15 @@ def test_rl_with_the_vlm_judge_talks_to_a_served_judge(rl_dataset, tmp_path):
     assert [m["reward/vlm_requests"] for m in metrics if "reward/vlm_requests" in m][-1] > 0
 
 
+def test_rl_in_a_simulator_can_start_from_fresh_scenes_without_a_dataset(tmp_path):
+    out = tmp_path / "run"
+    main(["rl", "--policy", str(POLICY), "--env", "sim", "--reward", "sim-dense", "--out", str(out), "--preset", "debug",
+          "--fresh-scenes"])
+    saved = json.loads((out / "config.json").read_text())
+    assert saved["rl"]["fresh_scenes"] and saved["data"] is None
+    assert [m["step"] for m in read_metrics(out) if "reward/mean" in m] == [1, 2]
+
+
 def test_rl_rejects_a_reward_the_env_cannot_give(rl_dataset, tmp_path, capsys):
     with pytest.raises(SystemExit):
         main(_rl_args("imagined", "sim", tmp_path / "run", rl_dataset))

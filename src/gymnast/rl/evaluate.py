@@ -68,21 +68,24 @@ class EnvFactory:
 
 
 def evaluation_starts(tasks: Sequence[str], episodes: int, config: EnvConfig) -> list[Start]:
-    """`episodes` starts per task from the evaluation seeds, with their real first frames.
+    """`episodes` starts per task from the evaluation seeds, with their real first frames."""
+    from gymnast.envs.tasks import eval_seed
+
+    return scene_starts([(task, eval_seed(i)) for task in tasks for i in range(episodes)], config)
+
+
+def scene_starts(scenes: Sequence[tuple[str, int]], config: EnvConfig) -> list[Start]:
+    """Starts for (task, seed) scenes with their real first frames and no reference actions.
 
     Rendering a first frame is a reset, not an interaction: no action is taken.
     """
-    from gymnast.envs.metaworld import MetaWorldEnv
-    from gymnast.envs.tasks import eval_seed
+    from gymnast.envs.metaworld import ACTION_DIM
+    from gymnast.envs.parallel import cached_env
 
     starts = []
-    for task in tasks:
-        env = MetaWorldEnv(task, config)
-        for i in range(episodes):
-            obs, info = env.reset(seed=eval_seed(i))
-            starts.append(Start(task, info["seed"], info["instruction"], obs["image"][None].copy(),
-                                np.zeros((0, env.action_space.shape[0]), np.float32)))
-        env.close()
+    for task, seed in scenes:
+        obs, info = cached_env(task, config).reset(seed=seed)
+        starts.append(Start(task, seed, info["instruction"], obs["image"][None].copy(), np.zeros((0, ACTION_DIM), np.float32)))
     return starts
 
 
@@ -102,7 +105,7 @@ def evaluate_in_env(envs: EnvFactory, kind: str, policy, reward: Reward, starts:
 
     Returns ``{prefix}_episodes`` (judged), ``_interactions`` (actions taken, which are real
     interactions when `kind` is ``real``) and, when any episode could be judged, ``_success``,
-    ``_ci_low`` and ``_ci_high``.
+    ``_ci_low``, ``_ci_high`` and ``_success/<task>`` for every task.
     """
     from gymnast.rl.train import score_groups
 
@@ -123,6 +126,9 @@ def evaluate_in_env(envs: EnvFactory, kind: str, policy, reward: Reward, starts:
     if total:  # nothing judged: a continuous reward on imagined video has no notion of success
         low, high = wilson_interval(wins, total)
         values |= {f"{prefix}_success": wins / total, f"{prefix}_ci_low": low, f"{prefix}_ci_high": high}
+        for task in dict.fromkeys(start.task for start in starts):
+            mine = success[[i for i, start in enumerate(starts) if start.task == task]]
+            values[f"{prefix}_success/{task}"] = torch.nanmean(mine).item()
     return values
 
 

@@ -23,6 +23,7 @@ import dataclasses
 import json
 import logging
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
@@ -33,7 +34,8 @@ from tqdm import tqdm
 
 from gymnast.config import EnvConfig
 from gymnast.rl import grpo
-from gymnast.rl.evaluate import EnvFactory, evaluate_in_env, evaluation_starts, verdicts, watch_hacking
+from gymnast.envs.tasks import DATA_SEEDS, resolve_tasks
+from gymnast.rl.evaluate import EnvFactory, evaluate_in_env, evaluation_starts, scene_starts, verdicts, watch_hacking
 from gymnast.rl.rollout import Rollouts, Start, collect_rollouts, dataset_starts
 from gymnast.rl.videos import write_group_video
 from gymnast.reward.base import Reward, RewardContext
@@ -56,6 +58,9 @@ class RLConfig:
     """RL steps (one policy update each)."""
     tasks: str = "mt10"
     """Tasks whose start states are trained on (task names or sets, comma-separated)."""
+    fresh_scenes: bool = False
+    """Simulators only: start each group from a new scene (a random data seed) instead of the
+    dataset's scenes; a simulator can set up any scene, a world model only continues real frames."""
     starts_per_step: int = 4
     """Start states B per step (groups)."""
     group_size: int = 8
@@ -157,15 +162,15 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
     world_model = load_world_model(run_spec.wm) if run_spec.wm else None
     _check_combination(run_spec, world_model)
     reward = make_reward(run_spec.reward, world_model)
-    data = Path(run_spec.data or _policy_data(run_spec.policy))
-    from gymnast.envs.tasks import resolve_tasks
-
+    if config.fresh_scenes and run_spec.env == "imagined":
+        raise ValueError("fresh scenes need a simulator: the imagined env starts only from the dataset's real frames")
+    data = None if config.fresh_scenes else Path(run_spec.data or _policy_data(run_spec.policy))
     tasks = resolve_tasks(config.tasks)
-    starts = dataset_starts(data, tasks)
     env_config = EnvConfig(image_size=policy.config.image_size, horizon=config.horizon)
+    draw_starts = start_sampler(tasks, None if config.fresh_scenes else dataset_starts(data, tasks), env_config)
     envs = EnvFactory(run_spec.env, policy.chunk_size, env_config, config.gap, config.workers, world_model)
     resolved = {"rl": dataclasses.asdict(config), "run": dataclasses.asdict(run_spec), "model": policy.spec(),
-                "data": str(data), "starts": len(starts)}
+                "data": str(data) if data else None}
 
     optimizer = torch.optim.AdamW(policy.parameters(), lr=config.lr, weight_decay=0.0)
     schedule = torch.optim.lr_scheduler.LambdaLR(optimizer, warmup_cosine(config.warmup_steps, 10**12))
@@ -203,6 +208,7 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
             values |= real
         values.pop("eval/own_interactions", None)
         values["eval/real_interactions"] = state["eval_real_interactions"]
+        values = {key: value for key, value in values.items() if np.isfinite(value)}  # JSON has no NaN
         state["curve"].append({"step": step, **values})
         log(step, values)
 
@@ -215,8 +221,8 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
     for step in bar:
         done = step + 1
         started = time.perf_counter()
-        batch, scores, values = _gather(envs.train(config.starts_per_step * config.group_size), policy, reward, starts,
-                                        config, sampler, actions)
+        batch, scores, values = _gather(envs.train(config.starts_per_step * config.group_size), policy, reward,
+                                        draw_starts, config, sampler, actions)
         state["real_interactions"] += int(values.pop("rollout/interactions")) if run_spec.env == "real" else 0
         values.pop("rollout/interactions", None)
         updated = time.perf_counter()
@@ -251,7 +257,23 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
     return write_summary(out, run_spec, config, state)
 
 
-def _gather(env, policy, reward: Reward, starts: list[Start], config: RLConfig, sampler: torch.Generator,
+def start_sampler(tasks: Sequence[str], dataset: list[Start] | None, config: EnvConfig
+                  ) -> Callable[[int, torch.Generator], list[Start]]:
+    """`draw(count, generator)`: start states drawn from the dataset's scenes, or (`dataset` None)
+    fresh scenes of `tasks` from random data seeds, rendered by a reset."""
+
+    def draw(count: int, generator: torch.Generator) -> list[Start]:
+        if dataset is not None:
+            return [dataset[i] for i in torch.randint(len(dataset), (count,), generator=generator).tolist()]
+        picks = torch.randint(len(tasks), (count,), generator=generator).tolist()
+        seeds = torch.randint(DATA_SEEDS.start, DATA_SEEDS.stop, (count,), generator=generator).tolist()
+        return scene_starts([(tasks[t], seed) for t, seed in zip(picks, seeds)], config)
+
+    return draw
+
+
+def _gather(env, policy, reward: Reward, draw_starts: Callable[[int, torch.Generator], list[Start]],
+            config: RLConfig, sampler: torch.Generator,
             actions: torch.Generator) -> tuple[Rollouts | None, torch.Tensor | None, dict[str, float]]:
     """Rollouts of B groups with something to learn from, refilled from fresh starts for at most
     `max_rounds` rounds; returns (kept rollouts or None, their (R,) scores, metrics).
@@ -267,11 +289,11 @@ def _gather(env, policy, reward: Reward, starts: list[Start], config: RLConfig, 
                                 "time/reward_s": 0.0}
     binary = getattr(reward, "binary", False)
     for round_ in range(config.max_rounds):
-        pick = torch.randint(len(starts), (groups,), generator=sampler).tolist()
+        starts = draw_starts(groups, sampler)
         seed = int(torch.randint(2**31 - 1, (1,), generator=sampler))
         timer: dict[str, float] = {}
         began = time.perf_counter()
-        rollouts = collect_rollouts(env, policy, [starts[i] for i in pick for _ in range(size)], config.temperature,
+        rollouts = collect_rollouts(env, policy, [start for start in starts for _ in range(size)], config.temperature,
                                     actions, seed, calls=-(-config.horizon // policy.chunk_size), timer=timer)
         values["time/rollout_s"] += time.perf_counter() - began
         values["time/policy_s"] += timer.get("policy_s", 0.0)
