@@ -107,7 +107,7 @@ def evaluate_in_env(envs: EnvFactory, kind: str, policy, reward: Reward, starts:
     interactions when `kind` is ``real``) and, when any episode could be judged, ``_success``,
     ``_ci_low``, ``_ci_high`` and ``_success/<task>`` for every task.
     """
-    from gymnast.rl.train import score_groups
+    from gymnast.rl.batch import score_groups  # batch.py imports this module
 
     env = envs.get(kind, envs.batch)
     outcomes, interactions = [], 0

@@ -27,6 +27,8 @@ from gymnasium.vector import VectorEnv
 
 from gymnast.policy.base import Policy
 
+EXPERTS = ("expert", "noisy_expert")  # the behaviours whose actions can serve as a reference
+
 
 @dataclass(frozen=True)
 class Start:
@@ -193,9 +195,9 @@ def _sample(policy: Policy, image: torch.Tensor, instructions: list[str], temper
 def dataset_starts(data: Path, tasks: Sequence[str] | None = None) -> list[Start]:
     """One start per (task, seed) scene of a dataset: its first frame, instruction and reference.
 
-    The reference is the successful scripted-expert episode with the least action noise in that
-    scene; scenes with no successful expert episode are left out (they have no reference, and an
-    imagined start should be one the expert solved in the real world).
+    The reference is the successful scripted-expert episode (with or without action noise) with
+    the least noise in that scene; scenes with no successful expert episode are left out (they
+    have no reference, and an imagined start should be one the expert solved in the real world).
 
     Raises:
         ValueError: no scene of `tasks` has a successful expert episode.
@@ -205,7 +207,7 @@ def dataset_starts(data: Path, tasks: Sequence[str] | None = None) -> list[Start
     dataset = EpisodeDataset(data)
     best: dict[tuple[str, int], int] = {}
     for i, info in enumerate(dataset.episodes):
-        if info.behaviour != "expert" or not info.success or (tasks and info.task not in tasks):
+        if info.behaviour not in EXPERTS or not info.success or (tasks and info.task not in tasks):
             continue
         key = (info.task, info.seed)
         if key not in best or info.noise < dataset.episodes[best[key]].noise:
