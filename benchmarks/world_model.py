@@ -26,7 +26,6 @@ from pathlib import Path
 import torch
 
 import gymnast  # noqa: F401  (sets MUJOCO_GL)
-from gymnast.config import EnvConfig
 from gymnast.utils.atomic import write_json
 from gymnast.world_model.base import load_world_model
 from gymnast.world_model.embedded import EmbeddedWorldModel, EmbeddedWorldModelConfig

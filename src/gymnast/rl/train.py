@@ -1,8 +1,8 @@
 """`gymnast rl`: GRPO fine-tuning of a VLA policy in the world model, the software simulator or
 the real world, through one loop.
 
-Each step: draw B real start states, roll the policy out G times from each (temperature > 1
-for exploration), score every video with the reward, keep the groups with something to learn
+Each step: draw B real start states, roll the policy out G times from each at the rollout
+temperature, score every video with the reward, keep the groups with something to learn
 from (dynamic sampling, refilling from fresh starts), normalise rewards within each group and
 take one clipped policy-gradient step (`gymnast.rl.grpo`). The loop drives a vector env and a
 `Reward`; it never asks where the frames come from.
@@ -32,10 +32,10 @@ import torch
 from tqdm import tqdm
 
 from gymnast.config import EnvConfig
-from gymnast.rl import grpo
 from gymnast.envs.tasks import resolve_tasks
-from gymnast.rl.evaluate import EnvFactory, evaluate_in_env, evaluation_starts, verdicts, watch_hacking
+from gymnast.rl import grpo
 from gymnast.rl.batch import gather_batch, start_sampler
+from gymnast.rl.evaluate import EnvFactory, evaluate_in_env, evaluation_starts, verdicts, watch_hacking
 from gymnast.rl.rollout import Rollouts, dataset_starts
 from gymnast.rl.videos import write_group_video
 from gymnast.utils.atomic import write_json
@@ -211,48 +211,51 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
         state["curve"].append({"step": step, **values})
         log(step, values)
 
-    if start_step == 0:
-        began = time.perf_counter()
-        evaluate(0)
-        state["wall_s"] += time.perf_counter() - began
-    bar = tqdm(range(start_step, config.steps), initial=start_step, total=config.steps, desc=f"rl {run_spec.env}",
-               disable=not progress)
-    for step in bar:
-        done = step + 1
-        started = time.perf_counter()
-        batch, scores, values = gather_batch(envs.train(config.starts_per_step * config.group_size), policy, reward,
-                                        draw_starts, config, sampler, actions)
-        state["real_interactions"] += int(values.pop("rollout/interactions")) if run_spec.env == "real" else 0
-        values.pop("rollout/interactions", None)
-        updated = time.perf_counter()
-        if batch is not None:
-            advantages, advantage_metrics = grpo.group_advantages(scores.view(-1, config.group_size), config.normalize_std)
-            values |= advantage_metrics | update_policy(policy, optimizer, batch, advantages.reshape(-1), config, reference)
-        schedule.step()
-        values["time/update_s"] = time.perf_counter() - updated
-        values["time/step_s"] = time.perf_counter() - started
-        values["train/lr"] = schedule.get_last_lr()[0]
-        values["rollout/real_interactions"] = state["real_interactions"]
-        if hasattr(reward, "metrics"):  # a VLM judge's request, retry, cache and token counts
-            values |= reward.metrics()
-        if batch is not None and config.watch_every and done % config.watch_every == 0 and run_spec.env != "real":
-            watched = watch_hacking(envs, batch, scores, verdicts(batch, scores, reward), config.watch_rollouts)
-            state["watch_real_interactions"] += int(watched.pop("eval/watch_interactions"))
-            values |= watched | {"eval/watch_real_interactions": state["watch_real_interactions"]}
-        if batch is not None and (done % config.video_every == 0 or done == config.steps):
-            write_group_video(out / "videos" / f"step_{done:06d}.mp4", batch, scores, config.group_size)
-        log(done, values)
-        bar.set_postfix(reward=f"{values.get('reward/mean', float('nan')):.2f}", step_s=f"{values['time/step_s']:.1f}")
-        if (config.eval_every and done % config.eval_every == 0) or done == config.steps:
-            evaluate(done)
-        state["wall_s"] += time.perf_counter() - started
-        if done % config.checkpoint_every == 0 or done == config.steps:
-            save_checkpoint(out, done, policy, resolved, optimizer,
-                            {"sampler": sampler.get_state(), "actions": actions.get_state()},
-                            {"schedule": schedule.state_dict(), "state": state})
-    envs.close()
-    if board is not None:
-        board.close()
+    try:
+        if start_step == 0:
+            began = time.perf_counter()
+            evaluate(0)
+            state["wall_s"] += time.perf_counter() - began
+        bar = tqdm(range(start_step, config.steps), initial=start_step, total=config.steps, desc=f"rl {run_spec.env}",
+                   disable=not progress)
+        for step in bar:
+            done = step + 1
+            started = time.perf_counter()
+            batch, scores, values = gather_batch(envs.train(config.starts_per_step * config.group_size), policy,
+                                                 reward, draw_starts, config, sampler, actions)
+            interactions = int(values.pop("rollout/interactions"))
+            if run_spec.env == "real":  # only the real world's actions are real interactions
+                state["real_interactions"] += interactions
+            updated = time.perf_counter()
+            if batch is not None:
+                advantages, advantage_metrics = grpo.group_advantages(scores.view(-1, config.group_size), config.normalize_std)
+                values |= advantage_metrics | update_policy(policy, optimizer, batch, advantages.reshape(-1), config, reference)
+            schedule.step()
+            values["time/update_s"] = time.perf_counter() - updated
+            values["time/step_s"] = time.perf_counter() - started
+            values["train/lr"] = schedule.get_last_lr()[0]
+            values["rollout/real_interactions"] = state["real_interactions"]
+            if hasattr(reward, "metrics"):  # a VLM judge's request, retry, cache and token counts
+                values |= reward.metrics()
+            if batch is not None and config.watch_every and done % config.watch_every == 0 and run_spec.env != "real":
+                watched = watch_hacking(envs, batch, scores, verdicts(batch, scores, reward), config.watch_rollouts)
+                state["watch_real_interactions"] += int(watched.pop("eval/watch_interactions"))
+                values |= watched | {"eval/watch_real_interactions": state["watch_real_interactions"]}
+            if batch is not None and (done % config.video_every == 0 or done == config.steps):
+                write_group_video(out / "videos" / f"step_{done:06d}.mp4", batch, scores, config.group_size)
+            log(done, values)
+            bar.set_postfix(reward=f"{values.get('reward/mean', float('nan')):.2f}", step_s=f"{values['time/step_s']:.1f}")
+            if (config.eval_every and done % config.eval_every == 0) or done == config.steps:
+                evaluate(done)
+            state["wall_s"] += time.perf_counter() - started
+            if done % config.checkpoint_every == 0 or done == config.steps:
+                save_checkpoint(out, done, policy, resolved, optimizer,
+                                {"sampler": sampler.get_state(), "actions": actions.get_state()},
+                                {"schedule": schedule.state_dict(), "state": state})
+    finally:  # worker processes and event files are released even when a step fails
+        envs.close()
+        if board is not None:
+            board.close()
     return write_summary(out, run_spec, config, state)
 
 

@@ -28,7 +28,7 @@ from tqdm import tqdm
 from gymnast.data.lerobot import EpisodeDataset
 from gymnast.utils.atomic import write_json
 from gymnast.utils.checkpoint import resolve_checkpoint
-from gymnast.world_model.base import WorldModel, load_world_model
+from gymnast.world_model.base import load_world_model
 from gymnast.world_model.controllability import ControllabilityConfig, check_controllability
 from gymnast.world_model.data import split_episodes
 from gymnast.world_model.metrics import PerceptualDistance, masked_psnr, moving_mask, psnr, ssim, summarize_horizons, to_unit_float
