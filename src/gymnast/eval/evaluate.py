@@ -35,7 +35,7 @@ from gymnast.envs.perturb import get_perturbation
 from gymnast.envs.tasks import eval_seed, resolve_tasks
 from gymnast.eval.stats import success_summary
 from gymnast.utils.atomic import atomic_path, write_json
-from gymnast.utils.video import CODEC_PRESETS, encode_video
+from gymnast.utils.video import BROWSER_CODEC, encode_video
 
 if TYPE_CHECKING:
     from gymnast.policy.base import Policy
@@ -47,9 +47,6 @@ EXPERT = "expert"
 VIDEO_DIR_SUFFIX = "_videos"
 """Videos go beside the JSON report, in ``<report name>_videos/``: one folder per report, so two
 reports in one folder (say, with and without perturbation) never overwrite each other's videos."""
-VIDEO_CODEC = CODEC_PRESETS["h264-yuv420-crf18"]
-# Reports are watched in browsers, which play H.264 only in 4:2:0; the dataset's lossless 4:4:4
-# default would not play there, and these videos are for people, not for training.
 
 
 @dataclass(frozen=True)
@@ -222,7 +219,7 @@ def run_episode(job: EvalJob, policy: Policy | None = None) -> dict:
                 break
     if job.video_path:
         with atomic_path(job.video_path) as tmp:
-            encode_video(tmp, np.stack(frames), fps=MetaWorldEnv.metadata["render_fps"], codec=VIDEO_CODEC)
+            encode_video(tmp, np.stack(frames), fps=MetaWorldEnv.metadata["render_fps"], codec=BROWSER_CODEC)
     return {"task": job.task, "seed": job.seed, "instruction": env.instruction, "success": success, "steps": steps}
 
 

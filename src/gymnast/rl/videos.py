@@ -17,10 +17,9 @@ from PIL import Image, ImageDraw
 from gymnast.envs.metaworld import CONTROL_FPS
 from gymnast.rl.rollout import Rollouts
 from gymnast.utils.atomic import atomic_path
-from gymnast.utils.video import CODEC_PRESETS, encode_video
+from gymnast.utils.video import BROWSER_CODEC, encode_video
 
 SCALE = 2  # 96-px frames are too small to read a caption on
-_CODEC = CODEC_PRESETS["h264-yuv420-crf18"]
 
 
 def captioned(frames: np.ndarray, text: str, scale: int = SCALE) -> np.ndarray:
@@ -45,5 +44,5 @@ def write_group_video(path: Path, rollouts: Rollouts, scores: torch.Tensor, grou
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(path) as tmp:
-        encode_video(tmp, grid, fps=CONTROL_FPS, codec=_CODEC)
+        encode_video(tmp, grid, fps=CONTROL_FPS, codec=BROWSER_CODEC)
     return path

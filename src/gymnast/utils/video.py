@@ -55,6 +55,9 @@ CODEC_PRESETS: dict[str, VideoCodec] = {
 one that still clears 40 dB, and the common web default (below 40 dB on small renders)."""
 
 DEFAULT_CODEC = CODEC_PRESETS["h264-yuv444-lossless"]
+BROWSER_CODEC = CODEC_PRESETS["h264-yuv420-crf18"]
+"""For videos people watch (reports, previews, RL rollouts): browsers play H.264 only in 4:2:0, so
+the dataset's lossless 4:4:4 default would not play there; fidelity is never measured on these."""
 
 
 class PSNR(NamedTuple):

@@ -16,10 +16,8 @@ import numpy as np
 from PIL import Image
 
 from gymnast.utils.atomic import atomic_path, write_bytes
-from gymnast.utils.video import CODEC_PRESETS, encode_video
+from gymnast.utils.video import BROWSER_CODEC, encode_video
 
-# Small files that any browser or player shows; fidelity is measured on raw frames, not on these.
-PREVIEW_CODEC = CODEC_PRESETS["h264-yuv420-crf18"]
 DIFFERENCE_GAIN = 3  # small errors are invisible at 1x; 3x shows them without saturating everything
 _GAP = 2  # white pixels between panels
 
@@ -39,7 +37,7 @@ def write_side_by_side(path: str | Path, real: np.ndarray, imagined: np.ndarray,
     if frames.shape[1] % 2 or frames.shape[2] % 2:  # 4:2:0 needs even sizes
         frames = np.pad(frames, ((0, 0), (0, frames.shape[1] % 2), (0, frames.shape[2] % 2), (0, 0)), constant_values=255)
     with atomic_path(path) as tmp:
-        encode_video(tmp, frames, fps=fps, codec=PREVIEW_CODEC)
+        encode_video(tmp, frames, fps=fps, codec=BROWSER_CODEC)
     return Path(path)
 
 
