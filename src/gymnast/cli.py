@@ -14,7 +14,7 @@ import tyro
 import gymnast  # noqa: F401  (sets MUJOCO_GL before anything imports mujoco)
 from gymnast.config import EnvConfig
 from gymnast.data.collect import CollectConfig
-from gymnast.cli_models import eval_judge, eval_wm, rl, serve_judge, train_judge, train_wm
+from gymnast.cli_models import eval_judge, eval_wm, experiment, rl, serve_judge, train_judge, train_wm
 from gymnast.eval.evaluate import EvalConfig
 
 
@@ -255,6 +255,7 @@ COMMANDS = {
     "serve-judge": serve_judge,
     "eval-judge": eval_judge,
     "rl": rl,
+    "experiment": experiment,
     "contact-sheet": contact_sheet,
     "gap-report": gap_report,
     "tasks": tasks,

@@ -8,7 +8,10 @@ from __future__ import annotations
 import dataclasses
 import json
 from pathlib import Path
-from typing import Literal
+from typing import Annotated, Literal
+
+import tyro
+
 
 def train_wm(
     data: Path,
@@ -213,3 +216,34 @@ def rl(
     summary = train_rl(run_spec, out, config, resume=resume)
     summary.pop("curve")
     print(json.dumps(summary, indent=2))
+
+
+def experiment(
+    out: Path,
+    preset: Literal["debug", "demo", "full"] = "full",
+    reuse: Annotated[list[str], tyro.conf.UseAppendAction] = [],  # noqa: B006 (read by tyro, never mutated)
+    workers: int | None = None,
+) -> None:
+    """The headline comparison: data, SFT, world model, judge, six arms, real-world evaluation and
+    the WorldGym check, then OUT/report.md, OUT/summary.json and OUT/plots/. Rerunning the same
+    command skips the stages that finished and continues an interrupted one.
+
+    Args:
+        out: experiment directory.
+        preset: debug (a minute; tests), demo (a few tasks, what `make demo` runs) or full (MT10).
+        reuse: a stage to take from an earlier run instead of running it, as STAGE=DIR (collect=DATASET,
+            sft=RUN, world_model=RUN, judge=RUN); repeat for several, e.g. --reuse collect=data/mt10
+            --reuse world_model=runs/wm_full.
+        workers: simulator processes (default: the preset's, one per core on 2 cores).
+    """
+    from gymnast.experiment.config import EXPERIMENT_PRESETS
+    from gymnast.experiment.pipeline import run_experiment
+    from gymnast.experiment.report import format_table
+    from gymnast.experiment.stages import parse_reuse
+
+    config = EXPERIMENT_PRESETS[preset]
+    if workers is not None:
+        config = dataclasses.replace(config, workers=workers)
+    summary = run_experiment(config, out, parse_reuse(reuse))
+    print(format_table(summary))
+    print(f"report: {out / 'report.md'}")

@@ -68,3 +68,13 @@ def test_missing_context_or_mismatched_batches_are_clear_errors():
         reward.score(frames, ["a", "b"], RewardContext())
     with pytest.raises(ValueError, match="same batch size"):
         reward.score(frames, ["a", "b"], RewardContext(torch.zeros(1, 1, 32, 32, 3, dtype=torch.uint8), torch.zeros(1, 3, 4)))
+
+
+def test_a_group_sharing_its_reference_scores_as_each_rollout_would_alone(setting):
+    model, reward, start, reference = setting
+    noise = torch.randn(3, 24, 4, generator=torch.Generator().manual_seed(1))
+    actions = (reference + 0.5 * noise).clamp(-1, 1)  # (3, T, A): a group of three rollouts
+    frames = imagine(model, start.expand(3, -1, -1, -1, -1), actions)
+    group = reward.score(frames, ["reach"] * 3, RewardContext(start.expand(3, -1, -1, -1, -1), reference.expand(3, -1, -1)))
+    alone = torch.cat([reward.score(frames[i:i + 1], ["reach"], RewardContext(start, reference)) for i in range(3)])
+    torch.testing.assert_close(group, alone, atol=1e-5, rtol=1e-5)

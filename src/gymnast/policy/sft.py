@@ -153,21 +153,40 @@ def sft_loss(
     return loss, {"train/loss": loss.item(), "train/token_accuracy": accuracy.item()}
 
 
-def train_sft(data: Path, out: Path, config: SFTConfig, resume: bool = False, progress: bool = True) -> Path:
-    """Trains (or resumes) an SFT run in `out`; returns the final checkpoint directory."""
+def train_sft(data: Path, out: Path, config: SFTConfig, resume: bool = False, progress: bool = True,
+              init: Path | None = None, extra: DemoSet | None = None) -> Path:
+    """Trains (or resumes) an SFT run in `out`; returns the final checkpoint directory.
+
+    Args:
+        init: start from this policy run's weights (its architecture replaces ``config.vla``)
+            instead of a fresh model: fine-tuning, as Iter-SFT does.
+        extra: more samples (say, a policy's own successful rollouts), drawn 1:1 with the
+            demonstrations: half of every batch comes from each.
+    """
     dataset = EpisodeDataset(data)
+    if init is not None:
+        from gymnast.policy.vla import load_policy
+
+        model = load_policy(init)
+        config = dataclasses.replace(config, vla=model.config)
     if dataset.image_shape[0] != config.vla.image_size:
+        if init is not None:
+            raise ValueError(f"{data} has {dataset.image_shape[0]}px images but the policy in {init} sees "
+                             f"{config.vla.image_size}px ones")
         config = dataclasses.replace(config, vla=dataclasses.replace(config.vla, image_size=dataset.image_shape[0]))
     demos = load_demos(dataset, select_demos(dataset, config.demos_per_task, config.tasks), config.vla.chunk_size)
-    logger.info("SFT on %d demonstrations (%d samples, %d instructions)", len(demos.episodes), len(demos.images),
-                len(demos.instructions))
+    logger.info("SFT on %d demonstrations (%d samples, %d instructions)%s", len(demos.episodes), len(demos.images),
+                len(demos.instructions), f" and {len(extra.images)} extra samples" if extra is not None else "")
     torch.manual_seed(config.seed)
-    model = EmbeddedVLA(config.vla)
+    if init is None:
+        model = EmbeddedVLA(config.vla)
+    pool, draw = _batch_pool(demos, extra, config.batch_size)
     optimizer = torch.optim.AdamW(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
     schedule = torch.optim.lr_scheduler.LambdaLR(optimizer, warmup_cosine(config.warmup_steps, config.steps))
     sampler = torch.Generator().manual_seed(config.seed)
     resolved = {"sft": dataclasses.asdict(config), "model": model.spec(), "data": str(data),
-                "demos": [info.key for info in demos.episodes]}
+                "demos": [info.key for info in demos.episodes], "init": str(init) if init else None,
+                "extra_samples": len(extra.images) if extra is not None else 0}
     start = resume_training(out, model, optimizer, schedule, sampler) if resume else 0
     if resume:
         logger.info("resumed %s at step %d", out, start)
@@ -178,10 +197,10 @@ def train_sft(data: Path, out: Path, config: SFTConfig, resume: bool = False, pr
     started = time.perf_counter()
     checkpoint = None
     for step in bar:
-        batch = torch.randint(0, len(demos.images), (config.batch_size,), generator=sampler)
-        images = random_shift(demos.images[batch], config.shift_augment, sampler)
-        texts = [demos.instructions[i] for i in demos.instruction[batch].tolist()]
-        loss, values = sft_loss(model, images, texts, demos.chunks[batch], demos.valid[batch], config.bf16)
+        batch = draw(sampler)
+        images = random_shift(pool.images[batch], config.shift_augment, sampler)
+        texts = [pool.instructions[i] for i in pool.instruction[batch].tolist()]
+        loss, values = sft_loss(model, images, texts, pool.chunks[batch], pool.valid[batch], config.bf16)
         values["train/grad_norm"] = gradient_step(loss, model, optimizer, schedule)
         done = step + 1
         if done % config.log_every == 0 or done == config.steps:
@@ -191,6 +210,29 @@ def train_sft(data: Path, out: Path, config: SFTConfig, resume: bool = False, pr
         if done % config.checkpoint_every == 0 or done == config.steps:
             checkpoint = save_training(out, done, model, resolved, optimizer, schedule, sampler)
     return checkpoint or resolve_checkpoint(out)
+
+
+def _batch_pool(demos: DemoSet, extra: DemoSet | None, batch_size: int):
+    """(one DemoSet holding every sample, draw(generator) -> (batch_size,) indices into it): all
+    from the demonstrations, or half from them and half from `extra`."""
+    if extra is None:
+        return demos, lambda generator: torch.randint(0, len(demos.images), (batch_size,), generator=generator)
+    if demos.images.shape[1:] != extra.images.shape[1:] or demos.chunks.shape[1:] != extra.chunks.shape[1:]:
+        raise ValueError(f"extra samples have images {tuple(extra.images.shape[1:])} and chunks {tuple(extra.chunks.shape[1:])}, "
+                         f"the demonstrations {tuple(demos.images.shape[1:])} and {tuple(demos.chunks.shape[1:])}")
+    instructions = list(dict.fromkeys(demos.instructions + extra.instructions))
+    remap = torch.tensor([instructions.index(text) for text in extra.instructions], dtype=torch.long)
+    pool = DemoSet(torch.cat([demos.images, extra.images]), torch.cat([demos.chunks, extra.chunks]),
+                   torch.cat([demos.valid, extra.valid]), torch.cat([demos.instruction, remap[extra.instruction]]),
+                   instructions, demos.episodes + extra.episodes)
+    first, offset = batch_size // 2, len(demos.images)
+
+    def draw(generator: torch.Generator) -> torch.Tensor:
+        own = torch.randint(0, offset, (first,), generator=generator)
+        more = offset + torch.randint(0, len(extra.images), (batch_size - first,), generator=generator)
+        return torch.cat([own, more])
+
+    return pool, draw
 
 
 def saved_sft_config(run: Path) -> SFTConfig:

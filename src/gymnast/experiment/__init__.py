@@ -1,0 +1,1 @@
+"""The headline experiment: the papers' comparison on the real world (`gymnast experiment`)."""

@@ -1,0 +1,73 @@
+"""The six arms of the headline comparison: what each one trains, where and with which reward.
+
+Every arm starts from the same SFT policy; the RL arms share one step budget and one `RLConfig`.
+The simulators (software and real) start each group from a fresh scene, which only a simulator
+can set up; the world-model arms start from the dataset's real first frames, as a world model
+only continues real frames (and the verified reward needs the dataset's expert actions).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from pathlib import Path
+
+from gymnast.experiment.config import ExperimentConfig
+from gymnast.rl.train import RLConfig, RLRun
+
+
+@dataclass(frozen=True)
+class Arm:
+    """One row of the table.
+
+    Attributes:
+        name: key in summary.json and the stage names.
+        title: what the report calls it.
+        env: where it practises (None: no practice, or imitation only).
+        reward: its reward name (``judge`` and ``verified`` are bound to the experiment's own models).
+    """
+
+    name: str
+    title: str
+    env: str | None = None
+    reward: str | None = None
+
+    @property
+    def is_rl(self) -> bool:
+        return self.env is not None
+
+
+ARMS = (
+    Arm("sft", "SFT"),
+    Arm("iter_sft", "Iter-SFT (judged imagined successes + demos)"),
+    Arm("rl_sim", "RL in the software simulator (dense reward)", "sim", "sim-dense"),
+    Arm("rl_wm_judge", "RL in the world model, judge (World-Gymnast)", "imagined", "judge"),
+    Arm("rl_wm_verified", "RL in the world model, verified (VLA-RFT)", "imagined", "verified"),
+    Arm("rl_real", "RL in the real world (dense reward; upper bound)", "real", "sim-dense"),
+)
+ARM_NAMES = tuple(arm.name for arm in ARMS)
+WM_ARMS = ("rl_wm_judge", "rl_wm_verified")
+"""The world-model RL arms; `rl_wm_judge` is World-Gymnast's and the one the goals are about."""
+ROBUSTNESS_ARMS = ("sft", *WM_ARMS)
+"""Policies measured under perturbations and with held-out instructions."""
+PERTURBATIONS = ("minor", "major")
+"""VLA-RFT's robustness levels (2.5 cm and 5 cm; `gymnast.envs.perturb`)."""
+
+
+def arm(name: str) -> Arm:
+    for candidate in ARMS:
+        if candidate.name == name:
+            return candidate
+    raise KeyError(f"no arm {name!r}; arms are {list(ARM_NAMES)}")
+
+
+def rl_setup(spec: Arm, config: ExperimentConfig, sft: Path, wm: Path, judge: Path, data: Path
+             ) -> tuple[RLRun, RLConfig]:
+    """The `gymnast rl` run an RL arm is: its env and reward on the experiment's models."""
+    reward = f"judge:{judge}" if spec.reward == "judge" else spec.reward
+    imagined = spec.env == "imagined"
+    run = RLRun(str(sft), spec.env, reward, wm=str(wm) if imagined else None, data=str(data))
+    rl = dataclasses.replace(config.rl, fresh_scenes=not imagined,
+                             # the watch replays imagined actions in the real world; elsewhere it has nothing to check
+                             watch_every=config.rl.watch_every if imagined else 0)
+    return run, rl

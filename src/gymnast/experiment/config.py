@@ -1,0 +1,114 @@
+"""Settings of the headline experiment, and its presets (debug / demo / full).
+
+One frozen dataclass holds the whole pipeline: each stage's own settings (collection, SFT, world
+model, judge, RL) and the experiment's protocol (which arms, how many evaluation episodes). Every
+RL arm shares one `RLConfig`, so the arms differ only in where they practise and how they are
+rewarded, never in their step budget.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+
+from gymnast.data.collect import CollectConfig
+from gymnast.policy.sft import SFT_PRESETS, SFTConfig
+from gymnast.reward.train_judge import JUDGE_PRESETS, JudgeTrainConfig
+from gymnast.rl.train import RL_PRESETS, RLConfig
+from gymnast.world_model.train import WM_PRESETS, WorldModelTrainConfig
+
+
+@dataclass(frozen=True)
+class IterSFTConfig:
+    """Iter-SFT: SFT again on the SFT policy's judged-successful imagined rollouts."""
+
+    group_size: int = 2
+    """Imagined rollouts per dataset scene (at the RL rollout temperature)."""
+    steps: int = 400
+    """Fine-tuning steps from the SFT policy, half of every batch from the demonstrations."""
+    lr: float = 1e-4
+    """Peak learning rate of the fine-tuning."""
+
+
+@dataclass(frozen=True)
+class ExperimentConfig:
+    """The whole pipeline: data, models, the six arms and how they are measured."""
+
+    tasks: str = "mt10"
+    """Tasks of every stage (names or sets, comma-separated)."""
+    collect: CollectConfig = field(default_factory=lambda: CollectConfig(episodes_per_task=30))
+    """Recording the dataset in the real world."""
+    sft: SFTConfig = field(default_factory=lambda: SFT_PRESETS["full"])
+    """The SFT policy every arm starts from."""
+    world_model: WorldModelTrainConfig = field(default_factory=lambda: WM_PRESETS["full"])
+    """The world model the imagined arms practise in."""
+    judge: JudgeTrainConfig = field(default_factory=lambda: JUDGE_PRESETS["full"])
+    """The learned judge (World-Gymnast's reward, and the WorldGym estimates)."""
+    rl: RLConfig = field(default_factory=lambda: RLConfig(steps=12, starts_per_step=8, group_size=8, lr=3e-5,
+                                                          eval_every=6, eval_episodes=5, video_every=6))
+    """Shared by every RL arm: step budget, batch, learning rate, learning-curve evaluations
+    (``eval_episodes`` per task at each of them)."""
+    iter_sft: IterSFTConfig = field(default_factory=IterSFTConfig)
+    """The Iter-SFT arm."""
+    gap: str = "mild"
+    """The software simulator's sim-to-real gap."""
+    eval_episodes: int = 50
+    """Real-world episodes per task for every arm's final evaluation (evaluation seeds)."""
+    robustness_episodes: int = 10
+    """Episodes per task under each perturbation (minor, major) and with held-out instructions."""
+    worldgym_episodes: int = 10
+    """Imagined episodes per task for each policy's WorldGym estimate (and real ones for the
+    policies that have no final evaluation)."""
+    workers: int = 2
+    """Simulator processes."""
+    seed: int = 0
+    """Seed of every stage."""
+
+    def __post_init__(self) -> None:
+        for name in ("eval_episodes", "robustness_episodes", "worldgym_episodes", "workers"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"ExperimentConfig.{name} must be at least 1, got {getattr(self, name)}")
+
+    def resolved(self) -> ExperimentConfig:
+        """Every stage told the experiment's tasks, workers and seed (one place to set them)."""
+        return dataclasses.replace(
+            self,
+            collect=dataclasses.replace(self.collect, tasks=self.tasks, workers=self.workers),
+            sft=dataclasses.replace(self.sft, tasks="", seed=self.seed),
+            rl=dataclasses.replace(self.rl, tasks=self.tasks, gap=self.gap, workers=self.workers, seed=self.seed),
+        )
+
+
+def _debug() -> ExperimentConfig:
+    rl = dataclasses.replace(RL_PRESETS["debug"], horizon=40, eval_every=1, eval_episodes=1, watch_every=2)
+    return ExperimentConfig(
+        tasks="reach-v3",
+        collect=CollectConfig(episodes_per_task=4, failure_fraction=0.25),
+        sft=dataclasses.replace(SFT_PRESETS["debug"], demos_per_task=2),
+        world_model=WM_PRESETS["debug"],
+        judge=JUDGE_PRESETS["debug"],
+        rl=rl,
+        iter_sft=IterSFTConfig(group_size=2, steps=2),
+        eval_episodes=2,
+        robustness_episodes=1,
+        worldgym_episodes=1,
+    )
+
+
+def _demo() -> ExperimentConfig:
+    return ExperimentConfig(
+        tasks="drawer-open-v3,reach-v3",
+        collect=CollectConfig(episodes_per_task=8),
+        sft=dataclasses.replace(SFT_PRESETS["demo"], demos_per_task=6, steps=600),
+        world_model=dataclasses.replace(WM_PRESETS["demo"], steps=300, video_every=300, validate_every=100),
+        judge=dataclasses.replace(JUDGE_PRESETS["demo"], steps=200),
+        rl=RLConfig(steps=4, starts_per_step=4, group_size=4, lr=3e-5, eval_every=2, eval_episodes=4,
+                    watch_every=2, watch_rollouts=8, video_every=4, checkpoint_every=2),
+        iter_sft=IterSFTConfig(group_size=2, steps=100),
+        eval_episodes=10,
+        robustness_episodes=5,
+        worldgym_episodes=4,
+    )
+
+
+EXPERIMENT_PRESETS: dict[str, ExperimentConfig] = {"debug": _debug(), "demo": _demo(), "full": ExperimentConfig()}

@@ -1,0 +1,160 @@
+"""`gymnast experiment`: the papers' comparison on the real world, from data to report.
+
+Stages, in order, each done once (`gymnast.experiment.stages`; a rerun skips finished ones):
+
+1. ``collect``: expert demonstrations and failures recorded in the real world.
+2. ``sft``: the SFT policy every arm starts from.
+3. ``world_model`` and ``judge``: the world model and the learned judge (trained on real and
+   re-imagined episodes).
+4. ``arm_<name>``: Iter-SFT and the four RL arms (`gymnast.experiment.arms`).
+5. ``eval_<name>``: every arm in the real world, ``eval_episodes`` per task from the evaluation
+   seeds, Wilson intervals; then the SFT and world-model-RL policies under minor and major
+   perturbations and with held-out instruction paraphrases.
+6. ``worldgym``: imagined against real success over policies of different quality.
+7. The report (always rewritten): summary.json, report.md, plots/.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+from pathlib import Path
+
+from gymnast.config import EnvConfig
+from gymnast.experiment.arms import ARMS, PERTURBATIONS, ROBUSTNESS_ARMS, arm, rl_setup
+from gymnast.experiment.config import ExperimentConfig
+from gymnast.experiment.stages import Stages
+from gymnast.utils.atomic import write_json
+
+logger = logging.getLogger(__name__)
+
+
+def run_experiment(config: ExperimentConfig, out: Path, reuse: dict[str, Path] | None = None,
+                   progress: bool = True) -> dict:
+    """Runs (or finishes) the experiment in `out`; returns summary.json's content."""
+    from gymnast.experiment.report import write_report
+
+    config = config.resolved()
+    out.mkdir(parents=True, exist_ok=True)
+    _save_settings(out, config)
+    stages = Stages(out, reuse)
+    data, sft, wm, judge = _models(stages, config, out, progress)
+    policies = {"sft": sft}
+    for spec in ARMS[1:]:
+        policies[spec.name] = _train_arm(stages, spec.name, config, out, sft, wm, judge, data, progress)
+    env = EnvConfig(image_size=config.collect.env.image_size, horizon=config.rl.horizon)
+    for name, policy in policies.items():
+        _evaluate(stages, f"eval_{name}", policy, config, out, config.eval_episodes, env, progress)
+    for name in ROBUSTNESS_ARMS:
+        for perturb in PERTURBATIONS:
+            _evaluate(stages, f"eval_{name}_{perturb}", policies[name], config, out, config.robustness_episodes, env,
+                      progress, perturb=perturb)
+        _evaluate(stages, f"eval_{name}_heldout", policies[name], config, out, config.robustness_episodes, env,
+                  progress, instruction_split="heldout")
+    stages.run("worldgym", lambda: _worldgym(stages, config, out, policies, wm, judge, env, progress))
+    return write_report(out, stages, config)
+
+
+def _models(stages: Stages, config: ExperimentConfig, out: Path, progress: bool) -> tuple[Path, Path, Path, Path]:
+    """The dataset, SFT policy, world model and judge, trained here or reused."""
+    from gymnast.data.collect import collect
+    from gymnast.policy.sft import train_sft
+    from gymnast.reward.train_judge import train_judge
+    from gymnast.world_model.train import train_world_model
+
+    stages.run("collect", lambda: {"success": collect(config.collect, out / "data", progress)}, out / "data")
+    data = stages.path("collect")
+    stages.run("sft", lambda: _trained(train_sft, data, out / "sft", config.sft, progress), out / "sft")
+    stages.run("world_model", lambda: _trained(train_world_model, data, out / "world_model", config.world_model, progress),
+               out / "world_model")
+    wm = stages.path("world_model")
+
+    def judge_stage() -> dict:
+        target = out / "judge"
+        report = train_judge(data, target, config.judge, wm=wm, resume=_has_checkpoint(target), progress=progress)
+        return {"metrics": {k: v for k, v in report.items() if k.startswith(("real", "imagined"))}}
+
+    stages.run("judge", judge_stage, out / "judge")
+    return data, stages.path("sft"), wm, stages.path("judge")
+
+
+def _trained(train, data: Path, target: Path, settings, progress: bool) -> dict:
+    """Runs a trainer that resumes from its own checkpoint when a previous attempt left one."""
+    checkpoint = train(data, target, settings, resume=_has_checkpoint(target), progress=progress)
+    return {"checkpoint": str(checkpoint)}
+
+
+def _has_checkpoint(run: Path) -> bool:
+    return (run / "checkpoints" / "last").exists()
+
+
+def _train_arm(stages: Stages, name: str, config: ExperimentConfig, out: Path, sft: Path, wm: Path, judge: Path,
+               data: Path, progress: bool) -> Path:
+    """Trains one arm (Iter-SFT or an RL arm) in ``out/arms/<name>``; returns its run directory."""
+    from gymnast.experiment.iter_sft import train_iter_sft
+    from gymnast.rl.train import train_rl
+
+    target = out / "arms" / name
+    spec = arm(name)
+
+    def work() -> dict:
+        if not spec.is_rl:
+            return {"imagined": train_iter_sft(sft, wm, judge, data, target, config), "real_interactions": 0}
+        run, rl = rl_setup(spec, config, sft, wm, judge, data)
+        summary = train_rl(run, target, rl, resume=_has_checkpoint(target), progress=progress)
+        summary.pop("curve")
+        return summary
+
+    stages.run(f"arm_{name}", work, target)
+    return stages.path(f"arm_{name}")
+
+
+def _evaluate(stages: Stages, stage: str, policy: Path, config: ExperimentConfig, out: Path, episodes: int,
+              env: EnvConfig, progress: bool, perturb: str = "none", instruction_split: str = "train") -> dict:
+    """A real-world evaluation of `policy` as a stage; its record keeps the summary figures."""
+    from gymnast.eval.evaluate import EvalConfig, evaluate
+
+    def work() -> dict:
+        settings = EvalConfig(tasks=config.tasks, episodes=episodes, perturb=perturb, instruction_split=instruction_split,
+                              workers=config.workers, videos_per_task=1 if perturb == "none" else 0,
+                              env=dataclasses.replace(env))
+        report = evaluate(str(policy), settings, out / "eval" / f"{stage.removeprefix('eval_')}.json", progress)
+        keep = ("success", "ci_low", "ci_high", "episodes", "successes", "per_task", "real_interactions", "videos")
+        return {key: report[key] for key in keep}
+
+    return stages.run(stage, work, out / "eval" / f"{stage.removeprefix('eval_')}.json")
+
+
+def _worldgym(stages: Stages, config: ExperimentConfig, out: Path, policies: dict[str, Path], wm: Path, judge: Path,
+              env: EnvConfig, progress: bool) -> dict:
+    """Imagined and real success of the arms and of the SFT run's earlier checkpoints."""
+    from gymnast.experiment.worldgym import correlation, imagined_success
+
+    candidates = {name: policies[name] for name in policies}
+    checkpoints = sorted(p for p in (policies["sft"] / "checkpoints").glob("[0-9]*") if p.is_dir())
+    for checkpoint in checkpoints[:-1]:  # the last one is the SFT arm itself
+        candidates[f"sft_step_{int(checkpoint.name)}"] = checkpoint
+    rows = []
+    for name, policy in candidates.items():
+        imagined = imagined_success(policy, wm, judge, config.tasks, config.worldgym_episodes)
+        if stages.done(f"eval_{name}"):
+            real = stages.record(f"eval_{name}")
+        else:
+            real = _evaluate(stages, f"eval_{name}", policy, config, out, config.worldgym_episodes, env, progress)
+        rows.append({"policy": name, "path": str(policy), "imagined": imagined["success"], "real": real["success"],
+                     "imagined_ci": [imagined["ci_low"], imagined["ci_high"]], "real_ci": [real["ci_low"], real["ci_high"]],
+                     "imagined_episodes": imagined["episodes"], "real_episodes": real["episodes"]})
+        logger.info("WorldGym %s: imagined %.2f, real %.2f", name, imagined["success"], real["success"])
+    return {"policies": rows, **correlation([r["imagined"] for r in rows], [r["real"] for r in rows])}
+
+
+def _save_settings(out: Path, config: ExperimentConfig) -> None:
+    """DIR/config.json: the resolved settings. A rerun with other settings would mix two
+    experiments in one table, so it is refused."""
+    import json
+
+    settings = json.loads(json.dumps(dataclasses.asdict(config)))
+    path = out / "config.json"
+    if path.exists() and json.loads(path.read_text()) != settings:
+        raise ValueError(f"{out} holds an experiment with other settings ({path}); use a new --out or the same preset")
+    write_json(path, settings)

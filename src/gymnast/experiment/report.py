@@ -1,0 +1,163 @@
+"""The experiment's outputs: summary.json (figures), report.md (the story), plots/ (pictures).
+
+Everything here is read back from the stage records and the runs' own files, so the report can
+be rewritten at any time without running anything again.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from pathlib import Path
+
+from gymnast.experiment.arms import ARMS, PERTURBATIONS, ROBUSTNESS_ARMS, WM_ARMS
+from gymnast.experiment.config import ExperimentConfig
+from gymnast.experiment.stages import Stages
+from gymnast.utils.atomic import write_bytes, write_json
+
+logger = logging.getLogger(__name__)
+
+GOAL_OVER_SFT = 2.0
+"""World-Gymnast's claim we test: world-model RL at least doubles SFT's real success."""
+GOAL_WORLDGYM_R = 0.9
+"""The WorldGym correlation we aim for (World-Gymnast reports 0.78)."""
+
+
+def _ratio(top: float | None, bottom: float | None) -> float | None:
+    return None if top is None or not bottom else top / bottom
+
+
+def _arm_row(stages: Stages, name: str, title: str) -> dict:
+    result = stages.record(f"eval_{name}")
+    trained = stages.record("sft" if name == "sft" else f"arm_{name}")
+    return {"title": title, "success": result["success"], "ci_low": result["ci_low"], "ci_high": result["ci_high"],
+            "episodes": result["episodes"],
+            "per_task": {task: {k: v[k] for k in ("success", "ci_low", "ci_high")} for task, v in result["per_task"].items()},
+            "real_interactions": trained.get("real_interactions", 0),
+            "eval_real_interactions": trained.get("eval_real_interactions", 0) + result["real_interactions"],
+            "watch_real_interactions": trained.get("watch_real_interactions", 0),
+            "wall_s": trained.get("wall_s"), "reused": trained.get("reused", False),
+            "steps": trained.get("steps"), "videos": result.get("videos", [])}
+
+
+def _curves(stages: Stages) -> dict[str, list[dict]]:
+    """Real success at each learning-curve evaluation of every RL arm, with the imagined
+    (judged) success beside it for the world-model arms."""
+    curves = {}
+    for spec in ARMS:
+        if not spec.is_rl:
+            continue
+        summary = json.loads((stages.path(f"arm_{spec.name}") / "summary.json").read_text())
+        where = "own" if spec.env == "real" else "real"
+        curves[spec.name] = [{"step": point["step"], "real": point.get(f"eval/{where}_success"),
+                              "real_ci": [point.get(f"eval/{where}_ci_low"), point.get(f"eval/{where}_ci_high")],
+                              "own": point.get("eval/own_success")} for point in summary["curve"]]
+    return curves
+
+
+def _watch(stages: Stages) -> dict[str, list[dict]]:
+    """The reward-hacking watch of each world-model arm: imagined verdicts replayed in the real world."""
+    watch = {}
+    for name in WM_ARMS:
+        rows = []
+        for line in (stages.path(f"arm_{name}") / "metrics.jsonl").read_text().splitlines():
+            values = json.loads(line)
+            if "eval/watch_real_success" in values:
+                rows.append({"step": values["step"], **{key.removeprefix("eval/watch_"): value for key, value in values.items()
+                                                        if key.startswith("eval/watch_") and "interactions" not in key}})
+        watch[name] = rows
+    return watch
+
+
+def build_summary(stages: Stages, config: ExperimentConfig) -> dict:
+    """summary.json's content, from the finished stages."""
+    from gymnast.data.lerobot import EpisodeDataset
+
+    arms = {spec.name: _arm_row(stages, spec.name, spec.title) for spec in ARMS}
+    success = {name: row["success"] for name, row in arms.items()}
+    worldgym = stages.record("worldgym")
+    judge = stages.record("judge")
+    judge_metrics = judge.get("metrics") or _read_json(stages.path("judge") / "metrics.json")
+    robustness = {name: {"none": _brief(stages.record(f"eval_{name}")),
+                         **{p: _brief(stages.record(f"eval_{name}_{p}")) for p in PERTURBATIONS}} for name in ROBUSTNESS_ARMS}
+    language = {name: {"train": robustness[name]["none"], "heldout": _brief(stages.record(f"eval_{name}_heldout"))}
+                for name in ROBUSTNESS_ARMS}
+    dataset = EpisodeDataset(stages.path("collect"))
+    summary = {
+        "tasks": config.tasks,
+        "arms": arms,
+        "wm_rl_over_sft": _ratio(success["rl_wm_judge"], success["sft"]),
+        "wm_rl_over_sim_rl": _ratio(success["rl_wm_judge"], success["rl_sim"]),
+        "wm_rl_verified_over_sft": _ratio(success["rl_wm_verified"], success["sft"]),
+        "wm_rl_verified_over_sim_rl": _ratio(success["rl_wm_verified"], success["rl_sim"]),
+        "worldgym_pearson": worldgym["pearson"],
+        "worldgym_spearman": worldgym["spearman"],
+        "worldgym": worldgym["policies"],
+        "robustness": robustness,
+        "language": language,
+        "curves": _curves(stages),
+        "watch": _watch(stages),
+        "judge": {k: v for k, v in (judge_metrics or {}).items() if k.startswith(("real_", "imagined_"))},
+        "dataset": {"episodes": len(dataset), "real_interactions": int(sum(dataset.lengths)), "path": str(dataset.root)},
+        "rl_steps": config.rl.steps,
+        "rollouts_per_step": config.rl.starts_per_step * config.rl.group_size,
+        "eval_episodes_per_task": config.eval_episodes,
+        "stage_wall_s": {path.stem: json.loads(path.read_text()).get("wall_s")
+                         for path in sorted((stages.out / "stages").glob("*.json"))},
+    }
+    best_wm = max(success[name] for name in WM_ARMS)
+    summary["goals"] = {
+        "wm_rl_at_least_2x_sft": summary["wm_rl_over_sft"] is not None and summary["wm_rl_over_sft"] >= GOAL_OVER_SFT,
+        "wm_rl_beats_sim_rl": success["rl_wm_judge"] > success["rl_sim"],
+        "any_wm_arm_beats_sft": best_wm > success["sft"],
+        "worldgym_r_at_least_0.9": worldgym["pearson"] is not None and worldgym["pearson"] >= GOAL_WORLDGYM_R,
+    }
+    return summary
+
+
+def _brief(record: dict) -> dict:
+    return {key: record[key] for key in ("success", "ci_low", "ci_high", "episodes")}
+
+
+def _read_json(path: Path) -> dict | None:
+    return json.loads(path.read_text()) if path.exists() else None
+
+
+def write_report(out: Path, stages: Stages, config: ExperimentConfig) -> dict:
+    """Writes summary.json, plots/ and report.md in `out`; returns the summary."""
+    from gymnast.experiment.plots import plot_curves, plot_per_task, plot_worldgym
+    from gymnast.experiment.report_text import report_markdown
+
+    summary = build_summary(stages, config)
+    write_json(out / "summary.json", summary)
+    plots = {"per_task": plot_per_task(summary, out / "plots" / "per_task.png"),
+             "curves": plot_curves(summary, out / "plots" / "learning_curves.png"),
+             "worldgym": plot_worldgym(summary, out / "plots" / "worldgym.png")}
+    markdown = report_markdown(summary, {name: path.relative_to(out).as_posix() for name, path in plots.items()})
+    write_bytes(out / "report.md", markdown.encode())
+    logger.info("report: %s", out / "report.md")
+    return summary
+
+
+def format_table(summary: dict) -> str:
+    """The arms as aligned text: success, 95% CI, real interactions, wall time."""
+    rows = [("arm", "success", "95% CI", "real interactions", "wall time")]
+    for row in summary["arms"].values():
+        wall = "reused" if row["reused"] else (f"{row['wall_s'] / 60:.1f} min" if row["wall_s"] is not None else "-")
+        rows.append((row["title"], f"{row['success']:.1%}", f"[{row['ci_low']:.1%}, {row['ci_high']:.1%}]",
+                     f"{row['real_interactions']:,}", wall))
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    lines = ["  ".join(cell.ljust(width) for cell, width in zip(row, widths)).rstrip() for row in rows]
+    lines.insert(1, "  ".join("-" * width for width in widths))
+    ratios = (f"world-model RL (judge) / SFT: {_fmt_ratio(summary['wm_rl_over_sft'])}; "
+              f"/ software-sim RL: {_fmt_ratio(summary['wm_rl_over_sim_rl'])}; "
+              f"WorldGym Pearson r: {_fmt(summary['worldgym_pearson'])}, Spearman: {_fmt(summary['worldgym_spearman'])}")
+    return "\n".join(lines + ["", ratios])
+
+
+def _fmt_ratio(value: float | None) -> str:
+    return "undefined" if value is None else f"{value:.2f}x"
+
+
+def _fmt(value: float | None) -> str:
+    return "undefined" if value is None else f"{value:.2f}"

@@ -1,0 +1,95 @@
+"""Stage bookkeeping: an experiment is a list of named stages, each done once.
+
+A stage that finishes writes ``DIR/stages/<name>.json`` (atomically) with what it produced and how
+long it took; a rerun reads that record instead of running the stage again. A stage interrupted
+half-way has no record and runs again, and the trainers underneath continue from their own last
+checkpoint, so an interruption costs at most one checkpoint interval.
+
+A stage can also be *reused* from elsewhere (``--reuse world_model=runs/wm``): its record then
+points at that directory and says it was not run here.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+from gymnast.utils.atomic import write_json
+
+logger = logging.getLogger(__name__)
+
+REUSABLE = ("collect", "sft", "world_model", "judge")
+"""Stages whose output another run can provide: a dataset or a trained model directory."""
+
+
+class Stages:
+    """Runs the stages of the experiment in `out`, skipping those already recorded.
+
+    Args:
+        out: the experiment directory.
+        reuse: stage name -> an existing directory that stands for the stage's output.
+    """
+
+    def __init__(self, out: Path, reuse: dict[str, Path] | None = None) -> None:
+        self.out = out
+        self.reuse = dict(reuse or {})
+        unknown = set(self.reuse) - set(REUSABLE)
+        if unknown:
+            raise ValueError(f"--reuse names unknown stages {sorted(unknown)}; reusable stages are {list(REUSABLE)}")
+        for name, path in self.reuse.items():
+            if not Path(path).is_dir():
+                raise FileNotFoundError(f"--reuse {name}={path}: no such directory")
+
+    def record_path(self, name: str) -> Path:
+        return self.out / "stages" / f"{name}.json"
+
+    def done(self, name: str) -> bool:
+        return self.record_path(name).exists()
+
+    def record(self, name: str) -> dict:
+        """A finished stage's record (KeyError-like FileNotFoundError if it has not run)."""
+        path = self.record_path(name)
+        if not path.exists():
+            raise FileNotFoundError(f"stage {name!r} has not finished in {self.out} (no {path})")
+        return json.loads(path.read_text())
+
+    def run(self, name: str, work: Callable[[], dict], output: Path | None = None) -> dict:
+        """The stage's record: read back if it finished before, else `work()`'s, with ``wall_s``.
+
+        `work` returns what the stage measured (JSON-ready). `output` is the stage's directory,
+        which a reused stage replaces with the given one.
+        """
+        if self.done(name):
+            record = self.record(name)
+            if name in self.reuse and record.get("path") != str(self.reuse[name]):
+                raise ValueError(f"stage {name!r} of {self.out} already finished with {record.get('path')}; "
+                                 f"it cannot be reused from {self.reuse[name]} now (start a new experiment directory)")
+            logger.info("stage %s: done before, skipped", name)
+            return record
+        if name in self.reuse:
+            record = {"stage": name, "path": str(self.reuse[name]), "reused": True, "wall_s": None}
+        else:
+            logger.info("stage %s: running", name)
+            began = time.perf_counter()
+            record = {"stage": name, "path": str(output) if output else None, "reused": False, **work()}
+            record["wall_s"] = record.get("wall_s", time.perf_counter() - began)
+        write_json(self.record_path(name), record)
+        return record
+
+    def path(self, name: str) -> Path:
+        """Where a finished (or reused) stage's output lives."""
+        return Path(self.record(name)["path"])
+
+
+def parse_reuse(items: list[str]) -> dict[str, Path]:
+    """``["world_model=runs/wm", ...]`` -> {"world_model": Path("runs/wm"), ...}."""
+    parsed = {}
+    for item in items:
+        name, sep, path = item.partition("=")
+        if not sep or not name or not path:
+            raise ValueError(f"--reuse expects STAGE=DIR (e.g. world_model=runs/wm), got {item!r}")
+        parsed[name.strip()] = Path(path.strip())
+    return parsed

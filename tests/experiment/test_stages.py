@@ -1,0 +1,54 @@
+"""Stage bookkeeping: a finished stage is never run twice; reuse is checked before anything runs."""
+
+import json
+
+import pytest
+
+from gymnast.experiment.stages import Stages, parse_reuse
+
+
+def test_a_finished_stage_is_read_back_instead_of_run_again(tmp_path):
+    calls = []
+    stages = Stages(tmp_path)
+    first = stages.run("sft", lambda: calls.append(1) or {"checkpoint": "x"}, tmp_path / "sft")
+    again = Stages(tmp_path).run("sft", lambda: calls.append(2) or {"checkpoint": "y"}, tmp_path / "sft")
+    assert calls == [1] and again == first and first["checkpoint"] == "x" and first["wall_s"] >= 0
+    assert json.loads((tmp_path / "stages" / "sft.json").read_text()) == first
+
+
+def test_an_interrupted_stage_leaves_no_record_and_runs_again(tmp_path):
+    stages = Stages(tmp_path)
+
+    def crash():
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        stages.run("world_model", crash)
+    assert not stages.done("world_model")
+    assert stages.run("world_model", lambda: {"ok": True})["ok"] is True
+
+
+def test_a_reused_stage_points_at_the_given_directory_without_running(tmp_path):
+    elsewhere = tmp_path / "wm_run"
+    elsewhere.mkdir()
+    stages = Stages(tmp_path / "exp", {"world_model": elsewhere})
+    record = stages.run("world_model", lambda: pytest.fail("a reused stage must not run"), tmp_path / "exp" / "wm")
+    assert record["reused"] is True and stages.path("world_model") == elsewhere
+
+
+def test_reuse_errors_name_the_stage_or_directory(tmp_path):
+    with pytest.raises(ValueError, match="unknown stages \\['arm_rl_sim'\\]"):
+        Stages(tmp_path, {"arm_rl_sim": tmp_path})
+    with pytest.raises(FileNotFoundError, match="--reuse judge=.*missing"):
+        Stages(tmp_path, {"judge": tmp_path / "missing"})
+    with pytest.raises(ValueError, match="expects STAGE=DIR"):
+        parse_reuse(["world_model"])
+    assert parse_reuse(["sft = runs/sft"]) == {"sft": tmp_path.__class__("runs/sft")}
+
+
+def test_a_stage_finished_here_cannot_later_be_swapped_for_a_reused_one(tmp_path):
+    Stages(tmp_path).run("sft", lambda: {}, tmp_path / "sft")
+    other = tmp_path / "other"
+    other.mkdir()
+    with pytest.raises(ValueError, match="already finished"):
+        Stages(tmp_path, {"sft": other}).run("sft", lambda: {}, tmp_path / "sft")
