@@ -24,16 +24,9 @@ setup: $(STAMP)
 test: $(STAMP)
 	$(BIN)/python -m pytest
 
-DEMO_TASKS := drawer-open-v3,reach-v3,push-v3
-
+# The headline experiment on a few tasks: every stage from data to report, then the table.
 demo: $(STAMP)
-	$(BIN)/gymnast collect --tasks $(DEMO_TASKS) --episodes-per-task 6 --out $(DEMO)/data
-	$(BIN)/gymnast inspect --data $(DEMO)/data --sheet $(DEMO)/episodes.png --episodes 6
-	$(BIN)/gymnast contact-sheet --tasks mt10 --out $(DEMO)/mt10.png
-	$(BIN)/gymnast sft --data $(DEMO)/data --out $(DEMO)/sft --preset demo --demos-per-task 4
-	$(BIN)/gymnast eval --policy $(DEMO)/sft --tasks $(DEMO_TASKS) --episodes 10 --out $(DEMO)/sft_eval.json
-	$(BIN)/gymnast train-wm --data $(DEMO)/data --out $(DEMO)/wm --preset demo
-	$(BIN)/gymnast eval-wm --wm $(DEMO)/wm --data $(DEMO)/data --out $(DEMO)/wm_eval.json --control-scenes 2 --gifs 1
+	$(BIN)/gymnast experiment --preset demo --out $(DEMO)
 
 clean:
 	rm -rf $(VENV) runs .pytest_cache

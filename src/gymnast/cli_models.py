@@ -93,7 +93,8 @@ def train_judge(
         resume: continue the run in OUT from its last checkpoint, with the settings saved there.
         steps: override the preset's optimizer steps.
     """
-    from gymnast.reward.train_judge import JUDGE_PRESETS, saved_judge_config, train_judge as train
+    from gymnast.reward.train_judge import JUDGE_PRESETS, saved_judge_config
+    from gymnast.reward.train_judge import train_judge as train
 
     config = saved_judge_config(out) if resume else JUDGE_PRESETS[preset]
     if steps is not None and not resume:

@@ -222,3 +222,19 @@ def test_step_checks_the_action_shape_and_values(env):
         env.step(np.zeros((3, K - 1, 4), np.float32))
     with pytest.raises(ValueError, match="finite"):
         env.step(np.full((3, K, 4), np.nan, np.float32))
+
+
+def test_the_environment_cache_stays_bounded_as_task_mixes_change():
+    from gymnast.envs.sim_vector import _Episodes
+
+    episodes = _Episodes(EnvConfig(image_size=32, horizon=5), "none", "train")
+    mixes = [["reach-v3", "reach-v3"], ["push-v3", "push-v3"], ["drawer-open-v3", "door-open-v3"], ["reach-v3", "push-v3"],
+             ["window-open-v3", "window-open-v3"]]
+    try:
+        for seed, tasks in enumerate(mixes):
+            first = episodes.reset(tasks, [seed] * 2, [None] * 2)["image"]
+            assert len(episodes._envs) <= 4  # twice the two episodes of a reset
+            again = episodes.reset(tasks, [seed] * 2, [None] * 2)["image"]
+            np.testing.assert_array_equal(first, again)  # a rebuilt or cached env starts the same scene
+    finally:
+        episodes.close()

@@ -47,8 +47,8 @@ def test_reuse_errors_name_the_stage_or_directory(tmp_path):
 
 
 def test_a_stage_finished_here_cannot_later_be_swapped_for_a_reused_one(tmp_path):
-    Stages(tmp_path).run("sft", lambda: {}, tmp_path / "sft")
+    Stages(tmp_path).run("sft", dict, tmp_path / "sft")
     other = tmp_path / "other"
     other.mkdir()
     with pytest.raises(ValueError, match="already finished"):
-        Stages(tmp_path, {"sft": other}).run("sft", lambda: {}, tmp_path / "sft")
+        Stages(tmp_path, {"sft": other}).run("sft", dict, tmp_path / "sft")

@@ -87,7 +87,9 @@ class MetaWorldEnv(gym.Env):
         self._mw.action_scale *= self.gap.action_scale
 
         size = self.config.image_size
-        self._renderer = SceneRenderer(self._mw.model, size, size, self.gap.camera(self.config.camera))
+        # Same task, same gap: the same XML with the same visual edits, so one GL context serves all.
+        self._renderer = SceneRenderer(self._mw.model, size, size, self.gap.camera(self.config.camera),
+                                       share=(self.task, self.gap))
         self.observation_space = gym.spaces.Dict(
             {
                 "image": gym.spaces.Box(0, 255, (size, size, 3), np.uint8),

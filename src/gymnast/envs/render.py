@@ -12,7 +12,7 @@ import atexit
 import os
 import weakref
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Hashable, Sequence
 
 import mujoco
 import numpy as np
@@ -26,6 +26,12 @@ _LIVE_RENDERERS: weakref.WeakSet = weakref.WeakSet()
 def _close_live_renderers() -> None:
     for renderer in list(_LIVE_RENDERERS):
         renderer.close()
+
+
+# One GL context with its uploaded meshes and textures costs ~120 MB, most of an environment's
+# memory. Environments of the same scene (task and gap) in one process share it: the scene is
+# rebuilt from each caller's own MjData at every frame, and poses come from the data alone.
+_SHARED: dict[Hashable, list] = {}  # key -> [mujoco.Renderer, number of SceneRenderers using it]
 
 
 @dataclass(frozen=True)
@@ -71,20 +77,24 @@ class SceneRenderer:
         height: image height in pixels.
         width: image width in pixels.
         camera: the free camera pose.
+        share: renderers given the same key in one process share one GL context. Only models
+            built alike (same XML, same visual edits) may share one: geometry, colours and
+            textures are read from the model the context was made for.
     """
 
-    def __init__(self, model: mujoco.MjModel, height: int, width: int, camera: CameraPose) -> None:
+    def __init__(self, model: mujoco.MjModel, height: int, width: int, camera: CameraPose,
+                 share: Hashable | None = None) -> None:
         # Multisampling must be off before the GL context is created; it costs ~4x on a CPU.
         model.vis.quality.offsamples = 0
-        try:
-            self._renderer = mujoco.Renderer(model, height=height, width=width)
-        except mujoco.FatalError as error:
-            raise RuntimeError(
-                "MuJoCo could not create an offscreen OpenGL context "
-                f"(MUJOCO_GL={os.environ.get('MUJOCO_GL')!r}). MUJOCO_GL must be set to egl or "
-                "osmesa before mujoco is first imported (importing gymnast first does it), and the "
-                "system needs libegl1 + libgl1-mesa-dri (or libosmesa6); `gymnast doctor` checks."
-            ) from error
+        self._share = None if share is None else (share, height, width)
+        if self._share in _SHARED:
+            entry = _SHARED[self._share]
+            entry[1] += 1
+            self._renderer = entry[0]
+        else:
+            self._renderer = self._new_renderer(model, height, width)
+            if self._share is not None:
+                _SHARED[self._share] = [self._renderer, 1]
         self._camera = mujoco.MjvCamera()
         self._camera.type = mujoco.mjtCamera.mjCAMERA_FREE
         self.camera = camera
@@ -98,6 +108,18 @@ class SceneRenderer:
             atexit.unregister(_close_live_renderers)
             atexit.register(_close_live_renderers)
         _LIVE_RENDERERS.add(self)
+
+    @staticmethod
+    def _new_renderer(model: mujoco.MjModel, height: int, width: int) -> mujoco.Renderer:
+        try:
+            return mujoco.Renderer(model, height=height, width=width)
+        except mujoco.FatalError as error:
+            raise RuntimeError(
+                "MuJoCo could not create an offscreen OpenGL context "
+                f"(MUJOCO_GL={os.environ.get('MUJOCO_GL')!r}). MUJOCO_GL must be set to egl or "
+                "osmesa before mujoco is first imported (importing gymnast first does it), and the "
+                "system needs libegl1 + libgl1-mesa-dri (or libosmesa6); `gymnast doctor` checks."
+            ) from error
 
     @property
     def camera(self) -> CameraPose:
@@ -150,6 +172,13 @@ class SceneRenderer:
             self._renderer.disable_segmentation_rendering()
 
     def close(self) -> None:
-        if not self._closed:
-            self._closed = True
-            self._renderer.close()
+        if self._closed:
+            return
+        self._closed = True
+        if self._share is not None:
+            entry = _SHARED[self._share]
+            entry[1] -= 1
+            if entry[1] > 0:  # others still render with it
+                return
+            del _SHARED[self._share]
+        self._renderer.close()

@@ -56,7 +56,9 @@ class _Episodes:
     """A contiguous slice of the B episodes, run in this process (the parent's or a worker's).
 
     Environments are cached per (task, n), n counting the slice's earlier episodes of that task,
-    because building a Meta-World scene costs far more than resetting one.
+    because building a Meta-World scene costs far more than resetting one. When resets draw ever
+    new mixes of tasks the cache would keep growing (an environment holds tens of MB), so past
+    twice the slice's size the environments the current reset does not use are closed.
     """
 
     def __init__(self, config: EnvConfig, gap: str, instruction_split: str) -> None:
@@ -74,6 +76,10 @@ class _Episodes:
                 self._envs[key] = MetaWorldEnv(task, **self._args)
             obs, info = self._envs[key].reset(seed=seed, options={"instruction": instruction})
             self._episodes.append(_Episode(self._envs[key], obs["image"], info["instruction"]))
+        if len(self._envs) > 2 * len(self._episodes):
+            used = {id(e.env) for e in self._episodes}
+            for key in [key for key, env in self._envs.items() if id(env) not in used]:
+                self._envs.pop(key).close()
         frames = np.stack([e.frame for e in self._episodes])  # (b, H, W, 3)
         instructions = np.array([e.instruction for e in self._episodes], dtype=object)
         return {"image": frames, "instruction": instructions, **self._status()}

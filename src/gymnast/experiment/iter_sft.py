@@ -15,6 +15,7 @@ import logging
 from pathlib import Path
 
 import torch
+from tqdm import tqdm
 
 from gymnast.experiment.config import ExperimentConfig
 from gymnast.policy.sft import DemoSet
@@ -38,8 +39,8 @@ def rollout_samples(rollouts: Rollouts, chunk_size: int) -> DemoSet:
     return DemoSet(rollouts.observations[used], chunks[used], valid[used], which[used], instructions, [])
 
 
-def imagine_successes(policy_run: Path, wm_run: Path, judge_run: Path, data: Path, config: ExperimentConfig
-                      ) -> tuple[DemoSet | None, dict]:
+def imagine_successes(policy_run: Path, wm_run: Path, judge_run: Path, data: Path, config: ExperimentConfig,
+                      progress: bool = True) -> tuple[DemoSet | None, dict]:
     """The SFT policy's judged-successful imagined rollouts from every dataset scene, as SFT
     samples (None if the judge passed none), and what was imagined (``rollouts``,
     ``judged_successes``, ``samples``)."""
@@ -60,7 +61,7 @@ def imagine_successes(policy_run: Path, wm_run: Path, judge_run: Path, data: Pat
     generator = torch.Generator().manual_seed(config.seed)
     kept, scores = [], []
     try:
-        for first in range(0, len(starts), env.num_envs):
+        for first in tqdm(range(0, len(starts), env.num_envs), desc="iter-sft imagine", disable=not progress):
             batch = starts[first: first + env.num_envs]
             real = len(batch)
             batch += [batch[0]] * (env.num_envs - real)  # a fixed-size env; the padding is dropped
@@ -85,15 +86,16 @@ def imagine_successes(policy_run: Path, wm_run: Path, judge_run: Path, data: Pat
 
 
 def train_iter_sft(policy_run: Path, wm_run: Path, judge_run: Path, data: Path, out: Path,
-                   config: ExperimentConfig) -> dict:
+                   config: ExperimentConfig, progress: bool = True) -> dict:
     """Runs Iter-SFT into `out`; returns what it imagined and kept."""
     import dataclasses
 
     from gymnast.policy.sft import train_sft
 
-    samples, counts = imagine_successes(policy_run, wm_run, judge_run, data, config)
+    samples, counts = imagine_successes(policy_run, wm_run, judge_run, data, config, progress)
     sft = dataclasses.replace(config.sft, steps=config.iter_sft.steps, lr=config.iter_sft.lr,
                               warmup_steps=min(config.sft.warmup_steps, config.iter_sft.steps // 10),
                               checkpoint_every=config.iter_sft.steps)
-    train_sft(data, out, sft, resume=(out / "checkpoints" / "last").exists(), init=policy_run, extra=samples)
+    train_sft(data, out, sft, resume=(out / "checkpoints" / "last").exists(), progress=progress, init=policy_run,
+              extra=samples)
     return counts

@@ -20,6 +20,8 @@ import dataclasses
 import logging
 from pathlib import Path
 
+from tqdm import tqdm
+
 from gymnast.config import EnvConfig
 from gymnast.experiment.arms import ARMS, PERTURBATIONS, ROBUSTNESS_ARMS, arm, rl_setup
 from gymnast.experiment.config import ExperimentConfig
@@ -99,7 +101,7 @@ def _train_arm(stages: Stages, name: str, config: ExperimentConfig, out: Path, s
 
     def work() -> dict:
         if not spec.is_rl:
-            return {"imagined": train_iter_sft(sft, wm, judge, data, target, config), "real_interactions": 0}
+            return {"imagined": train_iter_sft(sft, wm, judge, data, target, config, progress), "real_interactions": 0}
         run, rl = rl_setup(spec, config, sft, wm, judge, data)
         summary = train_rl(run, target, rl, resume=_has_checkpoint(target), progress=progress)
         summary.pop("curve")
@@ -135,7 +137,7 @@ def _worldgym(stages: Stages, config: ExperimentConfig, out: Path, policies: dic
     for checkpoint in checkpoints[:-1]:  # the last one is the SFT arm itself
         candidates[f"sft_step_{int(checkpoint.name)}"] = checkpoint
     rows = []
-    for name, policy in candidates.items():
+    for name, policy in tqdm(candidates.items(), desc="worldgym", unit="policy", disable=not progress):
         imagined = imagined_success(policy, wm, judge, config.tasks, config.worldgym_episodes)
         if stages.done(f"eval_{name}"):
             real = stages.record(f"eval_{name}")

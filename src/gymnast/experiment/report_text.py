@@ -38,18 +38,18 @@ def _verdict(summary: dict) -> list[str]:
     sft, wm, sim = arms["sft"], arms["rl_wm_judge"], arms["rl_sim"]
     overlap = wm["ci_low"] <= sft["ci_high"] and sft["ci_low"] <= wm["ci_high"]
     lines = [
-        f"- World-model RL with the judge (World-Gymnast) reached {_pct(wm['success'])} against SFT's "
+        (f"- World-model RL with the judge (World-Gymnast) reached {_pct(wm['success'])} against SFT's "
         f"{_pct(sft['success'])}: {_ratio(summary['wm_rl_over_sft'])} SFT "
         f"({'the intervals overlap, so the difference is not significant' if overlap else 'the intervals do not overlap'}). "
-        f"Goal of at least 2x: **{'met' if goals['wm_rl_at_least_2x_sft'] else 'not met'}**.",
-        f"- Against RL in the software simulator ({_pct(sim['success'])}): {_ratio(summary['wm_rl_over_sim_rl'])}. "
-        f"Goal of beating it: **{'met' if goals['wm_rl_beats_sim_rl'] else 'not met'}**.",
-        f"- World-model RL with the verified reward (VLA-RFT) reached {_pct(arms['rl_wm_verified']['success'])} "
-        f"({_ratio(summary['wm_rl_verified_over_sft'])} SFT).",
-        f"- RL in the real world, which spends {arms['rl_real']['real_interactions']:,} real interactions, reached "
-        f"{_pct(arms['rl_real']['success'])}.",
-        f"- WorldGym: Pearson r = {_num(summary['worldgym_pearson'])}, Spearman = {_num(summary['worldgym_spearman'])} over "
-        f"{len(summary['worldgym'])} policies. Goal r >= 0.9: **{'met' if goals['worldgym_r_at_least_0.9'] else 'not met'}**.",
+        f"Goal of at least 2x: **{'met' if goals['wm_rl_at_least_2x_sft'] else 'not met'}**."),
+        (f"- Against RL in the software simulator ({_pct(sim['success'])}): {_ratio(summary['wm_rl_over_sim_rl'])}. "
+        f"Goal of beating it: **{'met' if goals['wm_rl_beats_sim_rl'] else 'not met'}**."),
+        (f"- World-model RL with the verified reward (VLA-RFT) reached {_pct(arms['rl_wm_verified']['success'])} "
+        f"({_ratio(summary['wm_rl_verified_over_sft'])} SFT)."),
+        (f"- RL in the real world, which spends {arms['rl_real']['real_interactions']:,} real interactions, reached "
+        f"{_pct(arms['rl_real']['success'])}."),
+        (f"- WorldGym: Pearson r = {_num(summary['worldgym_pearson'])}, Spearman = {_num(summary['worldgym_spearman'])} over "
+        f"{len(summary['worldgym'])} policies. Goal r >= 0.9: **{'met' if goals['worldgym_r_at_least_0.9'] else 'not met'}**."),
     ]
     return lines
 
@@ -76,8 +76,8 @@ def _robustness_tables(summary: dict) -> list[str]:
                      f"{_pct(row['minor']['success'])} {_ci(row['minor'])} | {_pct(row['major']['success'])} {_ci(row['major'])} | "
                      f"{_pct(language['train']['success'])} | {_pct(language['heldout']['success'])} {_ci(language['heldout'])} |")
     episodes = next(iter(summary["robustness"].values()))["minor"]["episodes"]
-    lines += ["", f"Perturbed and held-out-instruction evaluations use {episodes} episodes in all per policy; "
-              "the unperturbed column is the main evaluation."]
+    lines += ["", (f"Perturbed and held-out-instruction evaluations use {episodes} episodes in all per policy; "
+              "the unperturbed column is the main evaluation.")]
     return lines
 
 
@@ -91,14 +91,14 @@ def _worldgym_table(summary: dict) -> list[str]:
 
 def _evidence(summary: dict) -> list[str]:
     judge = summary["judge"]
-    lines = ["**The judge** on held-out episodes (its own training stage): "
+    lines = [("**The judge** on held-out episodes (its own training stage): "
              f"real video TPR {_num(judge.get('real_tpr'))}, FPR {_num(judge.get('real_fpr'))}; "
-             f"imagined video TPR {_num(judge.get('imagined_tpr'))}, FPR {_num(judge.get('imagined_fpr'))}.", ""]
+             f"imagined video TPR {_num(judge.get('imagined_tpr'))}, FPR {_num(judge.get('imagined_fpr'))}."), ""]
     for name, rows in summary["watch"].items():
         if not rows:
             continue
-        lines += [f"**Reward-hacking watch, {summary['arms'][name]['title']}**: imagined rollouts replayed action for action "
-                  "in the real world.", "",
+        lines += [(f"**Reward-hacking watch, {summary['arms'][name]['title']}**: imagined rollouts replayed action for action "
+                  "in the real world."), "",
                   "| step | imagined success | real success of the same actions | agreement | judged successes that failed for real |",
                   "|---|---|---|---|---|"]
         for row in rows:
@@ -119,14 +119,14 @@ def report_markdown(summary: dict, plots: dict[str, str]) -> str:
     dataset = summary["dataset"]
     lines = [
         "# Headline experiment: practising in a learned world model vs. SFT and a software simulator", "",
-        f"Tasks: {summary['tasks']}. Every arm starts from the same SFT policy; the RL arms take "
+        (f"Tasks: {summary['tasks']}. Every arm starts from the same SFT policy; the RL arms take "
         f"{summary['rl_steps']} RL steps of {summary['rollouts_per_step']} rollouts each. Every policy is measured in the "
         f"real world on {summary['eval_episodes_per_task']} evaluation seeds per task (never recorded in any dataset), "
-        "greedy, with 95% Wilson intervals.", "",
+        "greedy, with 95% Wilson intervals."), "",
         "## Result", "", *_arms_table(summary), "", *_verdict(summary), "",
-        f"Real interactions are counted beyond the shared dataset ({dataset['episodes']} episodes, "
+        (f"Real interactions are counted beyond the shared dataset ({dataset['episodes']} episodes, "
         f"{dataset['real_interactions']:,} real interactions), which every arm uses. Evaluations and the reward-hacking "
-        "watch also act in the real world; they are counted apart.", "",
+        "watch also act in the real world; they are counted apart."), "",
         f"![per-task success]({plots['per_task']})", "",
         f"![learning curves]({plots['curves']})", "",
         "## Per task", "", *_per_task_table(summary), "",
@@ -135,8 +135,8 @@ def report_markdown(summary: dict, plots: dict[str, str]) -> str:
         f"![WorldGym]({plots['worldgym']})", "",
         "## Evidence: where imagination and reality part", "", *_evidence(summary),
         "## Files", "",
-        "- `summary.json`: every figure above; `config.json`: the resolved settings; `stages/`: one record per stage "
-        "with its wall time.",
+        ("- `summary.json`: every figure above; `config.json`: the resolved settings; `stages/`: one record per stage "
+        "with its wall time."),
         "- `eval/`: one report per evaluation (per-episode records, seeds) and the first episode of each task as video.",
         "- `arms/<arm>/`: each arm's run (metrics.jsonl, TensorBoard, rollout videos with their rewards, summary.json).",
     ]
