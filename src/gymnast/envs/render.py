@@ -11,8 +11,8 @@ from __future__ import annotations
 import atexit
 import os
 import weakref
+from collections.abc import Hashable, Sequence
 from dataclasses import dataclass
-from typing import Hashable, Sequence
 
 import mujoco
 import numpy as np

@@ -96,17 +96,19 @@ def _debug() -> ExperimentConfig:
 
 
 def _demo() -> ExperimentConfig:
+    # Sized to finish within 15 minutes on 2 CPU cores, set-up included: every stage runs, on two
+    # tasks, with models far smaller than the full ones (the numbers show the pipeline, not the method).
     return ExperimentConfig(
         tasks="drawer-open-v3,reach-v3",
         collect=CollectConfig(episodes_per_task=8),
-        sft=dataclasses.replace(SFT_PRESETS["demo"], demos_per_task=6, steps=600),
-        world_model=dataclasses.replace(WM_PRESETS["demo"], steps=300, video_every=300, validate_every=100),
-        judge=dataclasses.replace(JUDGE_PRESETS["demo"], steps=200),
-        rl=RLConfig(steps=4, starts_per_step=4, group_size=4, lr=3e-5, eval_every=2, eval_episodes=4,
-                    watch_every=2, watch_rollouts=8, video_every=4, checkpoint_every=2),
+        sft=dataclasses.replace(SFT_PRESETS["demo"], demos_per_task=6, steps=400, checkpoint_every=200),
+        world_model=dataclasses.replace(WM_PRESETS["demo"], steps=200, video_every=200, validate_every=100),
+        judge=dataclasses.replace(JUDGE_PRESETS["demo"], steps=150),
+        rl=RLConfig(steps=3, starts_per_step=4, group_size=4, lr=3e-5, eval_every=3, eval_episodes=4,
+                    watch_every=3, watch_rollouts=8, video_every=3, checkpoint_every=3),
         iter_sft=IterSFTConfig(group_size=2, steps=100),
         eval_episodes=10,
-        robustness_episodes=5,
+        robustness_episodes=4,
         worldgym_episodes=4,
     )
 

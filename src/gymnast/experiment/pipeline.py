@@ -4,8 +4,8 @@ Stages, in order, each done once (`gymnast.experiment.stages`; a rerun skips fin
 
 1. ``collect``: expert demonstrations and failures recorded in the real world.
 2. ``sft``: the SFT policy every arm starts from.
-3. ``world_model`` and ``judge``: the world model and the learned judge (trained on real and
-   re-imagined episodes).
+3. ``world_model``, ``judge``, ``world_model_eval``: the world model, the learned judge (trained on
+   real and re-imagined episodes) and the world model's fidelity on held-out episodes.
 4. ``arm_<name>``: Iter-SFT and the four RL arms (`gymnast.experiment.arms`).
 5. ``eval_<name>``: every arm in the real world, ``eval_episodes`` per task from the evaluation
    seeds, Wilson intervals; then the SFT and world-model-RL policies under minor and major
@@ -77,7 +77,25 @@ def _models(stages: Stages, config: ExperimentConfig, out: Path, progress: bool)
         return {"metrics": {k: v for k, v in report.items() if k.startswith(("real", "imagined"))}}
 
     stages.run("judge", judge_stage, out / "judge")
+    stages.run("world_model_eval", lambda: _world_model_fidelity(wm, data, out, progress), out / "world_model_eval.json")
     return data, stages.path("sft"), wm, stages.path("judge")
+
+
+FIDELITY_KEYS = ("psnr_h1", "psnr_h8", "psnr_h32", "copy_last_psnr_h32", "moving_psnr_h32", "copy_last_moving_psnr_h32",
+                 "ssim_h32", "episodes")
+
+
+def _world_model_fidelity(wm: Path, data: Path, out: Path, progress: bool) -> dict:
+    """`gymnast eval-wm` on the held-out episodes: open-loop fidelity and controllability, the
+    first thing to look at when imagined practice does not carry over to the real world."""
+    from gymnast.world_model.controllability import ControllabilityConfig
+    from gymnast.world_model.evaluate import WorldModelEvalConfig, evaluate_world_model
+
+    settings = WorldModelEvalConfig(videos=2, controllability=ControllabilityConfig(scenes=4))
+    report = evaluate_world_model(wm, data, out / "world_model_eval.json", settings, progress)
+    control = report.get("controllability") or {}
+    return {**{key: report[key] for key in FIDELITY_KEYS if key in report},
+            "controllability": {key: control.get(key) for key in ("matched_psnr", "mismatched_psnr", "identification_accuracy")}}
 
 
 def _trained(train, data: Path, target: Path, settings, progress: bool) -> dict:

@@ -98,6 +98,7 @@ def build_summary(stages: Stages, config: ExperimentConfig) -> dict:
         "curves": _curves(stages),
         "watch": _watch(stages),
         "judge": {k: v for k, v in (judge_metrics or {}).items() if k.startswith(("real_", "imagined_"))},
+        "world_model": _without_bookkeeping(stages.record("world_model_eval")) if stages.done("world_model_eval") else None,
         "dataset": {"episodes": len(dataset), "real_interactions": int(sum(dataset.lengths)), "path": str(dataset.root)},
         "rl_steps": config.rl.steps,
         "rollouts_per_step": config.rl.starts_per_step * config.rl.group_size,
@@ -113,6 +114,10 @@ def build_summary(stages: Stages, config: ExperimentConfig) -> dict:
         "worldgym_r_at_least_0.9": worldgym["pearson"] is not None and worldgym["pearson"] >= GOAL_WORLDGYM_R,
     }
     return summary
+
+
+def _without_bookkeeping(record: dict) -> dict:
+    return {key: value for key, value in record.items() if key not in ("stage", "path", "reused", "wall_s")}
 
 
 def _brief(record: dict) -> dict:

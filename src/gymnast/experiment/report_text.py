@@ -89,11 +89,27 @@ def _worldgym_table(summary: dict) -> list[str]:
     return lines
 
 
+def _fidelity(model: dict | None) -> list[str]:
+    if not model:
+        return []
+    control = model.get("controllability") or {}
+    lines = [(f"**The world model** on {model.get('episodes')} held-out episodes, open loop: PSNR {_num(model.get('psnr_h1'))} dB "
+              f"one step ahead, {_num(model.get('psnr_h8'))} at 8 and {_num(model.get('psnr_h32'))} at 32 steps "
+              f"(repeating the last real frame: {_num(model.get('copy_last_psnr_h32'))} at 32); on the pixels that move, "
+              f"{_num(model.get('moving_psnr_h32'))} dB at 32 steps (repeating: {_num(model.get('copy_last_moving_psnr_h32'))}).")]
+    if control.get("matched_psnr") is not None:
+        lines.append(f"Controllability: its rollout matches the real rollout of the same actions at {_num(control['matched_psnr'])} dB "
+                     f"and of other actions at {_num(control['mismatched_psnr'])} dB; it picks the right real rollout "
+                     f"{_pct(control['identification_accuracy'])} of the time.")
+    return [" ".join(lines), ""]
+
+
 def _evidence(summary: dict) -> list[str]:
     judge = summary["judge"]
-    lines = [("**The judge** on held-out episodes (its own training stage): "
-             f"real video TPR {_num(judge.get('real_tpr'))}, FPR {_num(judge.get('real_fpr'))}; "
-             f"imagined video TPR {_num(judge.get('imagined_tpr'))}, FPR {_num(judge.get('imagined_fpr'))}."), ""]
+    lines = [*_fidelity(summary.get("world_model")),
+             ("**The judge** on held-out episodes (its own training stage): "
+              f"real video TPR {_num(judge.get('real_tpr'))}, FPR {_num(judge.get('real_fpr'))}; "
+              f"imagined video TPR {_num(judge.get('imagined_tpr'))}, FPR {_num(judge.get('imagined_fpr'))}."), ""]
     for name, rows in summary["watch"].items():
         if not rows:
             continue
