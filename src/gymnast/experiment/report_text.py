@@ -92,6 +92,8 @@ def _worldgym_table(summary: dict) -> list[str]:
 def _fidelity(model: dict | None) -> list[str]:
     if not model:
         return []
+    if "skipped" in model:
+        return [f"**The world model**: fidelity not measured ({model['skipped']}).", ""]
     control = model.get("controllability") or {}
     lines = [(f"**The world model** on {model.get('episodes')} held-out episodes, open loop: PSNR {_num(model.get('psnr_h1'))} dB "
               f"one step ahead, {_num(model.get('psnr_h8'))} at 8 and {_num(model.get('psnr_h32'))} at 32 steps "
