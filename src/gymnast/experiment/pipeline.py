@@ -23,6 +23,7 @@ from pathlib import Path
 from tqdm import tqdm
 
 from gymnast.config import EnvConfig
+from gymnast.data.lerobot import EpisodeDataset
 from gymnast.experiment.arms import ARMS, PERTURBATIONS, ROBUSTNESS_ARMS, arm, rl_setup
 from gymnast.experiment.config import ExperimentConfig
 from gymnast.experiment.stages import Stages
@@ -44,7 +45,8 @@ def run_experiment(config: ExperimentConfig, out: Path, reuse: dict[str, Path] |
     policies = {"sft": sft}
     for spec in ARMS[1:]:
         policies[spec.name] = _train_arm(stages, spec.name, config, out, sft, wm, judge, data, progress)
-    env = EnvConfig(image_size=config.collect.env.image_size, horizon=config.rl.horizon)
+    # The real world as the dataset saw it (a reused dataset may have its own image size).
+    env = EnvConfig(image_size=EpisodeDataset(data).image_shape[0], horizon=config.rl.horizon)
     for name, policy in policies.items():
         _evaluate(stages, f"eval_{name}", policy, config, out, config.eval_episodes, env, progress)
     for name in ROBUSTNESS_ARMS:
@@ -90,7 +92,6 @@ def _world_model_fidelity(wm: Path, data: Path, out: Path, progress: bool) -> di
     first thing to look at when imagined practice does not carry over to the real world."""
     import json
 
-    from gymnast.data.lerobot import EpisodeDataset
     from gymnast.utils.checkpoint import resolve_checkpoint
     from gymnast.world_model.controllability import ControllabilityConfig
     from gymnast.world_model.data import split_episodes
