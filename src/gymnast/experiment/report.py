@@ -36,8 +36,18 @@ def _arm_row(stages: Stages, name: str, title: str) -> dict:
             "real_interactions": trained.get("real_interactions", 0),
             "eval_real_interactions": trained.get("eval_real_interactions", 0) + result["real_interactions"],
             "watch_real_interactions": trained.get("watch_real_interactions", 0),
-            "wall_s": trained.get("wall_s"), "reused": trained.get("reused", False),
+            "wall_s": trained.get("wall_s") if not trained.get("reused") else _logged_wall_s(Path(trained["path"])),
+            "reused": trained.get("reused", False),
             "steps": trained.get("steps"), "videos": result.get("videos", [])}
+
+
+def _logged_wall_s(run: Path) -> float | None:
+    """Training time of a reused run, from its own log (steps x mean step time), if it logged one."""
+    path = run / "metrics.jsonl"
+    if not path.exists():
+        return None
+    timed = [line for line in map(json.loads, path.read_text().splitlines()) if "time/step_s" in line]
+    return timed[-1]["step"] * timed[-1]["time/step_s"] if timed else None
 
 
 def _curves(stages: Stages) -> dict[str, list[dict]]:
@@ -148,7 +158,7 @@ def format_table(summary: dict) -> str:
     """The arms as aligned text: success, 95% CI, real interactions, wall time."""
     rows = [("arm", "success", "95% CI", "real interactions", "wall time")]
     for row in summary["arms"].values():
-        wall = "reused" if row["reused"] else (f"{row['wall_s'] / 60:.1f} min" if row["wall_s"] is not None else "-")
+        wall = f"{row['wall_s'] / 60:.1f} min" if row["wall_s"] is not None else ("reused" if row["reused"] else "-")
         rows.append((row["title"], f"{row['success']:.1%}", f"[{row['ci_low']:.1%}, {row['ci_high']:.1%}]",
                      f"{row['real_interactions']:,}", wall))
     widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]

@@ -19,9 +19,9 @@ def _ratio(value: float | None) -> str:
 
 
 def _minutes(row: dict) -> str:
-    if row["reused"]:
-        return "reused"
-    return "-" if row["wall_s"] is None else f"{row['wall_s'] / 60:.1f} min"
+    if row["wall_s"] is None:
+        return "reused" if row["reused"] else "-"
+    return f"{row['wall_s'] / 60:.1f} min" + (" (reused run's log)" if row["reused"] else "")
 
 
 def _arms_table(summary: dict) -> list[str]:
@@ -35,23 +35,27 @@ def _arms_table(summary: dict) -> list[str]:
 
 def _verdict(summary: dict) -> list[str]:
     arms, goals = summary["arms"], summary["goals"]
-    sft, wm, sim = arms["sft"], arms["rl_wm_judge"], arms["rl_sim"]
-    overlap = wm["ci_low"] <= sft["ci_high"] and sft["ci_low"] <= wm["ci_high"]
-    lines = [
+    sft, wm, sim, verified = arms["sft"], arms["rl_wm_judge"], arms["rl_sim"], arms["rl_wm_verified"]
+    met = {True: "met", False: "not met"}
+    return [
         (f"- World-model RL with the judge (World-Gymnast) reached {_pct(wm['success'])} against SFT's "
-        f"{_pct(sft['success'])}: {_ratio(summary['wm_rl_over_sft'])} SFT "
-        f"({'the intervals overlap, so the difference is not significant' if overlap else 'the intervals do not overlap'}). "
-        f"Goal of at least 2x: **{'met' if goals['wm_rl_at_least_2x_sft'] else 'not met'}**."),
-        (f"- Against RL in the software simulator ({_pct(sim['success'])}): {_ratio(summary['wm_rl_over_sim_rl'])}. "
-        f"Goal of beating it: **{'met' if goals['wm_rl_beats_sim_rl'] else 'not met'}**."),
-        (f"- World-model RL with the verified reward (VLA-RFT) reached {_pct(arms['rl_wm_verified']['success'])} "
-        f"({_ratio(summary['wm_rl_verified_over_sft'])} SFT)."),
-        (f"- RL in the real world, which spends {arms['rl_real']['real_interactions']:,} real interactions, reached "
-        f"{_pct(arms['rl_real']['success'])}."),
+         f"{_pct(sft['success'])}: {_ratio(summary['wm_rl_over_sft'])} SFT ({_significance(wm, sft)}). "
+         f"Goal of at least 2x: **{met[goals['wm_rl_at_least_2x_sft']]}**."),
+        (f"- Against RL in the software simulator ({_pct(sim['success'])}): {_ratio(summary['wm_rl_over_sim_rl'])} "
+         f"({_significance(wm, sim)}). Goal of beating it: **{met[goals['wm_rl_beats_sim_rl']]}**."),
+        (f"- World-model RL with the verified reward (VLA-RFT) reached {_pct(verified['success'])}: "
+         f"{_ratio(summary['wm_rl_verified_over_sft'])} SFT ({_significance(verified, sft)})."),
+        (f"- RL in the real world, which spent {arms['rl_real']['real_interactions']:,} real interactions on training, "
+         f"reached {_pct(arms['rl_real']['success'])} ({_significance(arms['rl_real'], sft)} with SFT)."),
         (f"- WorldGym: Pearson r = {_num(summary['worldgym_pearson'])}, Spearman = {_num(summary['worldgym_spearman'])} over "
-        f"{len(summary['worldgym'])} policies. Goal r >= 0.9: **{'met' if goals['worldgym_r_at_least_0.9'] else 'not met'}**."),
+         f"{len(summary['worldgym'])} policies. Goal r >= 0.9: **{met[goals['worldgym_r_at_least_0.9']]}**."),
     ]
-    return lines
+
+
+def _significance(a: dict, b: dict) -> str:
+    if a["ci_low"] <= b["ci_high"] and b["ci_low"] <= a["ci_high"]:
+        return "the 95% intervals overlap: no significant difference"
+    return "the 95% intervals do not overlap"
 
 
 def _num(value: float | None) -> str:
