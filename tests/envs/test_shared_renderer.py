@@ -33,9 +33,9 @@ def test_a_shared_context_renders_each_env_exactly_as_its_own_would(task, gap):
 
 
 def test_the_context_is_released_when_its_last_user_closes():
-    config = EnvConfig(image_size=32)
+    config = EnvConfig(image_size=24)  # a size no other test uses: no other env shares this context
     first, second = MetaWorldEnv("reach-v3", config=config), MetaWorldEnv("reach-v3", config=config)
-    key = ("reach-v3", first.gap), 32, 32
+    key = ("reach-v3", first.gap), 24, 24
     assert render._SHARED[key][1] == 2
     first.close()
     first.close()  # closing twice counts once

@@ -26,6 +26,9 @@ _LIVE_RENDERERS: weakref.WeakSet = weakref.WeakSet()
 def _close_live_renderers() -> None:
     for renderer in list(_LIVE_RENDERERS):
         renderer.close()
+    for shared, _ in _SHARED.values():  # left by renderers collected without close()
+        shared.close()
+    _SHARED.clear()
 
 
 # One GL context with its uploaded meshes and textures costs ~120 MB, most of an environment's
