@@ -53,7 +53,7 @@ def plot_per_task(summary: dict, path: Path) -> Path:
 
 def plot_curves(summary: dict, path: Path) -> Path:
     """Real success against RL step for each RL arm; SFT and Iter-SFT as horizontal lines."""
-    plt, figure, axes = _figure(7.5, 4.2)
+    plt, figure, axes = _figure(8.0, 5.6)
     for name, points in summary["curves"].items():
         points = [p for p in points if p["real"] is not None]
         steps = [p["step"] for p in points]
@@ -65,8 +65,8 @@ def plot_curves(summary: dict, path: Path) -> Path:
     axes.set_xlabel("RL step")
     axes.set_ylabel("real-world success")
     axes.set_ylim(0, 1.05)
-    axes.set_title("Real-world success during RL (learning-curve evaluations, 95% CI)")
-    axes.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.0, 1.0))
+    axes.set_title("Real-world success during RL (learning-curve evaluations, 95% CI)", fontsize=10)
+    axes.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=2)
     return _save(plt, figure, path)
 
 

@@ -205,7 +205,9 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
             real = evaluate_in_env(envs, "real", policy, reward, eval_starts, prefix="eval/real")
             state["eval_real_interactions"] += int(real.pop("eval/real_interactions"))
             values |= real
-        values.pop("eval/own_interactions", None)
+        own = int(values.pop("eval/own_interactions", 0))
+        if run_spec.env == "real":  # evaluating in the real world spends real interactions too
+            state["eval_real_interactions"] += own
         values["eval/real_interactions"] = state["eval_real_interactions"]
         values = {key: value for key, value in values.items() if np.isfinite(value)}  # JSON has no NaN
         state["curve"].append({"step": step, **values})
