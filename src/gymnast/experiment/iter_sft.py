@@ -11,6 +11,7 @@ Legend: R rollouts, S policy calls, K actions per call, A action dimensions, H/W
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 from pathlib import Path
 
@@ -88,8 +89,6 @@ def imagine_successes(policy_run: Path, wm_run: Path, judge_run: Path, data: Pat
 def train_iter_sft(policy_run: Path, wm_run: Path, judge_run: Path, data: Path, out: Path,
                    config: ExperimentConfig, progress: bool = True) -> dict:
     """Runs Iter-SFT into `out`; returns what it imagined and kept."""
-    import dataclasses
-
     from gymnast.policy.sft import train_sft
 
     samples, counts = imagine_successes(policy_run, wm_run, judge_run, data, config, progress)

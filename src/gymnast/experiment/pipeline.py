@@ -159,7 +159,7 @@ def _worldgym(stages: Stages, config: ExperimentConfig, out: Path, policies: dic
     """Imagined and real success of the arms and of the SFT run's earlier checkpoints."""
     from gymnast.experiment.worldgym import correlation, imagined_success
 
-    candidates = {name: policies[name] for name in policies}
+    candidates = dict(policies)
     checkpoints = sorted(p for p in (policies["sft"] / "checkpoints").glob("[0-9]*") if p.is_dir())
     for checkpoint in checkpoints[:-1]:  # the last one is the SFT arm itself
         candidates[f"sft_step_{int(checkpoint.name)}"] = checkpoint
