@@ -45,10 +45,13 @@ class JudgeConfig:
     """Feature width D."""
     image_size: int = 96
     """Frame height and width."""
+    threshold: float = 0.5
+    """P(success) from which a video counts as a success (`gymnast train-judge` chooses it on
+    validation scenes)."""
 
 
 class LearnedJudge(nn.Module):
-    """`Reward` whose score is 1.0 when P(success) >= 0.5 (see `probability` for the raw value)."""
+    """`Reward` whose score is 1.0 when P(success) >= the threshold (see `probability` for the raw value)."""
 
     backend = "embedded-judge"
     binary = True
@@ -72,16 +75,13 @@ class LearnedJudge(nn.Module):
     @torch.no_grad()
     def probability(self, videos: torch.Tensor, instructions: Sequence[str]) -> torch.Tensor:
         """(B,) P(success) for (B, T, H, W, 3) uint8 videos."""
-        if videos.ndim != 5 or videos.dtype != torch.uint8 or videos.shape[-1] != 3:
-            raise ValueError(f"videos must be (B, T, H, W, 3) uint8, got {tuple(videos.shape)} {videos.dtype}")
-        if len(instructions) != videos.shape[0]:
-            raise ValueError(f"{videos.shape[0]} videos need as many instructions, got {len(instructions)}")
+        check_videos(videos, instructions)
         picked = videos[:, judged_frame_indices(videos.shape[1])]  # (B, F, H, W, 3)
         return torch.sigmoid(self(picked, self.encoder(instructions)))
 
     def score(self, frames: torch.Tensor, instructions: Sequence[str], context: RewardContext | None = None) -> torch.Tensor:
-        """1.0 where the judge says success (P >= 0.5), else 0.0."""
-        return (self.probability(frames, instructions) >= 0.5).float()
+        """1.0 where the judge says success (P >= the threshold), else 0.0."""
+        return (self.probability(frames, instructions) >= self.config.threshold).float()
 
     def spec(self) -> dict:
         return {"backend": self.backend, **asdict(self.config)}
@@ -89,6 +89,14 @@ class LearnedJudge(nn.Module):
     @classmethod
     def from_spec(cls, spec: dict) -> LearnedJudge:
         return cls(JudgeConfig(**{k: v for k, v in spec.items() if k != "backend"}))
+
+
+def check_videos(videos: torch.Tensor, instructions: Sequence[str]) -> None:
+    """Raises ValueError unless `videos` is (B, T, H, W, 3) uint8 with B instructions."""
+    if videos.ndim != 5 or videos.dtype != torch.uint8 or videos.shape[-1] != 3:
+        raise ValueError(f"videos must be (B, T, H, W, 3) uint8, got {tuple(videos.shape)} {videos.dtype}")
+    if len(instructions) != videos.shape[0]:
+        raise ValueError(f"{videos.shape[0]} videos need as many instructions, got {len(instructions)}")
 
 
 def judge_loss(judge: LearnedJudge, frames: torch.Tensor, text: torch.Tensor, labels: torch.Tensor):

@@ -1,10 +1,16 @@
 """`gymnast train-judge`: fit the learned judge on real (and imagined) episodes, then measure it.
 
-Held-out episodes are those of the world model's held-out scenes (`gymnast.world_model.data`), so
-their imagined versions come from scenes the world model never saw either. The report counts, on
-real and on imagined videos separately: positives = whole successful episodes; negatives = whole
-failed episodes, and successful episodes cut before their success (halfway there, and
-`NEAR_MISS_STEPS` short), the near misses a judge of RL rollouts must not pass.
+Two judges train here: the per-frame judge (`kind="frames"`, `gymnast.reward.frame_judge`), which
+learns from every frame with Meta-World's per-step success flag, and the video judge
+(`kind="video"`, `gymnast.reward.judge`), which learns from whole videos and their prefixes.
+
+Scenes are split three ways by a fixed hash: held-out scenes are the world model's
+(`gymnast.world_model.data`), so their imagined versions come from scenes the world model never
+saw either, and they alone make the reported figures; validation scenes, a share of the rest,
+choose the decision threshold; the remaining scenes train. The report counts, on real and on
+imagined videos separately: positives = whole successful episodes; negatives = whole failed
+episodes, and successful episodes cut before their success (halfway there, and `NEAR_MISS_STEPS`
+short), the near misses a judge of RL rollouts must not pass.
 
 Legend: B batch, T steps, H/W image size.
 """
@@ -14,6 +20,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import time
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -22,6 +29,7 @@ from tqdm import tqdm
 
 from gymnast.data.lerobot import EpisodeDataset
 from gymnast.reward.base import Reward, RewardContext
+from gymnast.reward.frame_judge import FrameJudge, frame_loss
 from gymnast.reward.judge import JudgeConfig, LearnedJudge, judge_loss, judged_frame_indices
 from gymnast.utils.atomic import write_json
 from gymnast.utils.checkpoint import load_model, resume_training, save_training, saved_settings, write_run_config
@@ -33,27 +41,38 @@ from gymnast.world_model.data import split_episodes
 logger = logging.getLogger(__name__)
 
 NEAR_MISS_STEPS = 10  # a held-out negative: a successful episode cut this many steps before its success
+JUDGES = {"frames": FrameJudge, "video": LearnedJudge}
+"""Judge kinds by name; a checkpoint names its class by `backend`."""
 
 
 @dataclass(frozen=True)
 class JudgeTrainConfig:
     """Learned-judge training settings."""
 
+    kind: str = "frames"
+    """frames: the per-frame judge (every frame a labelled example; a video succeeds where any frame
+    does); video: the judge of four frames of a whole video, trained on videos and their prefixes."""
     steps: int = 1000
-    """Optimizer steps (about 6 minutes on 2 CPU cores)."""
+    """Optimizer steps."""
     batch_size: int = 32
-    """Videos per step."""
+    """Examples per step: frames (half of them success frames) or videos."""
     lr: float = 3e-4
     """Peak learning rate (AdamW, warm-up then cosine decay)."""
     warmup_steps: int = 50
     """Linear warm-up steps."""
     whole_share: float = 0.5
-    """Share of training videos that are whole episodes; the rest are cut at a random step."""
+    """Video judge: share of training videos that are whole episodes; the rest are cut at a random step."""
     ambiguous_steps: int = 5
-    """Cuts this close before a success are not used as negatives (the frames barely differ from the
-    success frame, so they teach the judge to doubt real successes); the whole episode is used instead."""
+    """Frames (or cuts) this close before a success are not used as negatives (they barely differ
+    from the success frame, so they teach the judge to doubt real successes)."""
     heldout_fraction: float = 0.1
     """Share of scenes held out (use the world model's, so imagined held-out videos are unseen)."""
+    validation_fraction: float = 0.1
+    """Share of the other scenes that choose the decision threshold instead of training."""
+    extra_data: tuple[Path, ...] = ()
+    """More datasets besides DATA (e.g. a policy's own recorded rollouts), with the same image
+    size; each is split by the same scene hashes, and every part (train, validation, held-out)
+    takes its share of each."""
     checkpoint_every: int = 500
     """Steps between checkpoints."""
     log_every: int = 25
@@ -63,43 +82,120 @@ class JudgeTrainConfig:
     judge: JudgeConfig = field(default_factory=JudgeConfig)
     """Architecture."""
 
+    def __post_init__(self) -> None:
+        if self.kind not in JUDGES:
+            raise ValueError(f"JudgeTrainConfig.kind must be one of {sorted(JUDGES)}, got {self.kind!r}")
+        if not 0 <= self.validation_fraction < 1:
+            raise ValueError(f"JudgeTrainConfig.validation_fraction must be in [0, 1), got {self.validation_fraction}")
+
 
 JUDGE_PRESETS = {
     "debug": JudgeTrainConfig(steps=4, batch_size=4, warmup_steps=1, checkpoint_every=2, log_every=1, judge=JudgeConfig(width=32)),
     "demo": JudgeTrainConfig(steps=400),
-    "full": JudgeTrainConfig(),
+    "full": JudgeTrainConfig(steps=2000, batch_size=64),
 }
 
 
 @dataclass(frozen=True)
 class Video:
-    """One episode's video (real or imagined) with its per-frame success: (T+1, H, W, 3) uint8 and
-    (T+1,) bool, frame t counting as success once the episode has succeeded by then."""
+    """One episode's video (real or imagined) with its success per frame.
+
+    Attributes:
+        frames: (T+1, H, W, 3) uint8.
+        success: (T+1,) bool frame t counts once the episode has succeeded by then.
+        shows: (T+1,) bool the task is done in frame t (Meta-World's per-step flag; an object
+            knocked off its goal again undoes it); frame 0 never.
+        instruction: the task in words.
+        imagined: re-imagined by a world model under the episode's real actions.
+    """
 
     frames: torch.Tensor
     success: torch.Tensor
+    shows: torch.Tensor
     instruction: str
     imagined: bool
 
 
+IMAGINE_BATCH = 32  # episodes re-imagined together: one world-model call per step for all of them
+
+
 def load_videos(dataset: EpisodeDataset, indices: list[int], wm: Path | None, progress: bool) -> list[Video]:
     """Real videos of the episodes, plus their re-imaginings under the real actions with a world model."""
-    model = load_world_model(wm) if wm else None
-    videos = []
+    videos, episodes = [], []
     for i in tqdm(indices, desc="loading episodes", disable=not progress):
         episode = dataset.load(i)
         frames = torch.from_numpy(episode.frames)
-        reached = torch.cat([torch.zeros(1, dtype=torch.bool), torch.from_numpy(episode.successes).bool().cummax(0).values])
-        videos.append(Video(frames, reached, episode.info.instruction, imagined=False))
-        if model is not None:
-            imagined = rollout(model, frames[None, :1], actions=torch.from_numpy(episode.actions)[None].float()).frames[0]
-            videos.append(Video(torch.cat([frames[:1], imagined]), reached, episode.info.instruction, imagined=True))
-    return videos
+        shows = torch.cat([torch.zeros(1, dtype=torch.bool), torch.from_numpy(episode.successes).bool()])
+        videos.append(Video(frames, shows.cummax(0).values, shows, episode.info.instruction, imagined=False))
+        episodes.append(torch.from_numpy(episode.actions).float())
+    if wm is None:
+        return videos
+    model = load_world_model(wm)
+    by_length: dict[int, list[int]] = {}
+    for n, actions in enumerate(episodes):
+        by_length.setdefault(len(actions), []).append(n)
+    imagined: dict[int, Video] = {}
+    batches = [group[i: i + IMAGINE_BATCH] for group in by_length.values() for i in range(0, len(group), IMAGINE_BATCH)]
+    for batch in tqdm(batches, desc="imagining episodes", disable=not progress):
+        start = torch.stack([videos[n].frames[:1] for n in batch])  # (b, 1, H, W, 3)
+        frames = rollout(model, start, actions=torch.stack([episodes[n] for n in batch])).frames  # (b, T, H, W, 3)
+        for n, video in zip(batch, frames):
+            real = videos[n]
+            imagined[n] = Video(torch.cat([real.frames[:1], video]), real.success, real.shows, real.instruction, imagined=True)
+    return [video for n, real in enumerate(videos) for video in (real, imagined[n])]
 
 
 def heldout_videos(dataset: EpisodeDataset, fraction: float, wm: Path | None = None) -> list[Video]:
     """The videos of the held-out scenes' episodes (and their re-imaginings with a world model)."""
     return load_videos(dataset, split_episodes(dataset.episodes, fraction)[1], wm, progress=False)
+
+
+def split_scenes(dataset: EpisodeDataset, config: JudgeTrainConfig) -> tuple[list[int], list[int], list[int]]:
+    """(train, validation, held-out) episode indices, each scene in one part only."""
+    train, heldout = split_episodes(dataset.episodes, config.heldout_fraction)
+
+    def validation(i: int) -> bool:
+        info = dataset.episodes[i]
+        return zlib.crc32(f"validation/{info.task}/{info.seed}".encode()) % 10_000 < config.validation_fraction * 10_000
+
+    return [i for i in train if not validation(i)], [i for i in train if validation(i)], heldout
+
+
+class FramePool:
+    """Every labelled frame of some videos, for drawing balanced batches of success and other frames.
+
+    Frames `ambiguous` steps or fewer before a video's first success are left out: they barely
+    differ from the success frame, and as negatives they teach the judge to doubt real successes.
+    """
+
+    def __init__(self, videos: list[Video], ambiguous: int) -> None:
+        self.videos = videos
+        positives, negatives = [], []
+        for v, video in enumerate(videos):
+            steps = torch.arange(1, len(video.frames))
+            first = int(video.shows.float().argmax()) if video.shows.any() else len(video.frames) + ambiguous
+            near = (steps >= first - ambiguous) & (steps < first)
+            shows = video.shows[1:]
+            positives.append(torch.stack([torch.full_like(steps, v), steps], 1)[shows])
+            negatives.append(torch.stack([torch.full_like(steps, v), steps], 1)[~shows & ~near])
+        empty = torch.zeros(0, 2, dtype=torch.int64)
+        self.positives, self.negatives = torch.cat([empty, *positives]), torch.cat([empty, *negatives])  # (n, 2) (video, frame)
+        if not len(self.positives) or not len(self.negatives):
+            raise ValueError(f"judge training needs frames with and without success; got {len(self.positives)} "
+                             f"success frames and {len(self.negatives)} others")
+
+    def sample(self, batch: int, generator: torch.Generator):
+        """(B, H, W, 3) first frames, (B, H, W, 3) frames, B instructions and (B,) labels; half successes."""
+        count = batch // 2
+        pick = [self.positives[torch.randint(len(self.positives), (count,), generator=generator)],
+                self.negatives[torch.randint(len(self.negatives), (batch - count,), generator=generator)]]
+        firsts, frames, texts = [], [], []
+        for v, t in torch.cat(pick).tolist():
+            firsts.append(self.videos[v].frames[0])
+            frames.append(self.videos[v].frames[t])
+            texts.append(self.videos[v].instruction)
+        labels = torch.arange(batch) < count
+        return torch.stack(firsts), torch.stack(frames), texts, labels
 
 
 def _sample(videos: list[Video], batch: int, whole_share: float, ambiguous: int, generator: torch.Generator):
@@ -121,38 +217,103 @@ def _sample(videos: list[Video], batch: int, whole_share: float, ambiguous: int,
 
 def train_judge(data: Path, out: Path, config: JudgeTrainConfig, wm: Path | None = None, resume: bool = False,
                 progress: bool = True) -> dict:
-    """Trains the judge in `out`, writes `out/metrics.json` (held-out TPR/FPR) and returns it."""
+    """Trains the judge in `out`, chooses its threshold on the validation scenes, writes
+    `out/metrics.json` (held-out TPR/FPR) and returns it."""
     started = time.perf_counter()
-    dataset = EpisodeDataset(data)
-    config = dataclasses.replace(config, judge=dataclasses.replace(config.judge, image_size=dataset.image_shape[0]))
-    train_ids, heldout_ids = split_episodes(dataset.episodes, config.heldout_fraction)
-    train_videos = load_videos(dataset, train_ids, wm, progress)
+    datasets = [EpisodeDataset(path) for path in (data, *config.extra_data)]
+    for other in datasets[1:]:
+        if other.image_shape != datasets[0].image_shape:
+            raise ValueError(f"{other.root}: frames are {other.image_shape}, but {data} has {datasets[0].image_shape}")
+    config = dataclasses.replace(config, judge=dataclasses.replace(config.judge, image_size=datasets[0].image_shape[0]))
+    parts = [split_scenes(dataset, config) for dataset in datasets]  # per dataset: (train, validation, held-out)
+    train_ids, validation_ids, heldout_ids = ([p[k] for p in parts] for k in range(3))
+    if not any(train_ids):
+        raise ValueError(f"{data}: no scene is left to train on after holding out {config.heldout_fraction:g} and "
+                         f"validating on {config.validation_fraction:g} of them; record more episodes")
+
+    def videos(chosen: list[list[int]], show: bool) -> list[Video]:
+        return [video for dataset, ids in zip(datasets, chosen) for video in load_videos(dataset, ids, wm, show)]
+
+    train_videos = videos(train_ids, progress)
     torch.manual_seed(config.seed)
-    judge = LearnedJudge(config.judge)
+    judge = JUDGES[config.kind](config.judge)
     optimizer = torch.optim.AdamW(judge.parameters(), lr=config.lr, weight_decay=0.01)
     schedule = torch.optim.lr_scheduler.LambdaLR(optimizer, warmup_cosine(config.warmup_steps, config.steps))
     sampler = torch.Generator().manual_seed(config.seed)
-    resolved = {"train": dataclasses.asdict(config), "model": judge.spec(), "data": str(data), "wm": str(wm) if wm else None}
+    settings = {**dataclasses.asdict(config), "extra_data": [str(path) for path in config.extra_data]}
+    resolved = {"train": settings, "model": judge.spec(), "data": str(data), "wm": str(wm) if wm else None}
     start = resume_training(out, judge, optimizer, schedule, sampler) if resume else 0
     write_run_config(out, resolved)
     metrics = MetricsLog(out, resume_step=start if resume else None)
+    pool = FramePool(train_videos, config.ambiguous_steps) if config.kind == "frames" else None
     judge.train()
     bar = tqdm(range(start, config.steps), initial=start, total=config.steps, desc="train-judge", disable=not progress)
     for step in bar:
-        frames, texts, labels = _sample(train_videos, config.batch_size, config.whole_share, config.ambiguous_steps, sampler)
-        loss, values = judge_loss(judge, frames, judge.encoder(texts), labels)
+        if pool is not None:
+            first, frames, texts, labels = pool.sample(config.batch_size, sampler)
+            loss, values = frame_loss(judge, first, frames, judge.encoder(texts), labels)
+        else:
+            frames, texts, labels = _sample(train_videos, config.batch_size, config.whole_share, config.ambiguous_steps, sampler)
+            loss, values = judge_loss(judge, frames, judge.encoder(texts), labels)
         values["train/grad_norm"] = gradient_step(loss, judge, optimizer, schedule)
         done = step + 1
         if done % config.log_every == 0 or done == config.steps:
             metrics.log(done, values)
             bar.set_postfix(loss=f"{values['train/loss']:.3f}", acc=f"{values['train/accuracy']:.2f}")
-        if done % config.checkpoint_every == 0 or done == config.steps:
+        if done % config.checkpoint_every == 0 and done < config.steps:
             save_training(out, done, judge, resolved, optimizer, schedule, sampler)
-    report = evaluate_judge(judge.eval(), heldout_videos(dataset, config.heldout_fraction, wm))
-    report |= {"data": str(data), "wm": str(wm) if wm else None, "heldout_episodes": len(heldout_ids),
-               "train_episodes": len(train_ids), "seconds": round(time.perf_counter() - started, 1)}
+    del train_videos, pool  # the held-out and validation videos take their place in memory
+    judge.eval()
+    threshold = choose_threshold(judge, videos(validation_ids, show=False))
+    judge.config = dataclasses.replace(judge.config, threshold=threshold["threshold"])
+    resolved["model"] = judge.spec()
+    write_run_config(out, resolved)
+    save_training(out, config.steps, judge, resolved, optimizer, schedule, sampler)
+    report = evaluate_judge(judge, videos(heldout_ids, show=False))
+    report |= {"kind": config.kind, **{f"validation_{k}": v for k, v in threshold.items()},
+               "data": [str(path) for path in (data, *config.extra_data)], "wm": str(wm) if wm else None,
+               "heldout_episodes": sum(map(len, heldout_ids)), "validation_episodes": sum(map(len, validation_ids)),
+               "train_episodes": sum(map(len, train_ids)),
+               "seconds": round(time.perf_counter() - started, 1)}
     write_json(out / "metrics.json", report)
     return report
+
+
+def choose_threshold(judge: Reward, videos: list[Video]) -> dict:
+    """The P(success) threshold that best separates the validation cases (most TPR - FPR, real and
+    imagined together), in the middle of the range of equally good ones so that it sits in the gap
+    between scores rather than on one; 0.5 with no validation case of each label.
+
+    Returns ``threshold``, ``tpr``, ``fpr`` and ``cases``.
+    """
+    cases = judge_cases(videos)
+    truth = torch.tensor([label for _, _, label, _, _ in cases], dtype=torch.bool)
+    if not truth.any() or truth.all():
+        logger.warning("no validation scene with both outcomes: the judge keeps the threshold 0.5")
+        return {"threshold": 0.5, "tpr": None, "fpr": None, "cases": len(cases)}
+    with torch.no_grad():
+        scores = torch.cat([judge.probability(frames[None], [text]) for frames, text, _, _, _ in cases]).double()
+    candidates = torch.unique(scores)  # sorted; a threshold in (candidates[i-1], candidates[i]] passes the same cases
+    quality = torch.stack([(scores[truth] >= c).double().mean() - (scores[~truth] >= c).double().mean() for c in candidates])
+    best = torch.nonzero(quality == quality.max()).flatten()
+    low = candidates[best[0] - 1] if best[0] > 0 else torch.tensor(0.0, dtype=torch.float64)
+    threshold = float((low + candidates[best[-1]]) / 2)
+    return {"threshold": threshold, "tpr": _rate(scores >= threshold, truth), "fpr": _rate(scores >= threshold, ~truth),
+            "cases": len(cases)}
+
+
+def judge_cases(videos: list[Video]) -> list[tuple[torch.Tensor, str, bool, bool, bool]]:
+    """What a judge is measured on: (frames, instruction, label, whole episode?, imagined?) for every
+    whole video, and for successful ones, cuts halfway to their success and `NEAR_MISS_STEPS` short."""
+    cases = []
+    for video in videos:
+        cases.append((video.frames, video.instruction, bool(video.success[-1]), True, video.imagined))
+        if video.success[-1]:
+            first = int(video.success.float().argmax())  # the first frame showing success
+            for cut in sorted({first // 2, first - NEAR_MISS_STEPS}):  # halfway there; a few steps short
+                if cut >= 2:
+                    cases.append((video.frames[:cut], video.instruction, False, False, video.imagined))
+    return cases
 
 
 def evaluate_judge(judge: Reward, videos: list[Video]) -> dict:
@@ -160,20 +321,13 @@ def evaluate_judge(judge: Reward, videos: list[Video]) -> dict:
     whole failed episodes. A NaN verdict (could not score) counts as "not success" and is counted."""
     report = {}
     for imagined in (False, True):
-        cases = []  # (frames, instruction, label, whole episode?)
-        for video in (v for v in videos if v.imagined == imagined):
-            cases.append((video.frames, video.instruction, bool(video.success[-1]), True))
-            if video.success[-1]:
-                first = int(video.success.float().argmax())  # the first frame showing success
-                for cut in {first // 2, first - NEAR_MISS_STEPS}:  # halfway there; a few steps short
-                    if cut >= 2:
-                        cases.append((video.frames[:cut], video.instruction, False, False))
+        cases = [case for case in judge_cases(videos) if case[4] == imagined]
         if not cases:
             continue
-        verdicts = torch.stack([judge.score(f[None], [text], RewardContext())[0] for f, text, _, _ in cases])
+        verdicts = torch.stack([judge.score(f[None], [text], RewardContext())[0] for f, text, _, _, _ in cases])
         predicted = verdicts >= 0.5  # NaN compares False
-        truth = torch.tensor([label for _, _, label, _ in cases])
-        whole = torch.tensor([w for _, _, _, w in cases])
+        truth = torch.tensor([label for _, _, label, _, _ in cases])
+        whole = torch.tensor([w for _, _, _, w, _ in cases])
         prefix = "imagined" if imagined else "real"
         report |= {
             f"{prefix}_tpr": _rate(predicted, truth),
@@ -194,11 +348,25 @@ def _rate(predicted: torch.Tensor, among: torch.Tensor) -> float | None:
 
 
 def saved_judge_config(run: Path) -> JudgeTrainConfig:
-    """The settings a run was started with (RUN/config.json), for ``--resume``."""
+    """The settings a run was started with (RUN/config.json), for ``--resume``; runs from before
+    the per-frame judge trained the video judge."""
     saved = saved_settings(run, "train")
-    return JudgeTrainConfig(**{**saved, "judge": JudgeConfig(**saved["judge"])})
+    extra = tuple(Path(path) for path in saved.get("extra_data", ()))
+    return JudgeTrainConfig(**{"kind": "video", **saved, "extra_data": extra, "judge": JudgeConfig(**saved["judge"])})
 
 
-def load_judge(run: Path) -> LearnedJudge:
-    """The newest checkpoint of a judge run (or a checkpoint directory), in eval mode."""
-    return load_model(Path(run), LearnedJudge.from_spec)
+def load_judge(run: Path) -> LearnedJudge | FrameJudge:
+    """The newest checkpoint of a judge run (or a checkpoint directory), in eval mode.
+
+    Raises:
+        ValueError: the checkpoint names no judge backend this version knows.
+    """
+    classes = {judge.backend: judge for judge in JUDGES.values()}
+
+    def build(spec: dict) -> LearnedJudge | FrameJudge:
+        backend = spec.get("backend")
+        if backend not in classes:
+            raise ValueError(f"{run}: model.backend is {backend!r}; known judges: {sorted(classes)}")
+        return classes[backend].from_spec(spec)
+
+    return load_model(Path(run), build)

@@ -1,0 +1,111 @@
+"""The per-frame success judge: is the task done in this frame?
+
+Legend: B videos, T frames, N judged frames, H/W image size, D feature width.
+
+Meta-World reports success at every step, so a judge can learn from every frame of every
+episode (tens of thousands of labelled frames where whole-episode labels give a few hundred
+videos), and it can judge a video the way the real world does: a rollout succeeds if the task is
+done at any step. Each frame is judged beside the video's first frame (where the objects and the
+goal started, which a frame alone may hide behind the arm) and the instruction's MiniLM
+embedding; the video's probability of success is the largest of its frames' (the start frame
+excluded: nothing has been done yet).
+
+The decision threshold is part of the model's settings, chosen by `gymnast train-judge` on
+validation scenes that neither training nor the reported figures use.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import asdict
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from gymnast.policy.text import EMBEDDING_DIM, InstructionEncoder
+from gymnast.policy.vision import to_float_image
+from gymnast.reward.base import RewardContext
+from gymnast.reward.judge import JudgeConfig, check_videos
+
+FRAMES_PER_PASS = 512  # frames through the CNN at once: bounds memory on long batches of videos
+
+
+def _pair_encoder(width: int) -> nn.Sequential:
+    """(N, 6, H, W) first frame and judged frame, stacked -> (N, width) features.
+
+    The two frames enter together so the first layers can see what changed, and the final grid is
+    kept (flattened), not pooled: success is a spatial relation (the puck *at* the goal), which
+    pooling would blur. Lighter than the policy's CNN because a judge scores every frame.
+    """
+    layers, channels = [], 6
+    for out in (32, 64, 64, 64):
+        layers += [nn.Conv2d(channels, out, 3, stride=2, padding=1), nn.GroupNorm(8, out), nn.GELU()]
+        channels = out
+    return nn.Sequential(*layers, nn.Flatten(), nn.LazyLinear(width), nn.GELU())
+
+
+class FrameJudge(nn.Module):
+    """`Reward` whose score is 1.0 when some frame after the first shows success (P >= threshold)."""
+
+    backend = "frame-judge"
+    binary = True
+
+    def __init__(self, config: JudgeConfig = JudgeConfig()) -> None:
+        super().__init__()
+        self.config = config
+        self.vision = _pair_encoder(config.width)
+        self.text = nn.Linear(EMBEDDING_DIM, config.width)
+        self.head = nn.Sequential(nn.Linear(2 * config.width, 256), nn.GELU(), nn.Linear(256, 1))
+        self.encoder = InstructionEncoder()
+        self(torch.zeros(1, config.image_size, config.image_size, 3, dtype=torch.uint8),
+             torch.zeros(1, config.image_size, config.image_size, 3, dtype=torch.uint8), torch.zeros(1, EMBEDDING_DIM))
+
+    def forward(self, first: torch.Tensor, frames: torch.Tensor, text: torch.Tensor) -> torch.Tensor:
+        """(N, H, W, 3) uint8 first frames and judged frames, (N, 384) embeddings -> (N,) logits."""
+        logits = []
+        for start in range(0, len(frames), FRAMES_PER_PASS):
+            part = slice(start, start + FRAMES_PER_PASS)
+            pair = torch.cat([to_float_image(first[part]), to_float_image(frames[part])], dim=1) * 2.0 - 1.0
+            with torch.autocast(self.text.weight.device.type, dtype=torch.bfloat16):  # ~2x faster convolutions
+                image = self.vision(pair.to(self.text.weight.device)).float()
+            logits.append(self.head(torch.cat([image, self.text(text[part])], dim=1)).squeeze(1))
+        return torch.cat(logits)
+
+    @torch.no_grad()
+    def frame_probabilities(self, videos: torch.Tensor, instructions: Sequence[str]) -> torch.Tensor:
+        """(B, T) P(success shows in frame t) for (B, T, H, W, 3) uint8 videos; frame 0 gets 0."""
+        check_videos(videos, instructions)
+        batch, length = videos.shape[:2]
+        if length < 2:
+            return torch.zeros(batch, length)
+        later = videos[:, 1:].flatten(0, 1)  # (B*(T-1), H, W, 3)
+        first = videos[:, :1].expand(-1, length - 1, -1, -1, -1).flatten(0, 1)
+        text = self.encoder(instructions)[:, None].expand(-1, length - 1, -1).flatten(0, 1)
+        probabilities = torch.sigmoid(self(first, later, text).float()).view(batch, length - 1)
+        return torch.cat([torch.zeros(batch, 1), probabilities], dim=1)
+
+    def probability(self, videos: torch.Tensor, instructions: Sequence[str]) -> torch.Tensor:
+        """(B,) P(success) of each video: that of its most convincing frame."""
+        return self.frame_probabilities(videos, instructions).max(dim=1).values
+
+    def score(self, frames: torch.Tensor, instructions: Sequence[str], context: RewardContext | None = None) -> torch.Tensor:
+        """1.0 where some frame shows success (P >= the chosen threshold), else 0.0."""
+        return (self.probability(frames, instructions) >= self.config.threshold).float()
+
+    def spec(self) -> dict:
+        return {"backend": self.backend, **asdict(self.config)}
+
+    @classmethod
+    def from_spec(cls, spec: dict) -> FrameJudge:
+        return cls(JudgeConfig(**{k: v for k, v in spec.items() if k != "backend"}))
+
+
+def frame_loss(judge: FrameJudge, first: torch.Tensor, frames: torch.Tensor, text: torch.Tensor, labels: torch.Tensor):
+    """Binary cross-entropy of (N, H, W, 3) frames, beside their videos' (N, H, W, 3) first frames,
+    against (N,) labels; (loss, metrics)."""
+    logits = judge(first, frames, text)
+    loss = F.binary_cross_entropy_with_logits(logits, labels.float())
+    accuracy = ((logits > 0) == labels.bool()).float().mean()
+    return loss, {"train/loss": loss.item(), "train/accuracy": accuracy.item()}
+

@@ -1,0 +1,106 @@
+"""The per-frame judge: success at any frame, balanced frame batches, a threshold chosen on
+validation scenes only, and checkpoints of either judge kind."""
+
+import dataclasses
+import json
+
+import pytest
+import torch
+
+from gymnast.data.lerobot import EpisodeDataset
+from gymnast.reward.frame_judge import FrameJudge
+from gymnast.reward.judge import JudgeConfig
+from gymnast.reward.train_judge import (JUDGE_PRESETS, FramePool, Video, choose_threshold, judge_cases, load_judge,
+                                        split_scenes, train_judge)
+
+DEBUG = dataclasses.replace(JUDGE_PRESETS["debug"], heldout_fraction=0.25, validation_fraction=0.2)
+
+
+def video(shows: list[bool], value: int = 0) -> Video:
+    """A (T+1)-frame video whose frames are filled with `value` + their index, with per-frame success."""
+    shows_t = torch.tensor([False, *shows])
+    frames = (torch.arange(len(shows_t)) + value).clamp(max=255).to(torch.uint8)[:, None, None, None].expand(-1, 8, 8, 3)
+    return Video(frames.contiguous(), shows_t.cummax(0).values, shows_t, "reach the goal", imagined=False)
+
+
+class Brightness:
+    """A stand-in judge whose P(success) of a video is its last frame's brightness / 255."""
+
+    def probability(self, videos: torch.Tensor, instructions) -> torch.Tensor:
+        return videos[:, -1].float().mean(dim=(1, 2, 3)) / 255
+
+
+def test_a_video_succeeds_where_its_most_convincing_frame_does():
+    judge = FrameJudge(JudgeConfig(width=16, image_size=16, threshold=0.7)).eval()
+    videos = torch.randint(0, 255, (2, 5, 16, 16, 3), dtype=torch.uint8)
+    per_frame = judge.frame_probabilities(videos, ["open the drawer"] * 2)
+    assert per_frame.shape == (2, 5) and (per_frame[:, 0] == 0).all()  # nothing is done at the start
+    assert torch.allclose(judge.probability(videos, ["open the drawer"] * 2), per_frame.max(dim=1).values)
+    with torch.no_grad():
+        judge.head[-1].bias.fill_(-30.0)  # every frame: certainly not
+    assert (judge.score(videos, ["open the drawer"] * 2) == 0).all()
+    with torch.no_grad():
+        judge.head[-1].bias.fill_(30.0)
+    assert (judge.score(videos, ["open the drawer"] * 2) == 1).all()
+    with pytest.raises(ValueError, match=r"\(B, T, H, W, 3\) uint8"):
+        judge.frame_probabilities(videos.float(), ["x"] * 2)
+
+
+def test_frame_batches_are_half_successes_and_skip_frames_just_before_a_success():
+    success = video([False] * 6 + [True] * 3)  # first success at frame 7
+    failure = video([False] * 9, value=100)
+    pool = FramePool([success, failure], ambiguous=2)
+    assert sorted(pool.positives[:, 1].tolist()) == [7, 8, 9]
+    negatives = {tuple(pair) for pair in pool.negatives.tolist()}
+    assert (0, 5) not in negatives and (0, 6) not in negatives and (0, 4) in negatives  # 5, 6 are too close to call
+    assert all((1, t) in negatives for t in range(1, 10)) and (0, 0) not in negatives  # the start frame is never used
+    first, frames, texts, labels = pool.sample(10, torch.Generator().manual_seed(0))
+    assert first.shape == frames.shape == (10, 8, 8, 3) and len(texts) == 10
+    assert labels.sum() == 5
+    assert all(int(f[0, 0, 0]) in (7, 8, 9) for f in frames[labels])  # success frames carry their index
+    with pytest.raises(ValueError, match="frames with and without success"):
+        FramePool([failure], ambiguous=2)
+
+
+def test_the_threshold_separates_validation_cases():
+    # Successes end bright (200+), failures dark (< 60): any threshold between separates them.
+    videos = [video([False] * 20 + [True], value=190), video([False] * 21, value=30), video([False] * 21, value=10)]
+    chosen = choose_threshold(Brightness(), videos)
+    assert chosen["tpr"] == 1.0 and chosen["fpr"] == 0.0
+    scores = [Brightness().probability(frames[None], [text]).item() for frames, text, *_ in judge_cases(videos)]
+    positives = [s for s, case in zip(scores, judge_cases(videos)) if case[2]]
+    negatives = [s for s, case in zip(scores, judge_cases(videos)) if not case[2]]
+    assert max(negatives) < chosen["threshold"] <= min(positives)
+    assert choose_threshold(Brightness(), videos[1:])["threshold"] == 0.5  # one outcome only: nothing to choose
+
+
+def test_scenes_split_three_ways_without_overlap(tiny_dataset):
+    dataset = EpisodeDataset(tiny_dataset)
+    train, validation, heldout = split_scenes(dataset, DEBUG)
+    scenes = [{(dataset.episodes[i].task, dataset.episodes[i].seed) for i in part} for part in (train, validation, heldout)]
+    assert not (scenes[0] & scenes[1]) and not (scenes[0] & scenes[2]) and not (scenes[1] & scenes[2])
+    assert sorted(train + validation + heldout) == list(range(len(dataset.episodes)))
+
+
+def test_the_chosen_threshold_is_saved_with_the_judge(tiny_dataset, tmp_path):
+    report = train_judge(tiny_dataset, tmp_path / "judge", DEBUG, progress=False)
+    judge = load_judge(tmp_path / "judge")
+    assert isinstance(judge, FrameJudge) and report["kind"] == "frames"
+    assert judge.config.threshold == pytest.approx(report["validation_threshold"])
+    saved = json.loads((tmp_path / "judge" / "config.json").read_text())
+    assert saved["model"]["threshold"] == pytest.approx(report["validation_threshold"])
+    video_kind = train_judge(tiny_dataset, tmp_path / "video", dataclasses.replace(DEBUG, kind="video"), progress=False)
+    assert video_kind["kind"] == "video" and load_judge(tmp_path / "video").backend == "embedded-judge"
+
+
+def test_a_checkpoint_of_an_unknown_judge_is_refused(tmp_path):
+    from gymnast.utils.checkpoint import save_checkpoint
+
+    save_checkpoint(tmp_path, 1, FrameJudge(JudgeConfig(width=16, image_size=16)), {"model": {"backend": "oracle"}})
+    with pytest.raises(ValueError, match="model.backend is 'oracle'"):
+        load_judge(tmp_path)
+
+
+def test_the_committed_video_judge_still_loads():
+    judge = load_judge("results/judge/judge")
+    assert judge.backend == "embedded-judge" and judge.config.threshold == 0.5
