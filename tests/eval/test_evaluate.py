@@ -14,7 +14,7 @@ import torch
 from gymnast.cli import main
 from gymnast.config import EnvConfig
 from gymnast.envs.tasks import EVAL_SEEDS, eval_seed
-from gymnast.eval import evaluate as evaluate_module
+from gymnast.eval import actors
 from gymnast.eval.evaluate import EvalConfig, evaluate, plan_episodes
 from gymnast.eval.stats import wilson_interval
 from gymnast.policy.base import ActionSample
@@ -119,13 +119,13 @@ def test_a_saved_vla_run_is_loaded_once_per_process_and_evaluated(tmp_path: Path
     model = EmbeddedVLA(VLAConfig(width=32, layers=1, heads=2, chunk_size=8, image_size=32))
     run = tmp_path / "run"
     save_checkpoint(run, 1, model, {"model": model.spec()})
-    evaluate_module._load_policy.cache_clear()
+    actors.load_run_policy.cache_clear()
     try:
         config = EvalConfig(tasks="reach-v3", episodes=2, workers=1, videos_per_task=0, env=SHORT)
         report = evaluate(str(run), config, tmp_path / "run.json", progress=False)
-        assert evaluate_module._load_policy.cache_info().misses == 1  # loaded once, reused for episode 2
+        assert actors.load_run_policy.cache_info().misses == 1  # loaded once, reused for episode 2
     finally:
-        evaluate_module._load_policy.cache_clear()
+        actors.load_run_policy.cache_clear()
     assert report["policy"] == str(run.resolve())
     assert report["episodes"] == 2 and report["real_interactions"] <= 2 * SHORT.horizon
 

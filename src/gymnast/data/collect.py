@@ -1,21 +1,30 @@
-"""`gymnast collect`: record scripted episodes in the real world into a LeRobot v3.0 dataset.
+"""`gymnast collect`: record episodes in the real world into a LeRobot v3.0 dataset.
+
+Legend: K action-chunk length, A action dimensions.
 
 The plan is a deterministic list of episode recipes (task, behaviour, noise, seed), so a rerun
 with the same arguments skips every recipe already in the dataset and records only the rest, and
 a rerun with more episodes per task extends it. Finished episodes are staged durably as they
 arrive (a crash loses at most the episodes in flight) and consolidated into the dataset files
 every `flush_every` episodes and at the end.
+
+Every episode is played by an `Actor`, which returns a chunk of K actions executed open-loop: a
+scripted behaviour (expert, noisy expert, failure) is a chunk of one action read from the
+simulator state. A learned policy's actor is built above this layer (data/ never imports the
+policies) and passed in as an `ActorFactory`; see `gymnast.eval.record`.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import logging
 import math
 from collections import defaultdict
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 from tqdm import tqdm
@@ -24,7 +33,7 @@ from gymnast.config import CommaFloats, EnvConfig
 from gymnast.data.lerobot import EpisodeDataset
 from gymnast.data.lerobot_writer import LeRobotWriter
 from gymnast.data.schema import Episode, EpisodeInfo, episode_key
-from gymnast.envs.experts import make_behaviour
+from gymnast.envs.experts import Behaviour, make_behaviour
 from gymnast.envs.gap import get_gap
 from gymnast.envs.metaworld import MetaWorldEnv
 from gymnast.envs.parallel import cached_env, parallel_map
@@ -44,12 +53,12 @@ class CollectConfig:
     tasks: str = "mt10"
     """Task names and/or task sets (mt10, mt50), comma-separated."""
     episodes_per_task: int = 10
-    """Expert episodes per task; they cycle through the noise levels."""
+    """Expert (or policy) episodes per task; they cycle through the noise levels."""
     noise: CommaFloats = (0.0, 0.1, 0.3)
-    """Standard deviations of Gaussian action noise for the expert episodes (0 = clean expert)."""
+    """Standard deviations of Gaussian action noise for the expert (or policy) episodes (0 = clean)."""
     failure_fraction: float = 0.25
     """Extra failure episodes per task (random actions, another task's expert), as a fraction of
-    episodes_per_task, rounded up; 0 records none."""
+    episodes_per_task, rounded up; 0 records none. Not used when recording a policy."""
     first_seed: int = 0
     """Seed of each task's first episode; episode i uses first_seed + i (data seeds only)."""
     gap: str = "none"
@@ -94,38 +103,93 @@ class EpisodeJob:
         return episode_key(get_gap(self.gap).env_variant, self.task, self.behaviour, self.noise, self.seed)
 
 
-def plan_episodes(config: CollectConfig) -> list[EpisodeJob]:
-    """Every recipe the configuration asks for, in a fixed order."""
+class Actor(Protocol):
+    """Plays one episode: called with the environment and its latest observation whenever the
+    previous chunk has run out."""
+
+    def __call__(self, env: MetaWorldEnv, obs: dict[str, np.ndarray]) -> np.ndarray:
+        """(K, A) the next K >= 1 actions, executed open-loop (stopping early if the episode ends)."""
+        ...
+
+
+class ActorFactory(Protocol):
+    """Builds each episode's `Actor` in the process that records it.
+
+    It travels to the worker processes, so it must be picklable (an instance of a module-level
+    class holding plain settings), and it should load anything heavy once per process.
+    """
+
+    behaviour: str
+    """The behaviour recorded with every episode (``policy-<tag>``, see `gymnast.data.schema.policy_behaviour`)."""
+
+    def __call__(self, job: EpisodeJob) -> Actor: ...
+
+
+class _ScriptedActor:
+    """A scripted behaviour as an `Actor`: a chunk of one action, from the simulator state."""
+
+    def __init__(self, behaviour: Behaviour) -> None:
+        self._behaviour = behaviour
+
+    def __call__(self, env: MetaWorldEnv, obs: dict[str, np.ndarray]) -> np.ndarray:
+        return self._behaviour(env.env_state)[None]  # (1, A)
+
+
+def plan_episodes(config: CollectConfig, behaviour: str | None = None) -> list[EpisodeJob]:
+    """Every recipe the configuration asks for, in a fixed order.
+
+    Args:
+        config: tasks, episodes per task, noise levels, failures, seeds.
+        behaviour: a learned actor's behaviour (`ActorFactory.behaviour`): every episode uses it,
+            cycling through the noise levels, and no failure episodes are planned (the policy's
+            own failures are what such a dataset is for). None plans the scripted behaviours.
+    """
     jobs = []
     for task in resolve_tasks(config.tasks):
         for i in range(config.episodes_per_task):
             noise = config.noise[i % len(config.noise)]
-            behaviour = "expert" if noise == 0 else "noisy_expert"
-            jobs.append(EpisodeJob(task, behaviour, noise, config.first_seed + i, config.gap, config.env))
-        for i in range(config.failures_per_task):
-            behaviour = ("random", "wrong_task_expert")[i % 2]
-            jobs.append(EpisodeJob(task, behaviour, 0.0, config.first_seed + i, config.gap, config.env))
+            name = behaviour or ("expert" if noise == 0 else "noisy_expert")
+            jobs.append(EpisodeJob(task, name, noise, config.first_seed + i, config.gap, config.env))
+        for i in range(0 if behaviour else config.failures_per_task):
+            failure = ("random", "wrong_task_expert")[i % 2]
+            jobs.append(EpisodeJob(task, failure, 0.0, config.first_seed + i, config.gap, config.env))
     return jobs
 
 
-def record_episode(job: EpisodeJob) -> Episode:
-    """Runs one recipe to its end in this process's cached environment."""
+def record_episode(job: EpisodeJob, make_actor: ActorFactory | None = None) -> Episode:
+    """Runs one recipe to its end in this process's cached environment.
+
+    Args:
+        job: the recipe.
+        make_actor: builds the episode's actor; None plays the scripted `job.behaviour`.
+
+    Raises:
+        ValueError: the actor returned something other than a non-empty (K, A) chunk.
+    """
     env = cached_env(job.task, job.env, gap=job.gap)
-    act = make_behaviour(job.behaviour, job.task, job.noise, job.seed)
+    if make_actor is None:
+        actor: Actor = _ScriptedActor(make_behaviour(job.behaviour, job.task, job.noise, job.seed))
+    else:
+        actor = make_actor(job)
     obs, info = env.reset(seed=job.seed)
     frames, states, env_states = [obs["image"]], [obs["state"]], [info["env_state"]]
     actions, rewards, successes = [], [], []
     done = False
     while not done:
-        action = act(env.env_state)
-        obs, reward, terminated, truncated, info = env.step(action)
-        frames.append(obs["image"])
-        states.append(obs["state"])
-        env_states.append(info["env_state"])
-        actions.append(action)
-        rewards.append(reward)
-        successes.append(info["success"])
-        done = terminated or truncated
+        chunk = np.asarray(actor(env, obs))  # (K, A)
+        if chunk.ndim != 2 or len(chunk) == 0:
+            raise ValueError(f"an actor must return a (K, A) chunk with K >= 1, got shape {chunk.shape}")
+        for action in chunk:  # executed open-loop, without looking at the new frames
+            obs, reward, terminated, truncated, info = env.step(action)
+            frames.append(obs["image"])
+            states.append(obs["state"])
+            env_states.append(info["env_state"])
+            actions.append(action)
+            rewards.append(reward)
+            successes.append(info["success"])
+            done = terminated or truncated
+            if done:
+                break
     return Episode(
         frames=np.stack(frames),
         states=np.stack(states),
@@ -145,8 +209,17 @@ def record_episode(job: EpisodeJob) -> Episode:
     )
 
 
-def collect(config: CollectConfig, out: str | Path, progress: bool = True) -> dict:
+def collect(
+    config: CollectConfig, out: str | Path, progress: bool = True, make_actor: ActorFactory | None = None
+) -> dict:
     """Records every planned episode not yet in `out`; returns `success_table` of the dataset.
+
+    Args:
+        config: what to record.
+        out: dataset directory (created if missing).
+        progress: show a progress bar with the running success rate.
+        make_actor: records this actor (e.g. a learned policy) as `make_actor.behaviour` instead
+            of the scripted behaviours; see `plan_episodes`.
 
     Raises:
         ValueError: `out` holds a dataset recorded with other environment settings.
@@ -154,14 +227,15 @@ def collect(config: CollectConfig, out: str | Path, progress: bool = True) -> di
     out = Path(out)
     _check_settings(out, config)
     writer = LeRobotWriter(out, fps=MetaWorldEnv.metadata["render_fps"])
-    plan = plan_episodes(config)
+    plan = plan_episodes(config, None if make_actor is None else make_actor.behaviour)
     done = writer.keys()
     todo = [job for job in plan if job.key not in done]
     logger.info("%d episodes planned, %d of them already in %s", len(plan), len(plan) - len(todo), out)
+    record = record_episode if make_actor is None else functools.partial(record_episode, make_actor=make_actor)
     bar = tqdm(total=len(todo), desc="collect", unit="ep", disable=not progress)
     recorded = successes = 0
     try:
-        for episode in parallel_map(record_episode, todo, config.workers):
+        for episode in parallel_map(record, todo, config.workers):
             writer.add(episode)
             recorded += 1
             successes += episode.info.success

@@ -12,17 +12,46 @@ size, A action dimensions.
 from __future__ import annotations
 
 import dataclasses
+import re
 from dataclasses import dataclass
 
 import numpy as np
 
-BEHAVIOURS = ("expert", "noisy_expert", "random", "wrong_task_expert")
+SCRIPTED_BEHAVIOURS = ("expert", "noisy_expert", "random", "wrong_task_expert")
+"""The behaviours that act from the simulator state (`gymnast.envs.experts.make_behaviour`)."""
+POLICY = "policy"
+BEHAVIOURS = (*SCRIPTED_BEHAVIOURS, POLICY)
 """How the actions of an episode were produced.
 
 expert: the task's scripted Meta-World policy; noisy_expert: the same with Gaussian action noise;
 random: uniform random actions; wrong_task_expert: the scripted policy of another task (a
-plausible-looking failure).
+plausible-looking failure); policy: a learned policy's own rollouts from the camera image,
+recorded as ``policy`` or ``policy-<tag>`` (see `policy_behaviour`).
 """
+_POLICY_TAG = re.compile(r"[0-9a-z]+")
+
+
+def policy_behaviour(tag: str) -> str:
+    """The behaviour name of one learned policy's rollouts: ``policy-<tag>``.
+
+    The tag (lowercase letters and digits) names the policy and its sampling settings. It lives
+    in the behaviour, hence in the episode key, so that one dataset can hold several policies'
+    rollouts from the same seeds and noise levels without a rerun mistaking one for another. The
+    noise field, a float, cannot carry it, and a new `EpisodeInfo` field would be a metadata
+    column that every dataset recorded before it lacks.
+
+    Raises:
+        ValueError: the tag is empty or has other characters.
+    """
+    if not _POLICY_TAG.fullmatch(tag):
+        raise ValueError(f"a policy tag is lowercase letters and digits, got {tag!r}")
+    return f"{POLICY}-{tag}"
+
+
+def behaviour_kind(behaviour: str) -> str:
+    """The behaviour without its policy tag: ``policy-3f2a9c1e`` -> ``policy``; others unchanged."""
+    kind, dash, tag = behaviour.partition("-")
+    return POLICY if kind == POLICY and dash and _POLICY_TAG.fullmatch(tag) else behaviour
 
 
 def episode_key(env_variant: str, task: str, behaviour: str, noise: float, seed: int) -> str:
@@ -38,7 +67,7 @@ class EpisodeInfo:
         task: Meta-World task name, e.g. ``drawer-open-v3``.
         instruction: the natural-language instruction given with the episode.
         success: whether the task was achieved at any step of the episode.
-        behaviour: one of `BEHAVIOURS`.
+        behaviour: one of `BEHAVIOURS`, a learned policy's with its tag (`policy_behaviour`).
         noise: standard deviation of the Gaussian noise added to the behaviour's actions.
         seed: the environment seed that fixed the initial state.
         env_variant: which world the episode was recorded in, e.g. ``real`` or ``sim-gap-mild``.
@@ -53,8 +82,10 @@ class EpisodeInfo:
     env_variant: str = "real"
 
     def __post_init__(self) -> None:
-        if self.behaviour not in BEHAVIOURS:
-            raise ValueError(f"EpisodeInfo.behaviour must be one of {BEHAVIOURS}, got {self.behaviour!r}")
+        if behaviour_kind(self.behaviour) not in BEHAVIOURS:
+            raise ValueError(
+                f"EpisodeInfo.behaviour must be one of {BEHAVIOURS} or {POLICY}-<tag>, got {self.behaviour!r}"
+            )
 
     @property
     def key(self) -> str:

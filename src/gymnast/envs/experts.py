@@ -15,7 +15,7 @@ from typing import Protocol
 import numpy as np
 from metaworld.policies import ENV_POLICY_MAP
 
-from gymnast.data.schema import BEHAVIOURS
+from gymnast.data.schema import SCRIPTED_BEHAVIOURS
 from gymnast.envs.tasks import MT50, check_task
 
 # Meta-World's experts warn on every step whose command they clip to [-1, 1]; clipping is the
@@ -67,7 +67,7 @@ def wrong_task_for(task: str, seed: int) -> str:
 
 
 def make_behaviour(behaviour: str, task: str, noise: float, seed: int) -> Behaviour:
-    """Builds the named behaviour (see `gymnast.data.schema.BEHAVIOURS`) for one episode."""
+    """Builds the named behaviour (see `gymnast.data.schema.SCRIPTED_BEHAVIOURS`) for one episode."""
     rng = np.random.default_rng([zlib.crc32(task.encode()), seed, 2])
     if behaviour in ("expert", "noisy_expert"):
         return ScriptedExpert(task, noise, rng)
@@ -75,4 +75,4 @@ def make_behaviour(behaviour: str, task: str, noise: float, seed: int) -> Behavi
         return RandomActions(rng)
     if behaviour == "wrong_task_expert":
         return ScriptedExpert(wrong_task_for(task, seed), noise, rng)
-    raise ValueError(f"unknown behaviour {behaviour!r}; choose one of {BEHAVIOURS}")
+    raise ValueError(f"unknown behaviour {behaviour!r}; choose one of {SCRIPTED_BEHAVIOURS}")

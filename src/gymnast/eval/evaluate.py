@@ -16,7 +16,6 @@ import dataclasses
 import functools
 import json
 import logging
-import multiprocessing
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -26,10 +25,11 @@ import numpy as np
 from tqdm import tqdm
 
 from gymnast.config import EnvConfig
+from gymnast.eval.actors import PolicyActor, load_run_policy
 from gymnast.envs.experts import ScriptedExpert
 from gymnast.envs.gap import get_gap
 from gymnast.envs.instructions import SPLITS
-from gymnast.envs.metaworld import ACTION_DIM, MetaWorldEnv
+from gymnast.envs.metaworld import MetaWorldEnv
 from gymnast.envs.parallel import cached_env, parallel_map
 from gymnast.envs.perturb import get_perturbation
 from gymnast.envs.tasks import eval_seed, resolve_tasks
@@ -145,46 +145,6 @@ class _ExpertActor:
         return self._expert(env.env_state)[None]  # (1, A)
 
 
-class _PolicyActor:
-    """A `Policy`: one greedy chunk of K actions per call, from the camera image alone."""
-
-    def __init__(self, policy: Policy) -> None:
-        if policy.chunk_size < 1 or policy.action_dim != ACTION_DIM:
-            raise ValueError(
-                f"policy has chunk_size={policy.chunk_size}, action_dim={policy.action_dim}; the "
-                f"evaluation needs chunk_size >= 1 and action_dim={ACTION_DIM} (Meta-World's actions)"
-            )
-        self._policy = policy
-
-    def __call__(self, env: MetaWorldEnv, obs: dict[str, np.ndarray]) -> np.ndarray:
-        import torch
-
-        image = torch.from_numpy(obs["image"])[None]  # (1, H, W, 3) uint8
-        with torch.inference_mode():
-            chunk = self._policy.act(image, [env.instruction])  # (1, K, A)
-        expected = (1, self._policy.chunk_size, ACTION_DIM)
-        if tuple(chunk.shape) != expected:
-            raise ValueError(f"policy.act returned shape {tuple(chunk.shape)}, expected (B, K, A) = {expected}")
-        actions = chunk[0].detach().to("cpu", torch.float32).numpy()  # (K, A)
-        if not np.isfinite(actions).all():
-            raise ValueError(f"policy.act returned non-finite actions on {env.task}: {actions.tolist()}")
-        return actions
-
-
-@functools.lru_cache(maxsize=1)
-def _load_policy(run_dir: str) -> Policy:
-    """This process's policy from `run_dir`, loaded once and reused across episodes."""
-    import torch
-
-    from gymnast.policy.vla import load_policy
-
-    if multiprocessing.parent_process() is not None:
-        # Each worker is one of several processes on the cores; torch's default of one thread
-        # per core in every one of them would oversubscribe the CPU many times over.
-        torch.set_num_threads(1)
-    return load_policy(Path(run_dir))
-
-
 def run_episode(job: EvalJob, policy: Policy | None = None) -> dict:
     """Runs one evaluation episode in this process's cached environment.
 
@@ -199,11 +159,11 @@ def run_episode(job: EvalJob, policy: Policy | None = None) -> dict:
     env = cached_env(job.task, job.env, gap=job.gap, perturbation=job.perturb,
                      instruction_split=job.instruction_split)
     if policy is not None:
-        actor = _PolicyActor(policy)
+        actor = PolicyActor(policy)
     elif job.policy == EXPERT:
         actor = _ExpertActor(job.task)
     else:
-        actor = _PolicyActor(_load_policy(job.policy))
+        actor = PolicyActor(load_run_policy(job.policy))
     obs, _ = env.reset(seed=job.seed)
     frames = [obs["image"]] if job.video_path else []
     steps, success, done = 0, False, False

@@ -1,0 +1,89 @@
+"""A learned policy acting in the real world, for evaluation and for recording its rollouts.
+
+Legend: K action-chunk length, A action dimensions (4 in Meta-World), H/W image height/width.
+
+The policy sees the current camera image and returns a chunk of K actions, executed open-loop as
+it would be on a robot (the episode loops that do so: `gymnast.eval.evaluate.run_episode` and
+`gymnast.data.collect.record_episode`).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import multiprocessing
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from gymnast.envs.metaworld import ACTION_DIM, MetaWorldEnv
+
+if TYPE_CHECKING:
+    from gymnast.policy.base import Policy
+
+
+class PolicyActor:
+    """A `Policy`: one chunk of K actions per call, from the camera image alone.
+
+    Args:
+        policy: the policy.
+        temperature: 0 decodes greedily (`Policy.act`); above 0 samples every action token from
+            softmax(logits / temperature) (`Policy.sample`).
+        noise: standard deviation of Gaussian noise added to every action; 0 adds none.
+        seed: seeds the sampling and the noise, so that an episode can be repeated exactly.
+
+    Raises:
+        ValueError: a chunk size or action size Meta-World cannot execute, or a negative (or
+            non-finite) temperature or noise.
+    """
+
+    def __init__(self, policy: Policy, temperature: float = 0.0, noise: float = 0.0, seed: int = 0) -> None:
+        import torch
+
+        if policy.chunk_size < 1 or policy.action_dim != ACTION_DIM:
+            raise ValueError(
+                f"policy has chunk_size={policy.chunk_size}, action_dim={policy.action_dim}; the "
+                f"environment needs chunk_size >= 1 and action_dim={ACTION_DIM} (Meta-World's actions)"
+            )
+        for name, value in (("temperature", temperature), ("noise", noise)):
+            if not (value >= 0 and math.isfinite(value)):  # also refuses NaN
+                raise ValueError(f"{name} must be a finite number >= 0, got {value}")
+        self._policy, self._temperature, self._noise = policy, temperature, noise
+        # Two streams, so the sampled tokens do not depend on whether noise is drawn, and back.
+        self._generator = torch.Generator().manual_seed(seed)
+        self._rng = np.random.default_rng(seed)
+
+    def __call__(self, env: MetaWorldEnv, obs: dict[str, np.ndarray]) -> np.ndarray:
+        import torch
+
+        image = torch.from_numpy(obs["image"])[None]  # (1, H, W, 3) uint8
+        with torch.inference_mode():
+            if self._temperature > 0:
+                chunk = self._policy.sample(image, [env.instruction], self._temperature, self._generator).actions
+            else:
+                chunk = self._policy.act(image, [env.instruction])  # (1, K, A)
+        expected = (1, self._policy.chunk_size, ACTION_DIM)
+        if tuple(chunk.shape) != expected:
+            raise ValueError(f"the policy returned shape {tuple(chunk.shape)}, expected (B, K, A) = {expected}")
+        actions = chunk[0].detach().to("cpu", torch.float32).numpy()  # (K, A)
+        if not np.isfinite(actions).all():
+            raise ValueError(f"the policy returned non-finite actions on {env.task}: {actions.tolist()}")
+        if self._noise > 0:
+            actions = actions + self._rng.normal(0.0, self._noise, size=actions.shape).astype(np.float32)
+        # The environment clips to [-1, 1] anyway; clipping here makes a recorded action the executed one.
+        return np.clip(actions, -1.0, 1.0)
+
+
+@functools.lru_cache(maxsize=1)
+def load_run_policy(run_dir: str) -> Policy:
+    """This process's policy from `run_dir`, loaded once and reused across episodes."""
+    import torch
+
+    from gymnast.policy.vla import load_policy
+
+    if multiprocessing.parent_process() is not None:
+        # Each worker is one of several processes on the cores; torch's default of one thread
+        # per core in every one of them would oversubscribe the CPU many times over.
+        torch.set_num_threads(1)
+    return load_policy(Path(run_dir))
