@@ -137,27 +137,37 @@ def rollout(
     return ImaginedRollout(torch.cat(frames, dim=1), torch.cat(applied, dim=1), tuple(samples))
 
 
-BACKENDS = {"embedded": "gymnast.world_model.embedded:EmbeddedWorldModel"}
-"""Backend name -> "module:Class", imported only when a checkpoint asks for it."""
+BACKENDS = {"embedded": "gymnast.world_model.embedded:EmbeddedWorldModel",
+            "ensemble": "gymnast.world_model.ensemble:EnsembleWorldModel"}
+"""Backend name -> "module:Class", imported only when a checkpoint (or an ensemble directory) asks for it."""
+
+ENSEMBLE_FILE = "ensemble.json"
+"""A directory holding this file is an ensemble of world-model runs (see `gymnast.world_model.ensemble`)."""
 
 
 def load_world_model(run: str | Path, **overrides: Any) -> WorldModel:
-    """The newest checkpoint of a world-model run (or a checkpoint directory), in eval mode.
+    """The newest checkpoint of a world-model run (or a checkpoint directory), in eval mode; or,
+    for a directory holding ``ensemble.json``, the ensemble of the runs it lists.
 
     `overrides` replace fields of the saved model spec that do not change the weights (e.g. the
-    embedded backend's ``reanchor_every``).
+    embedded backend's ``reanchor_every``); an ensemble passes them to every member.
 
     Raises:
         FileNotFoundError: no checkpoint there.
         ValueError: the checkpoint names an unknown backend.
     """
 
+    def backend(name: Any) -> Any:
+        if name not in BACKENDS:
+            raise ValueError(f"{run}: model.backend is {name!r}; known backends: {sorted(BACKENDS)}")
+        module, attribute = BACKENDS[name].split(":")
+        return getattr(import_module(module), attribute)
+
+    if (Path(run) / ENSEMBLE_FILE).is_file():
+        return backend("ensemble").load(Path(run), **overrides).eval()
+
     def build(spec: dict) -> WorldModel:
         spec = {**spec, **overrides}
-        backend = spec.get("backend")
-        if backend not in BACKENDS:
-            raise ValueError(f"{run}: model.backend is {backend!r}; known backends: {sorted(BACKENDS)}")
-        module, name = BACKENDS[backend].split(":")
-        return getattr(import_module(module), name).from_spec(spec)
+        return backend(spec.get("backend")).from_spec(spec)
 
     return load_model(Path(run), build)

@@ -67,18 +67,41 @@ class EpisodeBank:
         dataset: where the episodes are.
         indices: which episodes to load.
         progress: show a progress bar while decoding.
+
+    Attributes:
+        indices: each episode's index in its dataset.
+        roots: each episode's dataset directory (banks may hold several datasets, see `union`).
+        infos, frames, actions: each episode's facts, (T+1, H, W, 3) uint8 frames and (T, A) actions.
     """
 
     def __init__(self, dataset: EpisodeDataset, indices: Sequence[int], progress: bool = False) -> None:
         if not indices:
             raise ValueError(f"{dataset.root}: no episodes to load (is the held-out fraction too large?)")
         self.indices = list(indices)
+        self.roots = [dataset.root] * len(self.indices)
         self.infos = [dataset.episodes[i] for i in self.indices]
         self.frames, self.actions = [], []
         for i in tqdm(self.indices, desc="loading episodes", disable=not progress):
             episode = dataset.load(i)
             self.frames.append(torch.from_numpy(episode.frames))  # (T+1, H, W, 3)
             self.actions.append(torch.from_numpy(episode.actions).float())  # (T, A)
+
+    @classmethod
+    def union(cls, parts: Sequence[tuple[EpisodeDataset, Sequence[int]]], progress: bool = False) -> EpisodeBank:
+        """One bank over the chosen episodes of several datasets, in order; datasets with none are skipped.
+
+        Raises:
+            ValueError: no dataset has an episode chosen.
+        """
+        banks = [cls(dataset, indices, progress) for dataset, indices in parts if indices]
+        if not banks:
+            roots = ", ".join(str(dataset.root) for dataset, _ in parts)
+            raise ValueError(f"{roots}: no episodes to load (is the held-out fraction too large?)")
+        bank = banks[0]
+        for other in banks[1:]:
+            for name in ("indices", "roots", "infos", "frames", "actions"):
+                getattr(bank, name).extend(getattr(other, name))
+        return bank
 
     def __len__(self) -> int:
         return len(self.indices)
@@ -93,7 +116,7 @@ class EpisodeBank:
         frames, actions = self.frames[k], self.actions[k]
         steps = len(actions)
         if not 1 - context <= start <= steps + 1 - context - future:
-            raise IndexError(f"clip start {start} is outside episode {self.indices[k]} ({steps} steps)")
+            raise IndexError(f"clip start {start} is outside episode {self.indices[k]} of {self.roots[k]} ({steps} steps)")
         index = torch.arange(start, start + context + future).clamp(min=0)
         action_index = torch.arange(start + context - 1, start + context - 1 + future)
         clip_actions = torch.where((action_index >= 0)[:, None], actions[action_index.clamp(min=0)], 0.0)

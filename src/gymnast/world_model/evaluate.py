@@ -9,6 +9,12 @@ whole-frame PSNR). The same figures are computed for the trivial predictor that 
 context frame, which the model must beat. Horizon h means the h-th imagined frame; "full" is the
 mean over every frame of the rollouts that start at t = 0, i.e. whole episodes.
 
+For an ensemble (`gymnast.world_model.ensemble`) the frames measured are its first member's, and
+the report adds the members' per-frame disagreement (disagreement_h1 ... _full) and how well it
+predicts that member's error (see `disagreement_error`): the evidence for stopping or discounting
+imagined rollouts where the members disagree. Held out for an ensemble are the scenes held out of
+every member (the smallest of their held-out fractions: the scene hash is the same for all).
+
 Legend: N rollouts, T imagined frames, H/W image size.
 """
 
@@ -31,6 +37,7 @@ from gymnast.utils.checkpoint import resolve_checkpoint
 from gymnast.world_model.base import load_world_model
 from gymnast.world_model.controllability import ControllabilityConfig, check_controllability
 from gymnast.world_model.data import split_episodes
+from gymnast.world_model.ensemble import EnsembleWorldModel, is_ensemble, member_paths
 from gymnast.world_model.metrics import PerceptualDistance, masked_psnr, moving_mask, psnr, ssim, summarize_horizons, to_unit_float
 from gymnast.world_model.videos import side_by_side, write_gif, write_side_by_side
 
@@ -62,15 +69,16 @@ def evaluate_world_model(wm: Path, data: Path, out: Path, config: WorldModelEval
     """Measures `wm` on the held-out episodes of `data`; writes the report to `out` and returns it."""
     started = time.perf_counter()
     model = load_world_model(wm, **({} if config.reanchor_every is None else {"reanchor_every": config.reanchor_every}))
-    run_config = json.loads((resolve_checkpoint(Path(wm)) / "config.json").read_text())
+    fraction = heldout_fraction(Path(wm))
+    ensemble = isinstance(model, EnsembleWorldModel)
     dataset = EpisodeDataset(data)
     if dataset.image_shape[:2] != (model.image_size, model.image_size):
         raise ValueError(f"{data}: frames are {dataset.image_shape}, the world model makes {model.image_size}x{model.image_size}")
-    _, heldout = split_episodes(dataset.episodes, run_config["train"]["heldout_fraction"])
+    _, heldout = split_episodes(dataset.episodes, fraction)
     if config.max_episodes:
         heldout = heldout[: config.max_episodes]
     if not heldout:
-        raise ValueError(f"{data} has no held-out episodes for this run (held-out fraction {run_config['train']['heldout_fraction']})")
+        raise ValueError(f"{data} has no held-out episodes for this run (held-out fraction {fraction})")
     perceptual = PerceptualDistance()
     rows: dict[str, list[np.ndarray]] = defaultdict(list)  # measure -> one (T,) array per rollout
     tasks, full_rollout = [], []
@@ -80,8 +88,11 @@ def evaluate_world_model(wm: Path, data: Path, out: Path, config: WorldModelEval
         frames, actions = torch.from_numpy(episode.frames), torch.from_numpy(episode.actions).float()
         for start in range(0, len(actions), config.start_every):
             context = frames[max(0, start + 1 - model.context_frames) : start + 1][None]
-            imagined = model.step(model.init_state(context), actions[None, start:])[1][0]  # (T, H, W, 3)
+            state, imagined = model.step(model.init_state(context), actions[None, start:])
+            imagined = imagined[0]  # (T, H, W, 3)
             real = frames[start + 1 :]
+            if ensemble:
+                rows["disagreement"].append(state.disagreement[0].numpy())
             for name, values in _measure(imagined, real, context[0], perceptual).items():
                 rows[name].append(values)
             for name, values in _measure(context[0, -1:].expand_as(real), real, context[0], perceptual).items():
@@ -96,7 +107,7 @@ def evaluate_world_model(wm: Path, data: Path, out: Path, config: WorldModelEval
                 panels = side_by_side(real[:120:3].numpy(), imagined[:120:3].numpy())
                 write_gif(video_dir / f"{name}.gif", panels, fps=dataset.fps // 9, scale=1)
     table = {name: _pad(values) for name, values in rows.items()}  # name -> (N, T_max) with NaN
-    report = {**_summary(table, np.array(full_rollout)), "per_task": {}}
+    report = {**_summary(table, np.array(full_rollout)), **(disagreement_error(table) if ensemble else {}), "per_task": {}}
     for task in sorted(set(tasks)):
         chosen = np.array([t == task for t in tasks])
         report["per_task"][task] = _summary({k: v[chosen] for k, v in table.items()}, np.array(full_rollout)[chosen])
@@ -107,6 +118,49 @@ def evaluate_world_model(wm: Path, data: Path, out: Path, config: WorldModelEval
                "seconds": round(time.perf_counter() - started, 1)}
     write_json(out, report)
     return report
+
+
+def heldout_fraction(wm: Path) -> float:
+    """The held-out share of scenes of a world-model run; of an ensemble, the smallest of its members'."""
+    if is_ensemble(wm):
+        return min(heldout_fraction(member) for member in member_paths(wm))
+    return json.loads((resolve_checkpoint(wm) / "config.json").read_text())["train"]["heldout_fraction"]
+
+
+def disagreement_error(table: dict[str, np.ndarray]) -> dict[str, float | None]:
+    """How well an ensemble's disagreement predicts its first member's error, frame by frame.
+
+    The error of a frame is its root mean squared error in [0, 1] units (from its PSNR), the same
+    units as the disagreement (a standard deviation). Over every imagined frame of every rollout:
+    ``disagreement_error_corr`` (Pearson), ``disagreement_error_spearman`` (rank: any monotone
+    relation), and ``disagreement_error_corr_same_step`` (Pearson after removing each horizon's
+    mean from both: does disagreement find the bad rollouts, not just the late steps where every
+    rollout is worse). None where undefined (constant disagreement, or fewer than 3 frames).
+
+    Args:
+        table: measure -> (N, T) per-frame values with NaN padding; needs "disagreement" and "psnr".
+    """
+    disagreement, error = table["disagreement"], np.sqrt(10.0 ** (-table["psnr"] / 10.0))
+    valid = np.isfinite(disagreement) & np.isfinite(error)  # (N, T)
+    with np.errstate(all="ignore"):  # all-NaN horizons
+        centred = [v - np.nanmean(np.where(valid, v, np.nan), axis=0, keepdims=True) for v in (disagreement, error)]
+    return {"disagreement_error_corr": _pearson(disagreement[valid], error[valid]),
+            "disagreement_error_spearman": _pearson(_ranks(disagreement[valid]), _ranks(error[valid])),
+            "disagreement_error_corr_same_step": _pearson(centred[0][valid], centred[1][valid])}
+
+
+def _pearson(x: np.ndarray, y: np.ndarray) -> float | None:
+    if len(x) < 3 or np.std(x) == 0 or np.std(y) == 0:
+        return None
+    return round(float(np.corrcoef(x, y)[0, 1]), 4)
+
+
+def _ranks(x: np.ndarray) -> np.ndarray:
+    """Ranks of a 1-d array, ties given their average rank (as Spearman's correlation needs)."""
+    ranks = np.empty(len(x))
+    ranks[np.argsort(x, kind="stable")] = np.arange(len(x))
+    _, tie, counts = np.unique(x, return_inverse=True, return_counts=True)
+    return (np.bincount(tie, weights=ranks) / counts)[tie]
 
 
 def _measure(imagined: torch.Tensor, real: torch.Tensor, context: torch.Tensor, perceptual: PerceptualDistance) -> dict:
@@ -144,6 +198,10 @@ def format_report(report: dict) -> str:
             model, copy = report.get(f"{name}_{h}"), report.get(f"copy_last_{name}_{h}")
             cells.append("-" if model is None or copy is None else f"{model:.{digits}f}/{copy:.{digits}f}")
         lines.append(f"{name:<14}" + "".join(f"{c:>16}" for c in cells))
+    if "disagreement_error_corr" in report:
+        lines.append(f"ensemble disagreement: h1 {report['disagreement_h1']}, h32 {report['disagreement_h32']}; "
+                     f"correlation with the first member's error {report['disagreement_error_corr']} "
+                     f"(rank {report['disagreement_error_spearman']}, same step {report['disagreement_error_corr_same_step']})")
     control = report.get("controllability", {})
     if control:
         lines.append(f"controllability: matched {control['matched_psnr']:.2f} dB vs mismatched {control['mismatched_psnr']:.2f} dB; "

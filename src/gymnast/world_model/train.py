@@ -6,19 +6,26 @@ error of every imagined frame, backpropagating through the whole recurrence. Tra
 open-loop clips is what keeps errors from compounding at test time: the model sees (and learns to
 correct) its own drift, never real frames it would not have in a rollout.
 
+Three levers, all off by default: `moving_weight` makes the pixels that move (the arm, a puck) count
+more than the static table, which otherwise dominates the error and lets small objects fade;
+`init` fine-tunes an existing run's weights; `extra_data` trains on several datasets at once.
+
 Legend: B batch, C context frames, F future frames, H/W image size.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import json
 import logging
 import math
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import torch
+from safetensors.torch import load_file
 from tqdm import tqdm
 
 from gymnast.data.lerobot import EpisodeDataset
@@ -27,7 +34,7 @@ from gymnast.utils.metrics import MetricsLog
 from gymnast.utils.optim import gradient_step, warmup_cosine
 from gymnast.world_model.data import ClipBatch, EpisodeBank, split_episodes
 from gymnast.world_model.embedded import EmbeddedWorldModel, EmbeddedWorldModelConfig
-from gymnast.world_model.metrics import psnr, to_unit_float
+from gymnast.world_model.metrics import moving_mask, psnr, to_unit_float
 from gymnast.world_model.videos import write_side_by_side
 
 logger = logging.getLogger(__name__)
@@ -62,6 +69,18 @@ class WorldModelTrainConfig:
     """Steps between metrics lines."""
     seed: int = 0
     """Seed of initialisation and clip sampling."""
+    moving_weight: float = 0.0
+    """Extra weight of moving pixels: a pixel's squared error counts 1 + moving_weight times where the
+    target frame differs from the clip's last context frame (`metrics.moving_mask`, threshold 0.05),
+    and the loss is divided by the mean weight, so it stays a weighted mean squared error on the
+    usual scale (0 = plain mean squared error). train/psnr stays unweighted, comparable across runs."""
+    init: Path | None = None
+    """Start from the weights of this world-model run or checkpoint (fine-tuning) instead of a random
+    initialisation; its model spec must match this run's. The optimizer and the learning-rate
+    schedule start afresh. Saved as the checkpoint directory it resolved to."""
+    extra_data: tuple[Path, ...] = ()
+    """More datasets to train on besides DATA, with the same image size. Each is split by the same
+    scene hash, so a scene held out of one is held out of all of them."""
     model: EmbeddedWorldModelConfig = field(default_factory=EmbeddedWorldModelConfig)
     """Architecture."""
 
@@ -79,24 +98,28 @@ _VALIDATION_CLIPS = 32
 
 
 def train_world_model(data: Path, out: Path, config: WorldModelTrainConfig, resume: bool = False, progress: bool = True) -> Path:
-    """Trains (or resumes) a world-model run in `out`; returns the final checkpoint directory."""
-    dataset = EpisodeDataset(data)
+    """Trains (or resumes) a world-model run in `out`; returns the final checkpoint directory.
+
+    Raises:
+        ValueError: the datasets' image sizes differ, or `config.init`'s model spec differs from this run's.
+        FileNotFoundError: `config.init` has no checkpoint.
+    """
+    datasets = [EpisodeDataset(path) for path in (data, *config.extra_data)]
+    dataset = datasets[0]
     if dataset.image_shape[0] != config.model.image_size:
         config = dataclasses.replace(config, model=dataclasses.replace(config.model, image_size=dataset.image_shape[0]))
-    train_ids, heldout_ids = split_episodes(dataset.episodes, config.heldout_fraction)
-    logger.info("training on %d episodes, %d held out", len(train_ids), len(heldout_ids))
-    bank = EpisodeBank(dataset, train_ids, progress=progress)
-    heldout = EpisodeBank(dataset, heldout_ids) if heldout_ids else None
+    if config.init is not None and not resume:  # on resume the weights come from the run's own checkpoint
+        config = dataclasses.replace(config, init=resolve_checkpoint(config.init))
+    bank, heldout, counts = load_banks(datasets, config.heldout_fraction, progress)
     context = config.model.context_frames
 
-    torch.manual_seed(config.seed)
-    model = EmbeddedWorldModel(config.model)
+    model = build_model(config if not resume else dataclasses.replace(config, init=None))
     optimizer = torch.optim.AdamW(model.parameters(), lr=config.lr, weight_decay=0.0)
     schedule = torch.optim.lr_scheduler.LambdaLR(optimizer, warmup_cosine(config.warmup_steps, config.steps))
     sampler = torch.Generator().manual_seed(config.seed)
     validation = heldout.sample(_VALIDATION_CLIPS, context, config.future, torch.Generator().manual_seed(1)) if heldout else None
-    resolved = {"train": dataclasses.asdict(config), "model": model.spec(), "data": str(data),
-                "train_episodes": len(train_ids), "heldout_episodes": len(heldout_ids)}
+    resolved = {"train": _settings(config), "model": model.spec(), "data": str(data),
+                "train_episodes": len(bank), "heldout_episodes": len(heldout) if heldout else 0, "datasets": counts}
     start = resume_training(out, model, optimizer, schedule, sampler) if resume else 0
     if resume:
         logger.info("resumed %s at step %d", out, start)
@@ -108,7 +131,7 @@ def train_world_model(data: Path, out: Path, config: WorldModelTrainConfig, resu
     for step in bar:
         model.train()
         future = future_at(step, config)
-        loss, values = clip_loss(model, bank.sample(config.batch_size, context, future, sampler))
+        loss, values = clip_loss(model, bank.sample(config.batch_size, context, future, sampler), config.moving_weight)
         values["train/future"] = future
         values["train/grad_norm"] = gradient_step(loss, model, optimizer, schedule)
         done = step + 1
@@ -125,6 +148,59 @@ def train_world_model(data: Path, out: Path, config: WorldModelTrainConfig, resu
     return checkpoint or resolve_checkpoint(out)
 
 
+def load_banks(datasets: Sequence[EpisodeDataset], heldout_fraction: float,
+               progress: bool = False) -> tuple[EpisodeBank, EpisodeBank | None, list[dict]]:
+    """The training and held-out episodes of several datasets, each split by scene.
+
+    Returns:
+        The training bank, the held-out bank (None when nothing is held out) and, per dataset, its
+        path and how many episodes went to each side.
+
+    Raises:
+        ValueError: a dataset's frames are not the size of the first one's.
+    """
+    first = datasets[0]
+    for other in datasets[1:]:
+        if other.image_shape != first.image_shape:
+            size, wanted = "x".join(map(str, other.image_shape[:2])), "x".join(map(str, first.image_shape[:2]))
+            raise ValueError(f"{other.root}: frames are {size}, but {first.root} has {wanted}; "
+                             "every dataset of one world model needs one image size")
+    splits = [split_episodes(d.episodes, heldout_fraction) for d in datasets]
+    counts = [{"data": str(d.root), "train_episodes": len(t), "heldout_episodes": len(h)} for d, (t, h) in zip(datasets, splits)]
+    logger.info("training on %d episodes, %d held out", sum(len(t) for t, _ in splits), sum(len(h) for _, h in splits))
+    bank = EpisodeBank.union([(d, t) for d, (t, _) in zip(datasets, splits)], progress=progress)
+    has_heldout = any(h for _, h in splits)
+    heldout = EpisodeBank.union([(d, h) for d, (_, h) in zip(datasets, splits)]) if has_heldout else None
+    return bank, heldout, counts
+
+
+# Settings that change how the weights run, not what they are: a fine-tuning run may pick its own.
+_WEIGHT_FREE = ("bf16", "reanchor_every")
+
+
+def build_model(config: WorldModelTrainConfig) -> EmbeddedWorldModel:
+    """The model training starts from: seeded by `config.seed`, with `config.init`'s weights when given.
+
+    Raises:
+        FileNotFoundError: `config.init` has no checkpoint.
+        ValueError: `config.init`'s model spec differs from `config.model` (the message names the fields).
+    """
+    torch.manual_seed(config.seed)
+    model = EmbeddedWorldModel(config.model)
+    if config.init is None:
+        return model
+    checkpoint = resolve_checkpoint(config.init)
+    source = json.loads((checkpoint / "config.json").read_text()).get("model", {})
+    wanted = json.loads(json.dumps(model.spec()))  # tuples as JSON lists, like the saved spec
+    differ = sorted(k for k in source.keys() | wanted.keys() if k not in _WEIGHT_FREE and source.get(k) != wanted.get(k))
+    if differ:
+        fields = ", ".join(f"{k} ({source.get(k)!r} there, {wanted.get(k)!r} here)" for k in differ)
+        raise ValueError(f"--init {config.init}: its model differs from this run's in {fields}")
+    model.load_state_dict(load_file(checkpoint / "model.safetensors"))
+    logger.info("starting from the weights of %s", checkpoint)
+    return model
+
+
 def future_at(step: int, config: WorldModelTrainConfig) -> int:
     """Clip length F at `step`: from 4 up to `config.future` over the first `warmup_future` of training."""
     ramp = config.warmup_future * config.steps
@@ -133,14 +209,38 @@ def future_at(step: int, config: WorldModelTrainConfig) -> int:
     return max(min(4, config.future), round(4 + (config.future - 4) * step / ramp))
 
 
-def clip_loss(model: EmbeddedWorldModel, clips: ClipBatch) -> tuple[torch.Tensor, dict[str, float]]:
-    """Mean squared error of the F frames imagined open-loop from the context; (loss, metrics)."""
+def clip_loss(model: EmbeddedWorldModel, clips: ClipBatch, moving_weight: float = 0.0) -> tuple[torch.Tensor, dict[str, float]]:
+    """`frame_loss` of the F frames imagined open-loop from the context; (loss, metrics)."""
     target = to_unit_float(clips.future)  # (B, F, 3, H, W)
     with model.autocast():
         _, imagined = model.imagine(model.encode(to_unit_float(clips.context)), clips.actions)
-    error = (imagined.float() - target).square()
-    loss = error.mean()
-    return loss, {"train/loss": loss.item(), "train/psnr": -10 * math.log10(max(loss.item(), 1e-10))}
+    return frame_loss(imagined.float(), target, to_unit_float(clips.context[:, -1:]), moving_weight)
+
+
+def frame_loss(imagined: torch.Tensor, target: torch.Tensor, reference: torch.Tensor,
+               moving_weight: float = 0.0) -> tuple[torch.Tensor, dict[str, float]]:
+    """Mean squared error of imagined frames, moving pixels weighted; (loss, metrics).
+
+    The loss is sum(w * e) / sum(w) over pixels, e a pixel's squared error (mean over channels) and
+    w = 1 + moving_weight where the target pixel moved (differs from `reference`), else 1. Frames
+    where nothing moves, or moving_weight 0, give the plain mean squared error.
+
+    Args:
+        imagined: (B, F, 3, H, W) float in [0, 1].
+        target: (B, F, 3, H, W) float in [0, 1], the real frames.
+        reference: (B, 1, 3, H, W) float in [0, 1], the clip's last context frame.
+        moving_weight: the extra weight of a moving pixel.
+
+    Returns:
+        The loss and {"train/loss": it, "train/psnr": PSNR of the unweighted mean squared error}.
+    """
+    error = (imagined - target).square()  # (B, F, 3, H, W)
+    mse = error.mean()
+    loss = mse
+    if moving_weight:
+        weight = 1 + moving_weight * moving_mask(target, reference).float()  # (B, F, 1, H, W)
+        loss = (error * weight).mean() / weight.mean()
+    return loss, {"train/loss": loss.item(), "train/psnr": -10 * math.log10(max(mse.item(), 1e-10))}
 
 
 @torch.no_grad()
@@ -163,9 +263,17 @@ def _write_video(model: EmbeddedWorldModel, heldout: EpisodeBank, path: Path, fp
     write_side_by_side(path, frames[1:].numpy(), imagined.numpy(), fps)
 
 
+def _settings(config: WorldModelTrainConfig) -> dict:
+    """`config` as JSON-able values (paths as strings)."""
+    return {**dataclasses.asdict(config), "init": None if config.init is None else str(config.init),
+            "extra_data": [str(path) for path in config.extra_data]}
+
+
 def saved_train_config(run: Path) -> WorldModelTrainConfig:
     """The settings a run was started with (from RUN/config.json), for ``--resume``."""
     saved = saved_settings(run, "train")
     model = {**saved["model"], "widths": tuple(saved["model"]["widths"])}
-    return WorldModelTrainConfig(**{**saved, "model": EmbeddedWorldModelConfig(**model)})
+    paths = {"init": Path(saved["init"]) if saved.get("init") else None,
+             "extra_data": tuple(Path(p) for p in saved.get("extra_data", ()))}
+    return WorldModelTrainConfig(**{**saved, **paths, "model": EmbeddedWorldModelConfig(**model)})
 
