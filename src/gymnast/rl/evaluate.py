@@ -132,6 +132,56 @@ def evaluate_in_env(envs: EnvFactory, kind: str, policy, reward: Reward, starts:
     return values
 
 
+def replay_actions(env: VectorEnv, starts: Sequence[Start], actions: torch.Tensor, lengths: torch.Tensor
+                   ) -> tuple[torch.Tensor, torch.Tensor, int]:
+    """Replays R rollouts' actions, action for action, in a simulator from the same start states.
+
+    The env steps whole chunks, so the chunk holding a rollout's last action is executed in full
+    (with the zero actions that follow its end); a replay's outcome is read at the end of that
+    chunk. An env that does not terminate at success (``EnvConfig.terminate_on_success=False``)
+    executes every action, so every frame of the rollout has a replayed counterpart; it also keeps
+    stepping (with zero actions) the replays that ended before the longest one, since a vector env
+    steps all its episodes together.
+
+    Args:
+        env: a `SimVectorEnv` (or one with its contract) with ``num_envs == R``.
+        starts: the R start states (their task and seed fix the scene).
+        actions: (R, T, A) float32 the actions to replay (0 after each rollout's end).
+        lengths: (R,) int64 actions each rollout executed.
+
+    Returns:
+        ``(success, frames, interactions)``: (R,) bool whether the simulator reported success at
+        any step of the replay; (R, T + 1, H, W, 3) uint8 the start frame, then one frame per
+        action, the frame at a rollout's end repeating after it (as in `Rollouts.frames`); and the
+        actions the simulator executed (real interactions in the real world).
+    """
+    count, steps = actions.shape[:2]
+    if env.num_envs != count or len(starts) != count or lengths.shape != (count,):
+        raise ValueError(f"the env runs {env.num_envs} episodes; got {len(starts)} starts, actions "
+                         f"{tuple(actions.shape)} and lengths {tuple(lengths.shape)}")
+    chunk = env.single_action_space.shape[0]
+    obs, _ = env.reset(seed=0, options=start_options(starts))
+    frames = [torch.from_numpy(obs["image"])[:, None]]  # (R, 1, H, W, 3)
+    last_chunk = (lengths - 1).clamp(min=0) // chunk  # (R,) the chunk that ends each replay
+    success = torch.zeros(count, dtype=torch.bool)
+    interactions = 0
+    for index in range(int(last_chunk.max()) + 1):
+        step = actions[:, index * chunk: (index + 1) * chunk].float()  # (R, k, A)
+        if step.shape[1] < chunk:
+            step = torch.cat([step, torch.zeros(count, chunk - step.shape[1], step.shape[2])], 1)
+        _, _, terminated, truncated, infos = env.step(step.numpy())
+        frames.append(torch.from_numpy(infos["frames"]))  # (R, K, H, W, 3)
+        interactions += int(np.asarray(infos["executed"]).sum())
+        now = torch.from_numpy(np.asarray(infos["success"], dtype=bool))
+        success = torch.where(last_chunk >= index, now, success)  # success only accumulates
+        if (np.asarray(terminated) | np.asarray(truncated)).all():
+            break
+    video = torch.cat(frames, dim=1)[:, : steps + 1]  # (R, <= T + 1, H, W, 3)
+    ends = lengths.clamp(max=video.shape[1] - 1)  # (R,) the frame at each rollout's end
+    index = torch.minimum(torch.arange(steps + 1)[None], ends[:, None])  # (R, T + 1): the end frame repeats
+    return success, video[torch.arange(count)[:, None], index], interactions
+
+
 def watch_hacking(envs: EnvFactory, rollouts: Rollouts, scores: torch.Tensor, verdict: torch.Tensor,
                   count: int) -> dict[str, float]:
     """Replays the actions of `count` rollouts in the real world from the same start states and
@@ -151,22 +201,7 @@ def watch_hacking(envs: EnvFactory, rollouts: Rollouts, scores: torch.Tensor, ve
     count = min(count, len(rollouts.starts))
     pick = torch.linspace(0, len(rollouts.starts) - 1, count).round().long()
     chosen = rollouts.select(pick)
-    env = envs.get("real", count)
-    chunk = env.single_action_space.shape[0]
-    env.reset(seed=0, options=start_options(chosen.starts))
-    last_chunk = (chosen.lengths - 1).clamp(min=0) // chunk  # (R,) the chunk that ends each replay
-    real = torch.zeros(count, dtype=torch.bool)
-    interactions = 0
-    for index in range(int(last_chunk.max()) + 1):
-        actions = chosen.actions[:, index * chunk: (index + 1) * chunk]  # (R, k, A)
-        if actions.shape[1] < chunk:
-            actions = torch.cat([actions, torch.zeros(count, chunk - actions.shape[1], actions.shape[2])], 1)
-        _, _, terminated, truncated, infos = env.step(actions.numpy())
-        interactions += int(np.asarray(infos["executed"]).sum())
-        now = torch.from_numpy(np.asarray(infos["success"], dtype=bool))
-        real = torch.where(last_chunk >= index, now, real)  # success only accumulates
-        if (np.asarray(terminated) | np.asarray(truncated)).all():
-            break
+    real, _, interactions = replay_actions(envs.get("real", count), chosen.starts, chosen.actions, chosen.lengths)
     values = {"eval/watch_real_success": real.float().mean().item(), "eval/watch_interactions": interactions}
     judged = torch.isfinite(verdict[pick])
     if judged.any():
