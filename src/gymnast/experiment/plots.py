@@ -71,23 +71,33 @@ def plot_curves(summary: dict, path: Path) -> Path:
 
 
 def plot_worldgym(summary: dict, path: Path) -> Path:
-    """Imagined (judged) against real success, one point per policy, with the diagonal."""
-    plt, figure, axes = _figure(5.2, 5.0)
-    rows = summary["worldgym"]
+    """The experiment's WorldGym scatter (`plot_worldgym_rows` of summary.json's rows)."""
+    return plot_worldgym_rows(summary["worldgym"], summary["worldgym_pearson"], summary["worldgym_spearman"], path)
+
+
+def plot_worldgym_rows(rows: list[dict], pearson: float | None, spearman: float | None, path: Path) -> Path:
+    """Imagined (judged) against real success, one point per policy with both 95% intervals, and
+    the diagonal; the noise ladder's points (rows with a ``noise``) in their own colour."""
+    plt, figure, axes = _figure(5.6, 5.4)
     axes.plot([0, 1], [0, 1], color="grey", linewidth=0.8, linestyle="--")
+    labelled = set()
     for row in rows:
+        ladder = row.get("noise") is not None
+        label = "noise ladder" if ladder else "policies as trained"
         axes.errorbar(row["imagined"], row["real"],
                       xerr=[[row["imagined"] - row["imagined_ci"][0]], [row["imagined_ci"][1] - row["imagined"]]],
                       yerr=[[row["real"] - row["real_ci"][0]], [row["real_ci"][1] - row["real"]]],
-                      fmt="o", capsize=2, alpha=0.8)
-        axes.annotate(row["policy"], (row["imagined"], row["real"]), fontsize=7, xytext=(3, 3), textcoords="offset points")
-    r, rho = summary["worldgym_pearson"], summary["worldgym_spearman"]
-    title = "WorldGym: imagined vs real success"
-    if r is not None:
-        title += f"\nPearson r = {r:.2f}, Spearman = {rho:.2f} ({len(rows)} policies)"
+                      fmt="s" if ladder else "o", color="tab:orange" if ladder else "tab:blue", capsize=2, alpha=0.8,
+                      label=None if label in labelled else label)
+        labelled.add(label)
+        axes.annotate(row["policy"], (row["imagined"], row["real"]), fontsize=6, xytext=(3, 3), textcoords="offset points")
+    title = "WorldGym: imagined vs real success (95% CI)"
+    if pearson is not None:
+        title += f"\nPearson r = {pearson:.2f}, Spearman = {spearman:.2f} ({len(rows)} policies)"
     axes.set_title(title, fontsize=10)
     axes.set_xlabel("success in the world model (judged)")
     axes.set_ylabel("success in the real world")
     axes.set_xlim(-0.02, 1.02)
     axes.set_ylim(-0.02, 1.02)
+    axes.legend(fontsize=7, loc="best")
     return _save(plt, figure, path)
