@@ -14,25 +14,39 @@ import tyro
 import gymnast  # noqa: F401  (sets MUJOCO_GL before anything imports mujoco)
 from gymnast.config import EnvConfig
 from gymnast.data.collect import CollectConfig
-from gymnast.cli_models import eval_judge, eval_wm, experiment, rl, serve_judge, train_judge, train_wm
+from gymnast.cli_models import (eval_judge, eval_wm, experiment, imagination, make_ensemble, rl, serve_judge, train_judge,
+                                train_wm, worldgym)
 from gymnast.eval.evaluate import EvalConfig
 
 
 def collect(
     out: Path,
     config: Annotated[CollectConfig, tyro.conf.arg(name="")] = CollectConfig(),
+    policy: Path | None = None,
+    temperature: float = 0.0,
 ) -> None:
-    """Record scripted episodes (experts, noisy experts, failures) into a LeRobot v3.0 dataset.
+    """Record scripted episodes (experts, noisy experts, failures), or a learned policy's own
+    rollouts, into a LeRobot v3.0 dataset.
 
     Rerunning the same command resumes: episodes already in OUT are skipped.
 
     Args:
         out: dataset directory (created if missing).
         config: what to record.
+        policy: an SFT/RL run directory: record its rollouts (behaviour policy-<tag>, greedy plus the
+            --noise levels, no failure episodes) instead of the scripted behaviours.
+        temperature: with --policy, sample the action tokens at this temperature (0: greedy).
     """
-    from gymnast.data.collect import collect as run_collect
+    if policy is not None:
+        from gymnast.eval.record import record_policy
 
-    table = run_collect(config, out)
+        table = record_policy(policy, config, out, temperature=temperature)
+    elif temperature:
+        raise ValueError("--temperature applies to a learned policy; give --policy RUN too")
+    else:
+        from gymnast.data.collect import collect as run_collect
+
+        table = run_collect(config, out)
     print(format_success_table(table))
     print(f"dataset: {out}")
 
@@ -251,11 +265,14 @@ COMMANDS = {
     "eval": evaluate_command,
     "train-wm": train_wm,
     "eval-wm": eval_wm,
+    "make-ensemble": make_ensemble,
     "train-judge": train_judge,
     "serve-judge": serve_judge,
     "eval-judge": eval_judge,
     "rl": rl,
     "experiment": experiment,
+    "imagination": imagination,
+    "worldgym": worldgym,
     "contact-sheet": contact_sheet,
     "gap-report": gap_report,
     "tasks": tasks,

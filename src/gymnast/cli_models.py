@@ -12,6 +12,9 @@ from typing import Annotated, Literal
 
 import tyro
 
+from gymnast.config import CommaFloats
+from gymnast.experiment.worldgym import DEFAULT_NOISE
+
 
 def train_wm(
     data: Path,
@@ -20,6 +23,9 @@ def train_wm(
     resume: bool = False,
     steps: int | None = None,
     seed: int | None = None,
+    moving_weight: float | None = None,
+    init: Path | None = None,
+    extra_data: tuple[Path, ...] = (),
 ) -> None:
     """Train the embedded world model on every episode of a dataset (held-out scenes excepted).
 
@@ -30,13 +36,17 @@ def train_wm(
         resume: continue the run in OUT from its last checkpoint, with the settings saved there.
         steps: override the preset's optimizer steps.
         seed: override the seed.
+        moving_weight: extra loss weight of moving pixels, normalised (0 = plain mean squared error).
+        init: fine-tune: start from the weights of this world-model run or checkpoint (same model spec).
+        extra_data: more dataset directories to train on (same image size), split by the same scene hash.
     """
     from gymnast.world_model.train import WM_PRESETS, saved_train_config, train_world_model
 
     if resume:
         config = saved_train_config(out)
     else:
-        overrides = {"steps": steps, "seed": seed}
+        overrides = {"steps": steps, "seed": seed, "moving_weight": moving_weight, "init": init,
+                     "extra_data": tuple(extra_data) or None}
         config = dataclasses.replace(WM_PRESETS[preset], **{k: v for k, v in overrides.items() if v is not None})
     checkpoint = train_world_model(data, out, config, resume=resume)
     print(f"world model: {checkpoint}")
@@ -74,6 +84,20 @@ def eval_wm(
     print(f"report: {out}")
 
 
+def make_ensemble(members: tuple[Path, ...], out: Path) -> None:
+    """Make an ensemble of world-model runs: OUT/ensemble.json lists them (relative to OUT), and OUT then
+    works wherever a world-model run does (--wm OUT); eval-wm also reports where the members disagree.
+
+    Args:
+        members: two or more world-model runs (or checkpoints); the first one's frames are the ensemble's.
+        out: ensemble directory (created if missing).
+    """
+    from gymnast.world_model.ensemble import write_ensemble
+
+    model = write_ensemble(out, members)
+    print(f"ensemble of {len(model.members)} world models: {out}")
+
+
 def train_judge(
     data: Path,
     out: Path,
@@ -81,9 +105,11 @@ def train_judge(
     preset: Literal["debug", "demo", "full"] = "full",
     resume: bool = False,
     steps: int | None = None,
+    kind: Literal["frames", "video"] | None = None,
+    extra_data: tuple[Path, ...] = (),
 ) -> None:
-    """Train the embedded success judge on real episodes (and their re-imaginings with --wm), then
-    report its TPR and FPR on held-out real and imagined videos.
+    """Train the embedded success judge on real episodes (and their re-imaginings with --wm), choose
+    its threshold on validation scenes, then report its TPR and FPR on held-out real and imagined videos.
 
     Args:
         data: dataset directory (from `gymnast collect`).
@@ -92,13 +118,16 @@ def train_judge(
         preset: debug (seconds), demo (minutes) or full.
         resume: continue the run in OUT from its last checkpoint, with the settings saved there.
         steps: override the preset's optimizer steps.
+        kind: frames (judge every frame; the default) or video (four frames of the whole video).
+        extra_data: more datasets to train and measure on (e.g. a policy's recorded rollouts).
     """
     from gymnast.reward.train_judge import JUDGE_PRESETS, saved_judge_config
     from gymnast.reward.train_judge import train_judge as train
 
     config = saved_judge_config(out) if resume else JUDGE_PRESETS[preset]
-    if steps is not None and not resume:
-        config = dataclasses.replace(config, steps=steps)
+    if not resume:
+        overrides = {"steps": steps, "kind": kind, "extra_data": extra_data or None}
+        config = dataclasses.replace(config, **{k: v for k, v in overrides.items() if v is not None})
     report = train(data, out, config, wm=wm, resume=resume)
     print(json.dumps({k: v for k, v in report.items() if k.startswith(("real", "imagined"))}, indent=2))
     print(f"judge: {out}")
@@ -219,6 +248,43 @@ def rl(
     print(json.dumps(summary, indent=2))
 
 
+def worldgym(
+    policy: Path,
+    wm: Path,
+    judge: Path,
+    out: Path,
+    noise: CommaFloats = DEFAULT_NOISE,
+    tasks: str = "mt10",
+    episodes: int = 10,
+    horizon: int = 150,
+    workers: int = 2,
+    seed: int = 0,
+) -> None:
+    """WorldGym over a noise ladder: can the world model and judge rank policies like the real world?
+
+    Each noise level of POLICY is rolled out greedily in imagination (judged) and in the real world
+    from the same evaluation seeds; writes OUT/worldgym.json (rows with 95% intervals, Pearson and
+    Spearman, settings, seconds) and OUT/worldgym.png, and prints the table.
+
+    Args:
+        policy: the SFT/RL run (or checkpoint) the ladder is made of.
+        wm: world-model run the policies are imagined in.
+        judge: learned-judge run that scores the imagined rollouts.
+        out: output directory.
+        noise: action-noise std per level (actions span [-1, 1]); 0 is the policy itself, inf random actions.
+        tasks: task names or sets, comma-separated.
+        episodes: evaluation seeds per task, in each world.
+        horizon: actions per episode, in each world.
+        workers: simulator processes for the real-world rollouts.
+        seed: seed of the noise.
+    """
+    from gymnast.experiment.worldgym import format_rows, run_worldgym
+
+    result = run_worldgym(policy, noise, wm, judge, tasks, episodes, out, horizon=horizon, workers=workers, seed=seed)
+    print(format_rows(result))
+    print(f"report: {out / 'worldgym.json'}, plot: {out / 'worldgym.png'}")
+
+
 def experiment(
     out: Path,
     preset: Literal["debug", "demo", "full"] = "full",
@@ -248,3 +314,44 @@ def experiment(
     summary = run_experiment(config, out, parse_reuse(reuse))
     print(format_table(summary))
     print(f"report: {out / 'report.md'}")
+
+
+def imagination(
+    policy: Path,
+    wm: Path,
+    reward: str,
+    out: Path,
+    tasks: str = "mt10",
+    episodes: int = 10,
+    horizon: int = 150,
+    batch: int = 32,
+    workers: int = 1,
+    videos: int = 4,
+    seed: int = 0,
+) -> None:
+    """Measure imagination under a policy: its greedy rollouts in the world model, judged, against
+    the same actions replayed in the real world (agreement, false successes, PSNR per step) and
+    against the policy run in the real world; writes OUT/imagination.json, imagination.md,
+    psnr.png and side-by-side videos.
+
+    Args:
+        policy: SFT/RL run (or checkpoint) directory.
+        wm: world-model run (or checkpoint) directory.
+        reward: a 0/1 judge: judge:RUN or vlm:MODEL@BASE_URL (key from OPENAI_API_KEY).
+        out: report directory.
+        tasks: task names and/or sets, comma-separated.
+        episodes: evaluation scenes per task.
+        horizon: actions per rollout.
+        batch: rollouts stepped together.
+        workers: simulator processes for the real-world envs.
+        videos: side-by-side videos (imagined | real replay | difference), disagreements first.
+        seed: reset seed of the envs (what a stochastic world model draws from).
+    """
+    from gymnast.experiment.imagination import ImaginationConfig, measure_imagination_runs
+    from gymnast.experiment.imagination_report import format_imagination
+
+    config = ImaginationConfig(tasks=tasks, episodes=episodes, horizon=horizon, batch=batch, workers=workers,
+                               videos=videos, seed=seed)
+    report = measure_imagination_runs(policy, wm, reward, config, out)
+    print(format_imagination(report))
+    print(f"report: {out / 'imagination.md'}")

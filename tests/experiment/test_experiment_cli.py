@@ -45,6 +45,20 @@ def test_robustness_language_and_worldgym_are_measured(experiment: Path):
     policies = [row["policy"] for row in summary["worldgym"]]
     assert len(policies) >= 6 and set(ARM_NAMES) <= set(policies) and "sft_step_3" in policies
     assert all(0 <= row["imagined"] <= 1 and 0 <= row["real"] <= 1 for row in summary["worldgym"])
+    ladder = {row["policy"]: row for row in summary["worldgym"] if row["noise"] is not None}
+    assert {name: row["noise"] for name, row in ladder.items()} == {"sft_noise_0.5": 0.5, "sft_random": "inf"}
+    assert all(row["real_ci"][0] <= row["real"] <= row["real_ci"][1] for row in ladder.values())
+
+
+def test_the_sft_policy_imagination_is_measured_against_the_real_world(experiment: Path):
+    summary = json.loads((experiment / "summary.json").read_text())
+    figures = summary["imagination"]
+    assert figures["episodes"] == 1 and sum(figures["confusion"].values()) == 1  # worldgym_episodes x reach-v3
+    assert summary["imagination_agreement"] == figures["agreement"] in (0.0, 1.0)
+    assert "imagination" in summary["stage_wall_s"]
+    report = json.loads((experiment / "imagination" / "imagination.json").read_text())
+    assert report["overall"]["agreement"] == figures["agreement"] and report["settings"]["horizon"] == 40
+    assert "](imagination/imagination.md)" in (experiment / "report.md").read_text()
 
 
 def test_the_report_and_plots_are_written(experiment: Path):

@@ -9,8 +9,10 @@ rewarded, never in their step budget.
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass, field
 
+from gymnast.config import CommaFloats
 from gymnast.data.collect import CollectConfig
 from gymnast.policy.sft import SFT_PRESETS, SFTConfig
 from gymnast.reward.train_judge import JUDGE_PRESETS, JudgeTrainConfig
@@ -59,6 +61,11 @@ class ExperimentConfig:
     worldgym_episodes: int = 10
     """Imagined episodes per task for each policy's WorldGym estimate (and real ones for the
     policies that have no final evaluation)."""
+    worldgym_noise: CommaFloats = (0.25, 0.5, 0.75, 1.0, 1.5, 2.0)
+    """WorldGym also rates the SFT policy with these action-noise stds (> 0; noise 0 is the SFT arm
+    itself), so that the policies span most of the range of real success."""
+    worldgym_random: bool = True
+    """WorldGym also rates uniformly random actions (the floor of the noise ladder)."""
     workers: int = 2
     """Simulator processes."""
     seed: int = 0
@@ -68,6 +75,9 @@ class ExperimentConfig:
         for name in ("eval_episodes", "robustness_episodes", "worldgym_episodes", "workers"):
             if getattr(self, name) < 1:
                 raise ValueError(f"ExperimentConfig.{name} must be at least 1, got {getattr(self, name)}")
+        if not all(0 < noise < math.inf for noise in self.worldgym_noise):
+            raise ValueError(f"ExperimentConfig.worldgym_noise must be finite and positive (noise 0 is the SFT arm, "
+                             f"random actions are worldgym_random), got {self.worldgym_noise}")
 
     def resolved(self) -> ExperimentConfig:
         """Every stage told the experiment's tasks, workers and seed (one place to set them)."""
@@ -92,6 +102,7 @@ def _debug() -> ExperimentConfig:
         eval_episodes=2,
         robustness_episodes=1,
         worldgym_episodes=1,
+        worldgym_noise=(0.5,),
     )
 
 
@@ -110,6 +121,9 @@ def _demo() -> ExperimentConfig:
         eval_episodes=10,
         robustness_episodes=4,
         worldgym_episodes=4,
+        # Each rung of the noise ladder costs about a minute here: left out to keep the 15 minutes.
+        worldgym_noise=(),
+        worldgym_random=False,
     )
 
 

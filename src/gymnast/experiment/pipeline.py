@@ -6,11 +6,14 @@ Stages, in order, each done once (`gymnast.experiment.stages`; a rerun skips fin
 2. ``sft``: the SFT policy every arm starts from.
 3. ``world_model``, ``judge``, ``world_model_eval``: the world model, the learned judge (trained on
    real and re-imagined episodes) and the world model's fidelity on held-out episodes.
+   ``imagination``: the SFT policy's judged imagined rollouts against the same actions replayed
+   in the real world (`gymnast.experiment.imagination`).
 4. ``arm_<name>``: Iter-SFT and the four RL arms (`gymnast.experiment.arms`).
 5. ``eval_<name>``: every arm in the real world, ``eval_episodes`` per task from the evaluation
    seeds, Wilson intervals; then the SFT and world-model-RL policies under minor and major
    perturbations and with held-out instruction paraphrases.
-6. ``worldgym``: imagined against real success over policies of different quality.
+6. ``worldgym``: imagined against real success over policies of different quality: the arms, the
+   SFT run's earlier checkpoints and the SFT policy with growing action noise.
 7. The report (always rewritten): summary.json, report.md, plots/.
 """
 
@@ -19,8 +22,6 @@ from __future__ import annotations
 import dataclasses
 import logging
 from pathlib import Path
-
-from tqdm import tqdm
 
 from gymnast.config import EnvConfig
 from gymnast.data.lerobot import EpisodeDataset
@@ -42,6 +43,7 @@ def run_experiment(config: ExperimentConfig, out: Path, reuse: dict[str, Path] |
     _save_settings(out, config)
     stages = Stages(out, reuse)
     data, sft, wm, judge = _models(stages, config, out, progress)
+    stages.run("imagination", lambda: _imagination(sft, wm, judge, config, out, progress), out / "imagination")
     policies = {"sft": sft}
     for spec in ARMS[1:]:
         policies[spec.name] = _train_arm(stages, spec.name, config, out, sft, wm, judge, data, progress)
@@ -107,6 +109,17 @@ def _world_model_fidelity(wm: Path, data: Path, out: Path, progress: bool) -> di
             "controllability": {key: control.get(key) for key in ("matched_psnr", "mismatched_psnr", "identification_accuracy")}}
 
 
+def _imagination(sft: Path, wm: Path, judge: Path, config: ExperimentConfig, out: Path, progress: bool) -> dict:
+    """The SFT policy's imagined rollouts, judged, against the same actions in the real world
+    (`gymnast.experiment.imagination`): how far the arms that practise in imagination can trust it."""
+    from gymnast.experiment.imagination import ImaginationConfig, imagination_brief, measure_imagination_runs
+
+    settings = ImaginationConfig(tasks=config.tasks, episodes=config.worldgym_episodes, horizon=config.rl.horizon,
+                                 workers=config.workers, seed=config.seed)
+    report = measure_imagination_runs(sft, wm, f"judge:{judge}", settings, out / "imagination", progress)
+    return imagination_brief(report)
+
+
 def _trained(train, data: Path, target: Path, settings, progress: bool) -> dict:
     """Runs a trainer that resumes from its own checkpoint when a previous attempt left one."""
     checkpoint = train(data, target, settings, resume=_has_checkpoint(target), progress=progress)
@@ -156,24 +169,28 @@ def _evaluate(stages: Stages, stage: str, policy: Path, config: ExperimentConfig
 
 def _worldgym(stages: Stages, config: ExperimentConfig, out: Path, policies: dict[str, Path], wm: Path, judge: Path,
               env: EnvConfig, progress: bool) -> dict:
-    """Imagined and real success of the arms and of the SFT run's earlier checkpoints."""
-    from gymnast.experiment.worldgym import correlation, imagined_success
+    """Imagined and real success of the arms, of the SFT run's earlier checkpoints and of the SFT
+    policy's noise ladder (`ExperimentConfig.worldgym_noise`), which spans the range of real success."""
+    import math
 
-    candidates = dict(policies)
+    from gymnast.experiment.worldgym import Candidate, WorldGym, correlation, noise_ladder
+    from gymnast.policy.vla import load_policy
+
+    paths = dict(policies)
     checkpoints = sorted(p for p in (policies["sft"] / "checkpoints").glob("[0-9]*") if p.is_dir())
     for checkpoint in checkpoints[:-1]:  # the last one is the SFT arm itself
-        candidates[f"sft_step_{int(checkpoint.name)}"] = checkpoint
-    rows = []
-    for name, policy in tqdm(candidates.items(), desc="worldgym", unit="policy", disable=not progress):
-        imagined = imagined_success(policy, wm, judge, config.tasks, config.worldgym_episodes)
-        if stages.done(f"eval_{name}"):
-            real = stages.record(f"eval_{name}")
-        else:
-            real = _evaluate(stages, f"eval_{name}", policy, config, out, config.worldgym_episodes, env, progress)
-        rows.append({"policy": name, "path": str(policy), "imagined": imagined["success"], "real": real["success"],
-                     "imagined_ci": [imagined["ci_low"], imagined["ci_high"]], "real_ci": [real["ci_low"], real["ci_high"]],
-                     "imagined_episodes": imagined["episodes"], "real_episodes": real["episodes"]})
-        logger.info("WorldGym %s: imagined %.2f, real %.2f", name, imagined["success"], real["success"])
+        paths[f"sft_step_{int(checkpoint.name)}"] = checkpoint
+    # The arms and checkpoints are measured in the real world by `gymnast eval` (a stage each);
+    # the noise ladder by WorldGym's own real rollouts, with the same protocol and seeds.
+    real = {name: stages.record(f"eval_{name}") if stages.done(f"eval_{name}") else
+            _evaluate(stages, f"eval_{name}", path, config, out, config.worldgym_episodes, env, progress)
+            for name, path in paths.items()}
+    candidates = [Candidate(name, load_policy(path), str(path)) for name, path in paths.items()]
+    levels = (*config.worldgym_noise, *((math.inf,) if config.worldgym_random else ()))
+    if levels:
+        candidates += noise_ladder(policies["sft"], levels, config.seed, prefix="sft_")
+    with WorldGym(wm, judge, config.tasks, config.worldgym_episodes, env, config.workers) as gym:
+        rows = gym.rows(candidates, real, progress)
     return {"policies": rows, **correlation([r["imagined"] for r in rows], [r["real"] for r in rows])}
 
 

@@ -93,6 +93,8 @@ def build_summary(stages: Stages, config: ExperimentConfig) -> dict:
     language = {name: {"train": robustness[name]["none"], "heldout": _brief(stages.record(f"eval_{name}_heldout"))}
                 for name in ROBUSTNESS_ARMS}
     dataset = EpisodeDataset(stages.path("collect"))
+    # The SFT policy's judged imagination against the real world (None in experiments older than the stage).
+    imagination = _without_bookkeeping(stages.record("imagination")) if stages.done("imagination") else None
     summary = {
         "tasks": config.tasks,
         "arms": arms,
@@ -109,6 +111,8 @@ def build_summary(stages: Stages, config: ExperimentConfig) -> dict:
         "watch": _watch(stages),
         "judge": {k: v for k, v in (judge_metrics or {}).items() if k.startswith(("real_", "imagined_"))},
         "world_model": _without_bookkeeping(stages.record("world_model_eval")) if stages.done("world_model_eval") else None,
+        "imagination_agreement": imagination["agreement"] if imagination else None,
+        "imagination": imagination,
         "dataset": {"episodes": len(dataset), "real_interactions": int(sum(dataset.lengths)), "path": str(dataset.root)},
         "rl_steps": config.rl.steps,
         "rollouts_per_step": config.rl.starts_per_step * config.rl.group_size,

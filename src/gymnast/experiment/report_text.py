@@ -93,6 +93,30 @@ def _worldgym_table(summary: dict) -> list[str]:
     return lines
 
 
+def _imagination(summary: dict) -> list[str]:
+    """The SFT policy's judged imagined rollouts against the same actions replayed in the real world."""
+    figures = summary.get("imagination")
+    if not figures:
+        return ["Not measured in this experiment (it predates the `imagination` stage).", ""]
+
+    def rate(row: dict) -> str:
+        return f"{_pct(row['success'])} {_ci(row)}"
+
+    counts, judge = figures["confusion"], figures["judge_on_real"]
+    return [
+        (f"The SFT policy rolled out greedy in the world model from {figures['episodes']} evaluation scenes, each video "
+         "judged by the learned judge, then the same actions replayed in the real world from the same scene."), "",
+        "| imagined success (judged) | real replay of the same actions | SFT closed loop, real | agreement | "
+        "false success | tp / fp / fn / tn | judge on the real videos (TPR / FPR) | PSNR at 8 / 32 steps (dB) |",
+        "|---|---|---|---|---|---|---|---|",
+        (f"| {rate(figures['imagined_success'])} | {rate(figures['replay_success'])} | {rate(figures['real_success'])} | "
+         f"**{_pct(figures['agreement'])}** | {_pct(figures['false_success'])} | "
+         f"{counts['tp']} / {counts['fp']} / {counts['fn']} / {counts['tn']} | "
+         f"{_pct(judge['tpr'])} / {_pct(judge['fpr'])} | {_num(figures['psnr_h8'])} / {_num(figures['psnr_h32'])} |"), "",
+        "Per task, PSNR per step and side-by-side videos: [imagination/imagination.md](imagination/imagination.md).", "",
+    ]
+
+
 def _fidelity(model: dict | None) -> list[str]:
     if not model:
         return []
@@ -155,11 +179,13 @@ def report_markdown(summary: dict, plots: dict[str, str]) -> str:
         "## Robustness and language", "", *_robustness_tables(summary), "",
         "## WorldGym: does the world model rank policies like the real world?", "", *_worldgym_table(summary), "",
         f"![WorldGym]({plots['worldgym']})", "",
+        "## Imagination under the SFT policy: judged imagined outcomes vs the real world", "", *_imagination(summary),
         "## Evidence: where imagination and reality part", "", *_evidence(summary),
         "## Files", "",
         ("- `summary.json`: every figure above; `config.json`: the resolved settings; `stages/`: one record per stage "
         "with its wall time."),
         "- `eval/`: one report per evaluation (per-episode records, seeds) and the first episode of each task as video.",
+        "- `imagination/`: the SFT policy's imagined rollouts against their real replays (imagination.json, imagination.md, videos).",
         "- `arms/<arm>/`: each arm's run (metrics.jsonl, TensorBoard, rollout videos with their rewards, summary.json).",
     ]
     return "\n".join(lines) + "\n"
