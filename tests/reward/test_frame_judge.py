@@ -104,3 +104,20 @@ def test_a_checkpoint_of_an_unknown_judge_is_refused(tmp_path):
 def test_the_committed_video_judge_still_loads():
     judge = load_judge("results/judge/judge")
     assert judge.backend == "embedded-judge" and judge.config.threshold == 0.5
+
+
+def test_episodes_imagined_together_match_episodes_imagined_alone(tiny_dataset, tmp_path):
+    from gymnast.reward.train_judge import load_videos
+    from gymnast.world_model.train import WM_PRESETS, train_world_model
+
+    train_world_model(tiny_dataset, tmp_path / "wm", WM_PRESETS["debug"], progress=False)
+    dataset = EpisodeDataset(tiny_dataset)
+    episodes = list(range(len(dataset.episodes)))
+    assert len({len(dataset.load(i).actions) for i in episodes}) > 1  # lengths differ: some are padded
+    together = load_videos(dataset, episodes, tmp_path / "wm", progress=False)
+    for i in episodes:
+        real, imagined = load_videos(dataset, [i], tmp_path / "wm", progress=False)
+        assert torch.equal(together[2 * i].frames, real.frames)
+        assert together[2 * i + 1].imagined and imagined.frames.shape == real.frames.shape
+        difference = (together[2 * i + 1].frames.float() - imagined.frames.float()).abs()
+        assert difference.max() <= 2  # the same frames, up to bf16 rounding in a larger batch

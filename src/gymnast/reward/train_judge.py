@@ -131,17 +131,20 @@ def load_videos(dataset: EpisodeDataset, indices: list[int], wm: Path | None, pr
     if wm is None:
         return videos
     model = load_world_model(wm)
-    by_length: dict[int, list[int]] = {}
-    for n, actions in enumerate(episodes):
-        by_length.setdefault(len(actions), []).append(n)
+    # Episodes of similar length share a batch; shorter ones are padded with zero actions at the
+    # end and cut back, which changes none of their frames: frame t follows actions up to t only.
+    order = sorted(range(len(episodes)), key=lambda n: len(episodes[n]))
     imagined: dict[int, Video] = {}
-    batches = [group[i: i + IMAGINE_BATCH] for group in by_length.values() for i in range(0, len(group), IMAGINE_BATCH)]
-    for batch in tqdm(batches, desc="imagining episodes", disable=not progress):
+    for first in tqdm(range(0, len(order), IMAGINE_BATCH), desc="imagining episodes", disable=not progress):
+        batch = order[first: first + IMAGINE_BATCH]
+        longest = max(len(episodes[n]) for n in batch)
+        actions = torch.stack([torch.nn.functional.pad(episodes[n], (0, 0, 0, longest - len(episodes[n]))) for n in batch])
         start = torch.stack([videos[n].frames[:1] for n in batch])  # (b, 1, H, W, 3)
-        frames = rollout(model, start, actions=torch.stack([episodes[n] for n in batch])).frames  # (b, T, H, W, 3)
+        frames = rollout(model, start, actions=actions).frames  # (b, T_max, H, W, 3)
         for n, video in zip(batch, frames):
             real = videos[n]
-            imagined[n] = Video(torch.cat([real.frames[:1], video]), real.success, real.shows, real.instruction, imagined=True)
+            video = torch.cat([real.frames[:1], video[: len(episodes[n])]])
+            imagined[n] = Video(video, real.success, real.shows, real.instruction, imagined=True)
     return [video for n, real in enumerate(videos) for video in (real, imagined[n])]
 
 
