@@ -30,7 +30,7 @@ from gymnast.utils.metrics import read_metrics
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = Path(__file__).parent / "results" / "rl_step.json"
-POLICY, WORLD_MODEL, JUDGE = ROOT / "results/sft/policy", ROOT / "results/world_model/wm", ROOT / "results/judge/judge"
+POLICY, WORLD_MODEL, JUDGE = ROOT / "results/sft/policy", ROOT / "results/world_model/wm", ROOT / "results/judge/video_judge"
 SETTINGS = {
     "imagined_judge": ("imagined", f"judge:{JUDGE}"),
     "imagined_verified": ("imagined", "verified"),

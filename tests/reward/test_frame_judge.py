@@ -102,7 +102,7 @@ def test_a_checkpoint_of_an_unknown_judge_is_refused(tmp_path):
 
 
 def test_the_committed_video_judge_still_loads():
-    judge = load_judge("results/judge/judge")
+    judge = load_judge("results/judge/video_judge")
     assert judge.backend == "embedded-judge" and judge.config.threshold == 0.5
 
 
