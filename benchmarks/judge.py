@@ -3,7 +3,7 @@
     .venv/bin/python benchmarks/judge.py [--videos 64] [--frames 151] [--repeats 3]
 
 The per-frame judge looks at every frame of a video (a success at any step counts), the video
-judge at four; both are timed on the same random videos in the same run (the scores do not
+judge at four; both are timed on the same random videos in the same run (medians after two warm-up calls) (the scores do not
 depend on the content's meaning, only its size). Untrained weights at the committed judges'
 sizes. Prints and writes benchmarks/results/judge.json.
 """
@@ -14,7 +14,6 @@ import argparse
 import json
 import os
 import platform
-import time
 from pathlib import Path
 
 import torch
@@ -22,19 +21,9 @@ import torch
 from gymnast.reward.frame_judge import FrameJudge
 from gymnast.reward.judge import JudgeConfig, LearnedJudge
 from gymnast.utils.atomic import write_json
+from policy import seconds_per_call  # benchmarks/policy.py: median wall time after warm-up calls
 
 RESULTS = Path(__file__).parent / "results" / "judge.json"
-
-
-def median_seconds(fn, repeats: int) -> float:
-    """Median wall time of `repeats` calls after one warm-up call."""
-    fn()
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - start)
-    return sorted(times)[len(times) // 2]
 
 
 def main() -> None:
@@ -49,7 +38,7 @@ def main() -> None:
     result = {"videos": args.videos, "frames": args.frames}
     for name, judge in (("frames", FrameJudge(JudgeConfig())), ("video", LearnedJudge(JudgeConfig()))):
         judge.eval()
-        seconds = median_seconds(lambda: judge.score(videos, texts), args.repeats)
+        seconds = seconds_per_call(lambda: judge.score(videos, texts), args.repeats)
         result[f"{name}_s"] = round(seconds, 3)
         result[f"{name}_videos_per_s"] = round(args.videos / seconds, 1)
     result["frames_over_video_cost"] = round(result["frames_s"] / result["video_s"], 1)
