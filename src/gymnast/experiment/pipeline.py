@@ -20,7 +20,6 @@ Stages, in order, each done once (`gymnast.experiment.stages`; a rerun skips fin
 from __future__ import annotations
 
 import dataclasses
-import logging
 from pathlib import Path
 
 from gymnast.config import EnvConfig
@@ -29,8 +28,6 @@ from gymnast.experiment.arms import ARMS, PERTURBATIONS, ROBUSTNESS_ARMS, arm, r
 from gymnast.experiment.config import ExperimentConfig
 from gymnast.experiment.stages import Stages
 from gymnast.utils.atomic import write_json
-
-logger = logging.getLogger(__name__)
 
 
 def run_experiment(config: ExperimentConfig, out: Path, reuse: dict[str, Path] | None = None,
