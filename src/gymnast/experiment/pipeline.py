@@ -89,14 +89,11 @@ FIDELITY_KEYS = ("psnr_h1", "psnr_h8", "psnr_h32", "copy_last_psnr_h32", "moving
 def _world_model_fidelity(wm: Path, data: Path, out: Path, progress: bool) -> dict:
     """`gymnast eval-wm` on the held-out episodes: open-loop fidelity and controllability, the
     first thing to look at when imagined practice does not carry over to the real world."""
-    import json
-
-    from gymnast.utils.checkpoint import resolve_checkpoint
     from gymnast.world_model.controllability import ControllabilityConfig
     from gymnast.world_model.data import split_episodes
-    from gymnast.world_model.evaluate import WorldModelEvalConfig, evaluate_world_model
+    from gymnast.world_model.evaluate import WorldModelEvalConfig, evaluate_world_model, heldout_fraction
 
-    fraction = json.loads((resolve_checkpoint(wm) / "config.json").read_text())["train"]["heldout_fraction"]
+    fraction = heldout_fraction(wm)  # a run's, or the smallest of an ensemble's members
     if not split_episodes(EpisodeDataset(data).episodes, fraction)[1]:  # tiny datasets may hold out no scene
         return {"skipped": f"{data} has no scene held out from the world model (held-out fraction {fraction})"}
     settings = WorldModelEvalConfig(videos=2, controllability=ControllabilityConfig(scenes=4))
