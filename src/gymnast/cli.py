@@ -14,8 +14,8 @@ import tyro
 import gymnast  # noqa: F401  (sets MUJOCO_GL before anything imports mujoco)
 from gymnast.config import EnvConfig
 from gymnast.data.collect import CollectConfig
-from gymnast.cli_models import (eval_judge, eval_wm, experiment, imagination, make_ensemble, rl, serve_judge, train_judge,
-                                train_wm, worldgym)
+from gymnast.cli_models import (eval_judge, eval_wm, experiment, imagination, make_ensemble, object_fidelity, rl, serve_judge,
+                                train_judge, train_wm, worldgym)
 from gymnast.eval.evaluate import EvalConfig
 
 
@@ -266,6 +266,7 @@ COMMANDS = {
     "train-wm": train_wm,
     "eval-wm": eval_wm,
     "make-ensemble": make_ensemble,
+    "object-fidelity": object_fidelity,
     "train-judge": train_judge,
     "serve-judge": serve_judge,
     "eval-judge": eval_judge,

@@ -84,6 +84,34 @@ def eval_wm(
     print(f"report: {out}")
 
 
+def object_fidelity(
+    wm: Path,
+    data: Path,
+    out: Path,
+    extra_data: tuple[Path, ...] = (),
+    tasks: str = "pick-place-v3,push-v3,peg-insert-side-v3",
+    steps: int = 3000,
+) -> None:
+    """Object-level fidelity: train a position probe on real frames, then measure how far the object the
+    world model imagines (open-loop, held-out episodes) is from the real one at steps 1, 8, 16, 32, 64, 128.
+
+    Args:
+        wm: world-model run (or checkpoint) directory; its held-out scenes are measured.
+        data: dataset directory.
+        out: report JSON (per task and step: centimetres, counts, probe floor, settings, seconds).
+        extra_data: more datasets (same image size) to train the probe on and measure.
+        tasks: tasks with a small object, comma-separated.
+        steps: optimizer steps of the probe.
+    """
+    from gymnast.envs.tasks import resolve_tasks
+    from gymnast.world_model.object_probe import ObjectProbeConfig, format_object_table, measure_object_fidelity
+
+    config = ObjectProbeConfig(tasks=resolve_tasks(tasks), steps=steps)
+    report = measure_object_fidelity(wm, data, out, extra_data, config)
+    print(format_object_table(report))
+    print(f"report: {out}")
+
+
 def make_ensemble(members: tuple[Path, ...], out: Path) -> None:
     """Make an ensemble of world-model runs: OUT/ensemble.json lists them (relative to OUT), and OUT then
     works wherever a world-model run does (--wm OUT); eval-wm also reports where the members disagree.
