@@ -24,6 +24,7 @@ def collect(
     config: Annotated[CollectConfig, tyro.conf.arg(name="")] = CollectConfig(),
     policy: Path | None = None,
     temperature: float = 0.0,
+    imagine_with: Path | None = None,
 ) -> None:
     """Record scripted episodes (experts, noisy experts, failures), or a learned policy's own
     rollouts, into a LeRobot v3.0 dataset.
@@ -36,13 +37,17 @@ def collect(
         policy: an SFT/RL run directory: record its rollouts (behaviour policy-<tag>, greedy plus the
             --noise levels, no failure episodes) instead of the scripted behaviours.
         temperature: with --policy, sample the action tokens at this temperature (0: greedy).
+        imagine_with: with --policy, a world-model run: the policy plans each episode closed loop in
+            it from the scene's first frame and the real world executes the plan, so that every
+            episode labels an imagined rollout with its real outcome (judge data for
+            `gymnast train-judge --wm` on the same world model).
     """
     if policy is not None:
         from gymnast.eval.record import record_policy
 
-        table = record_policy(policy, config, out, temperature=temperature)
-    elif temperature:
-        raise ValueError("--temperature applies to a learned policy; give --policy RUN too")
+        table = record_policy(policy, config, out, temperature=temperature, imagine_with=imagine_with)
+    elif temperature or imagine_with:
+        raise ValueError("--temperature and --imagine-with apply to a learned policy; give --policy RUN too")
     else:
         from gymnast.data.collect import collect as run_collect
 

@@ -16,8 +16,10 @@ from gymnast.data.lerobot import EpisodeDataset
 from gymnast.data.schema import POLICY, EpisodeInfo, behaviour_kind, policy_behaviour
 from gymnast.envs.experts import make_behaviour
 from gymnast.envs.metaworld import MetaWorldEnv
+from gymnast.eval.actors import ImaginedPlanActor, PolicyActor
 from gymnast.eval.record import PolicyActors, policy_tag, record_policy
 from gymnast.policy.vla import load_policy
+from gymnast.world_model.base import load_world_model, rollout
 
 RUN = Path(__file__).resolve().parents[2] / "results" / "sft" / "policy"
 ENV = EnvConfig(image_size=96, horizon=20)  # the committed policy sees 96x96 images
@@ -97,6 +99,41 @@ def test_a_rerun_records_nothing_new_and_another_temperature_is_another_behaviou
     assert len(EpisodeDataset(copy)) == 3
 
 
+WM = RUN.parents[1] / "world_model" / "wm"
+
+
+def test_a_plan_made_in_imagination_is_the_policys_closed_loop_imagined_rollout_executed_for_real(tmp_path: Path):
+    config = CollectConfig(tasks="reach-v3", episodes_per_task=1, noise=(0.0,), workers=1, env=ENV)
+    table = record_policy(RUN, config, tmp_path / "data", progress=False, imagine_with=WM)
+    planned = policy_behaviour(policy_tag(RUN, 0.0, WM))
+    assert planned != policy_behaviour(policy_tag(RUN, 0.0)) and table["reach-v3"][planned][1] == 1
+    episode = EpisodeDataset(tmp_path / "data").load(0)
+    # The recorded actions are what the greedy policy chose looking at imagined frames only.
+    policy, world_model = load_policy(RUN), load_world_model(WM)
+    env = MetaWorldEnv("reach-v3", ENV)
+    obs, _ = env.reset(seed=0)
+    imagined = rollout(world_model, torch.from_numpy(obs["image"])[None, None], horizon=ENV.horizon,
+                       policy=lambda frames: torch.from_numpy(_greedy_chunk(policy, frames[0].numpy(), env.instruction))[None])
+    np.testing.assert_array_equal(episode.actions, imagined.actions[0].numpy()[:episode.length])
+    # ... and the real world executed them from the same scene (every step, open-loop).
+    for action, state in zip(episode.actions, episode.states[1:]):
+        obs, *_ = env.step(action)
+        np.testing.assert_allclose(obs["state"], state, rtol=0, atol=1e-6)
+    env.close()
+
+
+def test_a_plan_that_runs_out_before_the_episode_ends_is_an_error():
+    env = MetaWorldEnv("reach-v3", ENV)
+    obs, _ = env.reset(seed=0)
+    actor = ImaginedPlanActor(PolicyActor(load_policy(RUN)), load_world_model(WM), horizon=5)
+    assert actor(env, obs).shape == (5, 4)
+    with pytest.raises(ValueError, match="imagined plan of 5 actions ran out"):
+        actor(env, obs)
+    with pytest.raises(ValueError, match="horizon >= 1"):
+        ImaginedPlanActor(PolicyActor(load_policy(RUN)), load_world_model(WM), horizon=0)
+    env.close()
+
+
 def test_the_env_image_size_must_be_the_policys_and_the_temperature_non_negative(tmp_path: Path):
     small = CollectConfig(tasks="reach-v3", episodes_per_task=1, workers=1, env=EnvConfig(image_size=32, horizon=20))
     with pytest.raises(ValueError, match=r"96x96 images but env.image_size is 32"):
@@ -113,6 +150,9 @@ def test_cli_refuses_evaluation_seeds_and_a_temperature_without_a_policy(tmp_pat
     assert exit_info.value.code == 2 and "evaluation seeds are never recorded" in capsys.readouterr().err
     with pytest.raises(SystemExit) as exit_info:
         main([*args, "--temperature", "0.5"])
+    assert exit_info.value.code == 2 and "--policy" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exit_info:
+        main([*args, "--imagine-with", str(WM)])
     assert exit_info.value.code == 2 and "--policy" in capsys.readouterr().err
     assert not (tmp_path / "data").exists()
 

@@ -21,6 +21,7 @@ from gymnast.envs.metaworld import ACTION_DIM, MetaWorldEnv
 
 if TYPE_CHECKING:
     from gymnast.policy.base import Policy
+    from gymnast.world_model.base import WorldModel
 
 
 class PolicyActor:
@@ -55,24 +56,81 @@ class PolicyActor:
         self._rng = np.random.default_rng(seed)
 
     def __call__(self, env: MetaWorldEnv, obs: dict[str, np.ndarray]) -> np.ndarray:
+        return self.chunk(obs["image"], env.instruction, env.task)
+
+    def chunk(self, image: np.ndarray, instruction: str, task: str) -> np.ndarray:
+        """(K, A) float32 actions in [-1, 1] for one (H, W, 3) uint8 image, real or imagined."""
         import torch
 
-        image = torch.from_numpy(obs["image"])[None]  # (1, H, W, 3) uint8
+        image = torch.as_tensor(image)[None]  # (1, H, W, 3) uint8
         with torch.inference_mode():
             if self._temperature > 0:
-                chunk = self._policy.sample(image, [env.instruction], self._temperature, self._generator).actions
+                chunk = self._policy.sample(image, [instruction], self._temperature, self._generator).actions
             else:
-                chunk = self._policy.act(image, [env.instruction])  # (1, K, A)
+                chunk = self._policy.act(image, [instruction])  # (1, K, A)
         expected = (1, self._policy.chunk_size, ACTION_DIM)
         if tuple(chunk.shape) != expected:
             raise ValueError(f"the policy returned shape {tuple(chunk.shape)}, expected (B, K, A) = {expected}")
         actions = chunk[0].detach().to("cpu", torch.float32).numpy()  # (K, A)
         if not np.isfinite(actions).all():
-            raise ValueError(f"the policy returned non-finite actions on {env.task}: {actions.tolist()}")
+            raise ValueError(f"the policy returned non-finite actions on {task}: {actions.tolist()}")
         if self._noise > 0:
             actions = actions + self._rng.normal(0.0, self._noise, size=actions.shape).astype(np.float32)
         # The environment clips to [-1, 1] anyway; clipping here makes a recorded action the executed one.
         return np.clip(actions, -1.0, 1.0)
+
+
+class ImaginedPlanActor:
+    """The policy plans the whole episode in imagination; the real world then executes the plan.
+
+    At the scene's first frame the policy acts closed loop in the world model (it sees the
+    imagined frames, as in world-model RL) for `horizon` actions; the real env executes those
+    actions open-loop. The real outcome of the plan is then the true label of an imagined
+    rollout: re-imagining the episode's actions from its first frame (as `gymnast train-judge
+    --wm` does) gives back the video the policy saw, so such episodes teach a judge what the
+    world model's imagined successes and failures really are.
+
+    Args:
+        actor: decides each chunk from an imagined frame (its temperature and noise apply there).
+        world_model: imagines the frames; its image size must be the env's.
+        horizon: actions to plan, at least the episode's limit (a plan that ran out would leave
+            the episode unfinished).
+
+    Raises:
+        ValueError: a horizon below 1; asked for more actions than the plan holds.
+    """
+
+    def __init__(self, actor: PolicyActor, world_model: WorldModel, horizon: int) -> None:
+        if horizon < 1:
+            raise ValueError(f"an imagined plan needs horizon >= 1, got {horizon}")
+        self._actor, self._world_model, self._horizon = actor, world_model, horizon
+        self._planned = False
+
+    def __call__(self, env: MetaWorldEnv, obs: dict[str, np.ndarray]) -> np.ndarray:
+        import torch
+
+        from gymnast.world_model.base import rollout
+
+        if self._planned:
+            raise ValueError(f"the imagined plan of {self._horizon} actions ran out before the episode on {env.task} "
+                             "ended; plan at least the env's horizon")
+        self._planned = True
+
+        def act(frames: torch.Tensor) -> torch.Tensor:  # (1, H, W, 3) uint8 -> (1, K, A)
+            return torch.from_numpy(self._actor.chunk(frames[0].numpy(), env.instruction, env.task))[None]
+
+        context = torch.from_numpy(obs["image"])[None, None]  # (1, 1, H, W, 3): the first frame only
+        with torch.inference_mode():
+            imagined = rollout(self._world_model, context, policy=act, horizon=self._horizon)
+        return imagined.actions[0].numpy()  # (T, A)
+
+
+@functools.lru_cache(maxsize=1)
+def load_run_world_model(run_dir: str) -> WorldModel:
+    """This process's world model from `run_dir` (a run, checkpoint or ensemble), loaded once."""
+    from gymnast.world_model.base import load_world_model
+
+    return load_world_model(Path(run_dir))
 
 
 @functools.lru_cache(maxsize=1)

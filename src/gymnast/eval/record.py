@@ -9,8 +9,13 @@ through ``--noise`` like the experts' (and a temperature samples the action toke
 policy yields both successes and failures. They start from data seeds only: `CollectConfig`
 refuses evaluation seeds, which must stay unseen by anything trained on the dataset.
 
+With a world model (``--imagine-with``), the policy instead plans each episode closed loop in
+imagination from the scene's first frame, and the real world executes the plan
+(`ImaginedPlanActor`): each episode is then an imagined rollout of the policy labelled by what
+its actions really do, at the cost of one real episode.
+
 Each episode's behaviour is ``policy-<tag>`` (`gymnast.data.schema.policy_behaviour`), the tag a
-digest of the checkpoint's weights and the temperature, so the rollouts of several policies, or
+digest of the checkpoint's weights and the temperature (and of the world model that planned), so the rollouts of several policies, or
 of one policy at several temperatures, can share a dataset and a rerun skips exactly its own.
 """
 
@@ -24,7 +29,7 @@ from pathlib import Path
 
 from gymnast.data.collect import CollectConfig, EpisodeJob, collect
 from gymnast.data.schema import policy_behaviour
-from gymnast.eval.actors import PolicyActor, load_run_policy
+from gymnast.eval.actors import ImaginedPlanActor, PolicyActor, load_run_policy, load_run_world_model
 from gymnast.utils.checkpoint import resolve_checkpoint
 
 logger = logging.getLogger(__name__)
@@ -32,7 +37,8 @@ logger = logging.getLogger(__name__)
 
 @dataclass(frozen=True)
 class PolicyActors:
-    """Builds each episode's `PolicyActor` (a `gymnast.data.collect.ActorFactory`).
+    """Builds each episode's `PolicyActor`, or `ImaginedPlanActor` with a world model (a
+    `gymnast.data.collect.ActorFactory`).
 
     Plain settings, so it pickles to the worker processes, where the policy is loaded once.
 
@@ -40,35 +46,52 @@ class PolicyActors:
         run: the run (or checkpoint) directory of the policy, absolute.
         temperature: 0 for greedy decoding, above 0 to sample the action tokens.
         behaviour: the behaviour recorded with every episode, ``policy-<tag>``.
+        world_model: a world-model run (absolute) the policy plans each episode in; None acts
+            in the real world directly.
     """
 
     run: str
     temperature: float
     behaviour: str
+    world_model: str | None = None
 
-    def __call__(self, job: EpisodeJob) -> PolicyActor:
+    def __call__(self, job: EpisodeJob) -> PolicyActor | ImaginedPlanActor:
         # Seeded by the recipe, so a recipe always yields the same episode, as a scripted one does.
         seed = zlib.crc32(f"{job.task}/{job.seed}".encode())
-        return PolicyActor(load_run_policy(self.run), self.temperature, job.noise, seed)
+        actor = PolicyActor(load_run_policy(self.run), self.temperature, job.noise, seed)
+        if self.world_model is None:
+            return actor
+        return ImaginedPlanActor(actor, load_run_world_model(self.world_model), job.env.horizon)
 
 
-def policy_tag(run: str | Path, temperature: float) -> str:
-    """Eight hex digits naming the newest checkpoint of `run` and the sampling temperature.
+def policy_tag(run: str | Path, temperature: float, world_model: str | Path | None = None) -> str:
+    """Eight hex digits naming the newest checkpoint of `run`, the sampling temperature and the
+    world model the policy plans in, if any.
 
-    The checkpoint is named by the content of its weights, so a moved run keeps its tag and a
-    run trained further gets a new one.
+    A checkpoint is named by the content of its weights, so a moved run keeps its tag and a run
+    trained further gets a new one (an ensemble by its ``ensemble.json``).
 
     Raises:
-        FileNotFoundError: no checkpoint in `run`.
+        FileNotFoundError: no checkpoint in `run` or `world_model`.
     """
-    with open(resolve_checkpoint(Path(run)) / "model.safetensors", "rb") as f:
-        digest = hashlib.file_digest(f, "sha256")
+    digest = hashlib.sha256(_weights_digest(Path(run)))
     digest.update(f"/temperature={temperature:g}".encode())
+    if world_model is not None:
+        digest.update(b"/world_model=" + _weights_digest(Path(world_model)))
     return digest.hexdigest()[:8]
 
 
+def _weights_digest(run: Path) -> bytes:
+    from gymnast.world_model.base import ENSEMBLE_FILE
+
+    path = run / ENSEMBLE_FILE if (run / ENSEMBLE_FILE).is_file() else resolve_checkpoint(run) / "model.safetensors"
+    with open(path, "rb") as f:
+        return hashlib.file_digest(f, "sha256").digest()
+
+
 def record_policy(
-    run: str | Path, config: CollectConfig, out: str | Path, temperature: float = 0.0, progress: bool = True
+    run: str | Path, config: CollectConfig, out: str | Path, temperature: float = 0.0, progress: bool = True,
+    imagine_with: str | Path | None = None,
 ) -> dict:
     """Records the rollouts of `run`'s newest checkpoint into the dataset `out`.
 
@@ -80,6 +103,8 @@ def record_policy(
         out: dataset directory (created if missing); episodes already there are skipped.
         temperature: 0 decodes greedily; above 0 samples every action token at this temperature.
         progress: show a progress bar with the running success rate.
+        imagine_with: a world-model run: the policy plans each episode in it from the scene's first
+            frame and the real world executes the plan (`ImaginedPlanActor`).
 
     Returns:
         `gymnast.data.collect.success_table` of the whole dataset.
@@ -99,7 +124,15 @@ def record_policy(
             f"the policy in {run} sees {size}x{size} images but env.image_size is {config.env.image_size}; "
             f"record with --env.image-size {size}"
         )
-    actors = PolicyActors(run_dir, temperature, policy_behaviour(policy_tag(run_dir, temperature)))
-    logger.info("recording %s as behaviour %s (temperature %g, noise %s)",
-                run_dir, actors.behaviour, temperature, ", ".join(f"{n:g}" for n in config.noise))
+    world_model = None
+    if imagine_with is not None:
+        world_model = str(Path(imagine_with).resolve())
+        imagined_size = load_run_world_model(world_model).image_size
+        if imagined_size != size:
+            raise ValueError(f"the world model in {imagine_with} imagines {imagined_size}x{imagined_size} frames, but "
+                             f"the policy in {run} sees {size}x{size}")
+    tag = policy_tag(run_dir, temperature, world_model)
+    actors = PolicyActors(run_dir, temperature, policy_behaviour(tag), world_model)
+    logger.info("recording %s as behaviour %s (temperature %g, noise %s%s)", run_dir, actors.behaviour, temperature,
+                ", ".join(f"{n:g}" for n in config.noise), f", planned in {world_model}" if world_model else "")
     return collect(config, out, progress=progress, make_actor=actors)
