@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
-import json
 import logging
 import sys
 from pathlib import Path
@@ -12,10 +10,12 @@ from typing import Annotated, Literal
 import tyro
 
 import gymnast  # noqa: F401  (sets MUJOCO_GL before anything imports mujoco)
+from gymnast.cli_models import (Preset, eval_judge, eval_wm, experiment, imagination, make_ensemble, object_fidelity,
+                                rl, serve_judge, train_judge, train_wm, worldgym)
+from gymnast.cli_settings import resolve, saved_inputs
 from gymnast.config import EnvConfig
 from gymnast.data.collect import CollectConfig
-from gymnast.cli_models import (eval_judge, eval_wm, experiment, imagination, make_ensemble, object_fidelity, rl, serve_judge,
-                                train_judge, train_wm, worldgym)
+from gymnast.data.summary import format_success_table
 from gymnast.eval.evaluate import EvalConfig
 
 
@@ -76,9 +76,9 @@ def evaluate_command(
 
 
 def sft(
-    data: Path,
     out: Path,
-    preset: Literal["debug", "demo", "full"] = "full",
+    data: Path | None = None,
+    preset: Preset = "full",
     resume: bool = False,
     demos_per_task: int | None = None,
     steps: int | None = None,
@@ -89,10 +89,10 @@ def sft(
     """Behaviour-clone the embedded VLA on N successful expert demonstrations per task.
 
     Args:
-        data: dataset directory (from `gymnast collect`).
         out: run directory: checkpoints, metrics.jsonl, config.json.
+        data: dataset directory (from `gymnast collect`); with --resume, the run's own.
         preset: debug (seconds), demo (minutes) or full (the default policy).
-        resume: continue the run in OUT from its last checkpoint, with the settings saved there.
+        resume: continue the run in OUT from its last checkpoint, with the settings and data saved there.
         demos_per_task: override the preset's demonstrations per task.
         steps: override the preset's optimizer steps.
         vision: override the image encoder.
@@ -101,14 +101,12 @@ def sft(
     """
     from gymnast.policy.sft import SFT_PRESETS, saved_sft_config, train_sft
 
-    if resume:
-        config = saved_sft_config(out)
-    else:
-        overrides = {"demos_per_task": demos_per_task, "steps": steps, "tasks": tasks, "seed": seed}
-        config = dataclasses.replace(SFT_PRESETS[preset], **{k: v for k, v in overrides.items() if v is not None})
-        if vision is not None:
-            config = dataclasses.replace(config, vla=dataclasses.replace(config.vla, vision=vision))
-    checkpoint = train_sft(data, out, config, resume=resume)
+    config, inputs = resolve(
+        "sft", out, resume, SFT_PRESETS[preset], inputs={"data": data}, required=("data",),
+        overrides={"demos_per_task": demos_per_task, "steps": steps, "tasks": tasks, "seed": seed,
+                   "vla.vision": vision},
+        saved=lambda: (saved_sft_config(out), saved_inputs(out, "data")))
+    checkpoint = train_sft(inputs["data"], out, config, resume=resume)
     print(f"policy: {checkpoint}")
 
 
@@ -120,28 +118,13 @@ def inspect(data: Path, sheet: Path | None = None, episodes: int = 10) -> None:
         sheet: also write a PNG contact sheet (first, middle and last frame of a few episodes).
         episodes: how many episodes the contact sheet shows.
     """
-    from gymnast.data.collect import success_table
     from gymnast.data.lerobot import EpisodeDataset
-    from gymnast.utils.images import contact_sheet, save_png
+    from gymnast.data.summary import describe_dataset, write_episode_sheet
 
     dataset = EpisodeDataset(data)
-    infos = dataset.episodes
-    print(f"{data}: LeRobot {dataset.info['codebase_version']}, {len(infos)} episodes, "
-          f"{sum(dataset.lengths)} steps, {dataset.fps} fps, images {dataset.image_shape}")
-    recorded = dataset.info.get("gymnast", {})
-    if "video_psnr_db" in recorded:
-        print(f"video: {json.dumps(recorded['codec'])}, decoded-vs-raw PSNR "
-              f"min {recorded['video_psnr_db']['min']:.1f} dB, mean {recorded['video_psnr_db']['mean']:.1f} dB")
-    print(format_success_table(success_table(infos)))
+    print(describe_dataset(dataset))
     if sheet is not None:
-        frames, labels = [], []
-        for i in range(min(episodes, len(infos))):
-            episode = dataset.load(i)
-            for t in (0, episode.length // 2, episode.length):
-                frames.append(episode.frames[t])
-                labels.append(f"{i} {infos[i].task[:14]} t={t}")
-        save_png(contact_sheet(frames, labels, columns=6), sheet)
-        print(f"contact sheet: {sheet}")
+        print(f"contact sheet: {write_episode_sheet(dataset, sheet, episodes)}")
 
 
 def contact_sheet(
@@ -160,24 +143,10 @@ def contact_sheet(
         gap: which world to show (none = the real world).
         env: camera and image size.
     """
-    from gymnast.envs.metaworld import MetaWorldEnv
     from gymnast.envs.tasks import resolve_tasks
-    from gymnast.envs.visibility import object_pixel_counts
-    from gymnast.utils.atomic import write_json
-    from gymnast.utils.images import contact_sheet as tile
-    from gymnast.utils.images import save_png
+    from gymnast.envs.visibility import write_task_sheet
 
-    frames, labels, sizes = [], [], {}
-    for task in resolve_tasks(tasks):
-        world = MetaWorldEnv(task, env, gap=gap)
-        obs, _ = world.reset(seed=seed)
-        frames.append(obs["image"])
-        labels.append(task.removesuffix("-v3"))
-        sizes[task] = object_pixel_counts(world)
-        world.close()
-    save_png(tile(frames, labels, columns=5, scale=max(1, 192 // env.image_size)), out)
-    write_json(out.with_suffix(".json"), {"image_size": env.image_size, "seed": seed, "pixels": sizes})
-    print(f"contact sheet: {out}")
+    print(f"contact sheet: {write_task_sheet(out, resolve_tasks(tasks), seed, gap, env)}")
 
 
 def gap_report(
@@ -200,28 +169,13 @@ def gap_report(
         first_seed: first data seed.
         env: camera, image size and horizon.
     """
-    from tqdm import tqdm
-
-    from gymnast.envs.gap import get_gap
-    from gymnast.envs.gap_report import measure_gap, summarise, to_markdown
+    from gymnast.envs.gap_report import format_level, measure_gap_levels, write_gap_report
     from gymnast.envs.tasks import resolve_tasks
-    from gymnast.utils.atomic import write_bytes, write_json
 
-    task_list = resolve_tasks(tasks)
-    report = {"tasks": list(task_list), "episodes_per_task": episodes, "horizon": env.horizon, "levels": {}}
-    for level in levels:
-        records = list(tqdm(measure_gap(level, task_list, episodes, env, workers, first_seed),
-                            total=len(task_list) * episodes, desc=f"gap {level}", unit="ep"))
-        summary = summarise(records)
-        report["levels"][level] = {"gap": dataclasses.asdict(get_gap(level)), **summary, "records": records}
-        overall = summary["overall"]
-        print(f"{level:>7}: expert success real {overall['real_expert_success']:.0%} -> sim "
-              f"{overall['sim_expert_success']:.0%}; replayed real actions succeed "
-              f"{overall['replay_success']:.0%}, hand drift {overall['hand_divergence_cm_final']:.1f} cm, "
-              f"object drift {overall['object_divergence_cm_final']:.1f} cm")
-    write_json(out, report)
-    write_bytes(out.with_suffix(".md"), to_markdown(report).encode())
-    print(f"report: {out} and {out.with_suffix('.md')}")
+    report = measure_gap_levels(resolve_tasks(tasks), episodes, levels, env, workers, first_seed)
+    for level, result in report["levels"].items():
+        print(format_level(level, result["overall"]))
+    print(f"report: {out} and {write_gap_report(out, report)}")
 
 
 def tasks(task_set: str = "mt10", split: str = "train") -> None:
@@ -248,19 +202,6 @@ def doctor() -> None:
     print(message)
     if not ok:
         raise SystemExit(1)
-
-
-def format_success_table(table: dict) -> str:
-    """Success by task (rows) and behaviour (columns) as aligned text: 'successes/episodes'."""
-    behaviours = sorted({b for row in table.values() for b in row})
-    width = max([len(t) for t in table] + [4])
-    lines = [f"{'task':<{width}}  " + "  ".join(f"{b:>17}" for b in behaviours)]
-    for task, row in sorted(table.items()):
-        cells = [f"{row[b][0]:>3}/{row[b][1]:<3} ({row[b][0] / row[b][1]:>4.0%})" if b in row else f"{'-':>17}"
-                 for b in behaviours]
-        lines.append(f"{task:<{width}}  " + "  ".join(f"{c:>17}" for c in cells))
-    return "\n".join(lines)
-
 
 
 COMMANDS = {

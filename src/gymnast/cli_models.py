@@ -12,14 +12,19 @@ from typing import Annotated, Literal
 
 import tyro
 
+from gymnast.cli_settings import flags_of, resolve, saved_inputs
 from gymnast.config import CommaFloats
 from gymnast.experiment.worldgym import DEFAULT_NOISE
+from gymnast.rl.train import RL_PRESETS, EnvName, RLConfig
+
+Preset = Literal["debug", "demo", "full"]
+RLFlags = flags_of(RLConfig, RL_PRESETS)
 
 
 def train_wm(
-    data: Path,
     out: Path,
-    preset: Literal["debug", "demo", "full"] = "full",
+    data: Path | None = None,
+    preset: Preset = "full",
     resume: bool = False,
     steps: int | None = None,
     seed: int | None = None,
@@ -30,10 +35,10 @@ def train_wm(
     """Train the embedded world model on every episode of a dataset (held-out scenes excepted).
 
     Args:
-        data: dataset directory (from `gymnast collect`).
         out: run directory: checkpoints, metrics.jsonl, config.json, videos/.
+        data: dataset directory (from `gymnast collect`); with --resume, the run's own.
         preset: debug (seconds), demo (minutes) or full (the default world model, under an hour on 2 cores).
-        resume: continue the run in OUT from its last checkpoint, with the settings saved there.
+        resume: continue the run in OUT from its last checkpoint, with the settings and data saved there.
         steps: override the preset's optimizer steps.
         seed: override the seed.
         moving_weight: extra loss weight of moving pixels, normalised (0 = plain mean squared error).
@@ -42,13 +47,12 @@ def train_wm(
     """
     from gymnast.world_model.train import WM_PRESETS, saved_train_config, train_world_model
 
-    if resume:
-        config = saved_train_config(out)
-    else:
-        overrides = {"steps": steps, "seed": seed, "moving_weight": moving_weight, "init": init,
-                     "extra_data": tuple(extra_data) or None}
-        config = dataclasses.replace(WM_PRESETS[preset], **{k: v for k, v in overrides.items() if v is not None})
-    checkpoint = train_world_model(data, out, config, resume=resume)
+    config, inputs = resolve(
+        "train-wm", out, resume, WM_PRESETS[preset], inputs={"data": data}, required=("data",),
+        overrides={"steps": steps, "seed": seed, "moving_weight": moving_weight, "init": init,
+                   "extra_data": extra_data or None},
+        saved=lambda: (saved_train_config(out), saved_inputs(out, "data")))
+    checkpoint = train_world_model(inputs["data"], out, config, resume=resume)
     print(f"world model: {checkpoint}")
 
 
@@ -127,10 +131,10 @@ def make_ensemble(members: tuple[Path, ...], out: Path) -> None:
 
 
 def train_judge(
-    data: Path,
     out: Path,
+    data: Path | None = None,
     wm: Path | None = None,
-    preset: Literal["debug", "demo", "full"] = "full",
+    preset: Preset = "full",
     resume: bool = False,
     steps: int | None = None,
     kind: Literal["frames", "video"] | None = None,
@@ -140,11 +144,12 @@ def train_judge(
     its threshold on validation scenes, then report its TPR and FPR on held-out real and imagined videos.
 
     Args:
-        data: dataset directory (from `gymnast collect`).
         out: run directory: checkpoints, metrics.jsonl, metrics.json (the held-out figures).
+        data: dataset directory (from `gymnast collect`); with --resume, the run's own.
         wm: world-model run: also train and measure on its re-imagining of every episode.
         preset: debug (seconds), demo (minutes) or full.
-        resume: continue the run in OUT from its last checkpoint, with the settings saved there.
+        resume: continue the run in OUT from its last checkpoint, with the settings, data and world model
+            saved there.
         steps: override the preset's optimizer steps.
         kind: frames (judge every frame; the default) or video (four frames of the whole video).
         extra_data: more datasets to train and measure on (e.g. a policy's recorded rollouts).
@@ -152,11 +157,11 @@ def train_judge(
     from gymnast.reward.train_judge import JUDGE_PRESETS, saved_judge_config
     from gymnast.reward.train_judge import train_judge as train
 
-    config = saved_judge_config(out) if resume else JUDGE_PRESETS[preset]
-    if not resume:
-        overrides = {"steps": steps, "kind": kind, "extra_data": extra_data or None}
-        config = dataclasses.replace(config, **{k: v for k, v in overrides.items() if v is not None})
-    report = train(data, out, config, wm=wm, resume=resume)
+    config, inputs = resolve(
+        "train-judge", out, resume, JUDGE_PRESETS[preset], inputs={"data": data, "wm": wm}, required=("data",),
+        overrides={"steps": steps, "kind": kind, "extra_data": extra_data or None},
+        saved=lambda: (saved_judge_config(out), saved_inputs(out, "data", "wm")))
+    report = train(inputs["data"], out, config, wm=inputs["wm"], resume=resume)
     print(json.dumps({k: v for k, v in report.items() if k.startswith(("real", "imagined"))}, indent=2))
     print(f"judge: {out}")
 
@@ -199,40 +204,22 @@ def eval_judge(
         wm: world-model run whose imagined videos are judged too.
         heldout_fraction: the held-out share of scenes (the world model's, so its videos are unseen).
     """
-    from gymnast.data.lerobot import EpisodeDataset
-    from gymnast.reward.select import make_reward
-    from gymnast.reward.train_judge import evaluate_judge, heldout_videos
-    from gymnast.utils.atomic import write_json
+    from gymnast.reward.train_judge import measure_judge
 
-    if not reward.startswith(("judge:", "vlm:")):
-        raise ValueError(f"eval-judge measures judges (judge:RUN or vlm:MODEL@BASE_URL), got {reward!r}")
-    report = evaluate_judge(make_reward(reward), heldout_videos(EpisodeDataset(data), heldout_fraction, wm))
-    report |= {"reward": reward, "data": str(data), "wm": str(wm) if wm else None}
-    write_json(out, report)
+    report = measure_judge(reward, data, out, wm, heldout_fraction)
     print(json.dumps(report, indent=2))
 
 
 def rl(
     out: Path,
     policy: Path | None = None,
-    env: Literal["imagined", "sim", "real"] | None = None,
+    env: EnvName | None = None,
     reward: str | None = None,
     wm: Path | None = None,
     data: Path | None = None,
-    preset: Literal["debug", "demo", "full"] = "full",
+    preset: Preset = "full",
     resume: bool = False,
-    steps: int | None = None,
-    tasks: str | None = None,
-    fresh_scenes: bool = False,
-    gap: str | None = None,
-    lr: float | None = None,
-    temperature: float | None = None,
-    group_size: int | None = None,
-    starts_per_step: int | None = None,
-    eval_every: int | None = None,
-    eval_episodes: int | None = None,
-    workers: int | None = None,
-    seed: int | None = None,
+    config: Annotated[RLFlags, tyro.conf.arg(name="")] = RLFlags(),
 ) -> None:
     """Fine-tune a policy with GRPO in the world model (imagined), the software simulator or the real world.
 
@@ -244,34 +231,22 @@ def rl(
         wm: the world model run (needed by --env imagined and --reward verified).
         data: dataset whose scenes are the start states (default: the one the policy was trained on).
         preset: debug (seconds), demo (minutes) or full.
-        resume: continue the run in OUT from its last checkpoint, with the settings saved there.
-        steps: override the number of RL steps.
-        tasks: override the training tasks (comma-separated names or sets).
-        fresh_scenes: sim/real only: start each group from a new scene instead of the dataset's (no dataset needed).
-        gap: override the software simulator's gap (mild, strong).
-        lr: override the learning rate.
-        temperature: override the rollout temperature.
-        group_size: override the rollouts per start state.
-        starts_per_step: override the start states per step.
-        eval_every: override the steps between evaluations.
-        eval_episodes: override the evaluation episodes per task.
-        workers: override the simulator processes.
-        seed: override the seed.
+        resume: continue the run in OUT from its last checkpoint, with the settings, policy, env,
+            reward, world model and data saved there.
+        config: the GRPO settings; each one left out keeps the preset's value.
     """
-    from gymnast.rl.train import RL_PRESETS, RLRun, saved_rl_settings, train_rl
+    from gymnast.rl.train import RLRun, saved_rl_settings, train_rl
 
-    if resume:
-        run_spec, config = saved_rl_settings(out)
-    elif policy is None or env is None or reward is None:
-        raise ValueError("gymnast rl needs --policy, --env and --reward (or --resume to continue OUT)")
-    else:
-        run_spec = RLRun(str(policy), env, reward, str(wm) if wm else None, str(data) if data else None)
-        overrides = {"steps": steps, "tasks": tasks, "gap": gap, "lr": lr, "temperature": temperature,
-                     "group_size": group_size, "starts_per_step": starts_per_step, "eval_every": eval_every,
-                     "eval_episodes": eval_episodes, "workers": workers, "seed": seed}
-        config = dataclasses.replace(RL_PRESETS[preset], **{k: v for k, v in overrides.items() if v is not None})
-        config = dataclasses.replace(config, fresh_scenes=fresh_scenes or config.fresh_scenes)
-    summary = train_rl(run_spec, out, config, resume=resume)
+    def saved() -> tuple[RLConfig, dict]:
+        run_spec, settings = saved_rl_settings(out)
+        return settings, dataclasses.asdict(run_spec)
+
+    settings, inputs = resolve(
+        "rl", out, resume, RL_PRESETS[preset], overrides=dataclasses.asdict(config), saved=saved,
+        inputs={"policy": policy, "env": env, "reward": reward, "wm": wm, "data": data},
+        required=("policy", "env", "reward"))
+    run_spec = RLRun(**{name: str(value) if isinstance(value, Path) else value for name, value in inputs.items()})
+    summary = train_rl(run_spec, out, settings, resume=resume)
     summary.pop("curve")
     print(json.dumps(summary, indent=2))
 
@@ -315,7 +290,8 @@ def worldgym(
 
 def experiment(
     out: Path,
-    preset: Literal["debug", "demo", "full"] = "full",
+    preset: Preset = "full",
+    resume: bool = False,
     reuse: Annotated[list[str], tyro.conf.UseAppendAction] = [],  # noqa: B006 (read by tyro, never mutated)
     workers: int | None = None,
 ) -> None:
@@ -326,19 +302,19 @@ def experiment(
     Args:
         out: experiment directory.
         preset: debug (a minute; tests), demo (a few tasks, what `make demo` runs) or full (MT10).
+        resume: continue the experiment in OUT with the settings saved there (whatever its preset).
         reuse: a stage to take from an earlier run instead of running it, as STAGE=DIR (collect=DATASET,
             sft=RUN, world_model=RUN, judge=RUN); repeat for several, e.g. --reuse collect=data/mt10
             --reuse world_model=runs/wm_full.
         workers: simulator processes (default: the preset's, one per core on 2 cores).
     """
     from gymnast.experiment.config import EXPERIMENT_PRESETS
-    from gymnast.experiment.pipeline import run_experiment
+    from gymnast.experiment.pipeline import run_experiment, saved_experiment_config
     from gymnast.experiment.report import format_table
     from gymnast.experiment.stages import parse_reuse
 
-    config = EXPERIMENT_PRESETS[preset]
-    if workers is not None:
-        config = dataclasses.replace(config, workers=workers)
+    config, _ = resolve("experiment", out, resume, EXPERIMENT_PRESETS[preset], overrides={"workers": workers},
+                        inputs={}, saved=lambda: (saved_experiment_config(out), {}))
     summary = run_experiment(config, out, parse_reuse(reuse))
     print(format_table(summary))
     print(f"report: {out / 'report.md'}")

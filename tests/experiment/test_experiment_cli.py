@@ -79,6 +79,11 @@ def test_a_rerun_skips_every_finished_stage_and_prints_the_table(experiment: Pat
     assert "RL in the real world" in out and "WorldGym Pearson r" in out
 
 
+def test_resume_continues_with_the_saved_settings_whatever_the_preset(experiment: Path, capsys):
+    main(["experiment", "--out", str(experiment), "--resume"])
+    assert "WorldGym Pearson r" in capsys.readouterr().out
+
+
 def test_other_settings_in_the_same_directory_are_refused(experiment: Path, capsys):
     with pytest.raises(SystemExit):
         main(["experiment", "--preset", "demo", "--out", str(experiment)])

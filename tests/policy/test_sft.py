@@ -86,6 +86,7 @@ def test_cli_sft_then_eval_runs_end_to_end(tiny_dataset, tmp_path, capsys):
     main(["sft", "--data", str(tiny_dataset), "--out", str(run), "--preset", "debug", "--demos-per-task", "2"])
     assert (run / "checkpoints" / "last").read_text() == "000006"
     main(["sft", "--data", str(tiny_dataset), "--out", str(run), "--resume"])  # already finished: no new steps
+    main(["sft", "--out", str(run), "--resume"])  # the data comes from the run
     assert sorted(p.name for p in (run / "checkpoints").iterdir() if p.name != "last") == ["000003", "000006"]
     report = tmp_path / "eval.json"
     main(["eval", "--policy", str(run), "--tasks", "reach-v3", "--episodes", "2", "--workers", "1",

@@ -75,6 +75,8 @@ def test_the_vlm_client_scores_videos_through_serve_judge(tiny_dataset, tmp_path
 def test_cli_train_judge_runs(tiny_dataset, tmp_path, capsys):
     main(["train-judge", "--data", str(tiny_dataset), "--out", str(tmp_path / "j"), "--preset", "debug"])
     assert "judge:" in capsys.readouterr().out
+    main(["train-judge", "--out", str(tmp_path / "j"), "--resume"])  # the data comes from the run
+    assert "judge:" in capsys.readouterr().out
 
 
 def test_cli_eval_judge_measures_a_judge_through_its_name(tiny_dataset, tmp_path, capsys):

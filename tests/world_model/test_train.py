@@ -101,6 +101,10 @@ def test_cli_train_wm_then_eval_wm(tiny_dataset, tmp_path, capsys):
     main(["train-wm", "--data", str(tiny_dataset), "--out", str(tmp_path / "wm"), "--preset", "debug"])
     assert "world model:" in capsys.readouterr().out
     main(["train-wm", "--data", str(tiny_dataset), "--out", str(tmp_path / "wm"), "--resume"])
+    main(["train-wm", "--out", str(tmp_path / "wm"), "--resume"])  # the data comes from the run
+    with pytest.raises(SystemExit):
+        main(["train-wm", "--out", str(tmp_path / "wm"), "--resume", "--steps", "99"])
+    assert "--steps 99 disagrees with the run" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         main(["eval-wm", "--wm", str(tmp_path / "missing"), "--data", str(tiny_dataset), "--out", str(tmp_path / "e.json")])
     assert "no checkpoint" in capsys.readouterr().err

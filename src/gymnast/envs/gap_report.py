@@ -11,14 +11,18 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Iterator
 
 import numpy as np
+from tqdm import tqdm
 
 from gymnast.config import EnvConfig
 from gymnast.envs.experts import ScriptedExpert
+from gymnast.envs.gap import get_gap
 from gymnast.envs.metaworld import MetaWorldEnv
 from gymnast.envs.parallel import cached_env, parallel_map
+from gymnast.utils.atomic import write_bytes, write_json
 
 _HAND = slice(0, 3)
 _OBJECT = slice(4, 7)  # the first object's position in Meta-World's state vector
@@ -80,6 +84,33 @@ def measure_gap(
     """Yields `measure_one` results for every task and seed (in completion order)."""
     jobs = [GapJob(task, first_seed + i, gap, config) for task in tasks for i in range(episodes)]
     yield from parallel_map(measure_one, jobs, workers)
+
+
+def measure_gap_levels(tasks: tuple[str, ...], episodes: int, levels: tuple[str, ...], config: EnvConfig, workers: int,
+                       first_seed: int, progress: bool = True) -> dict:
+    """Every level measured on `episodes` seeds per task: its settings, `summarise`'s figures and
+    the per-episode records."""
+    report = {"tasks": list(tasks), "episodes_per_task": episodes, "horizon": config.horizon, "levels": {}}
+    for level in levels:
+        records = list(tqdm(measure_gap(level, tasks, episodes, config, workers, first_seed),
+                            total=len(tasks) * episodes, desc=f"gap {level}", unit="ep", disable=not progress))
+        report["levels"][level] = {"gap": dataclasses.asdict(get_gap(level)), **summarise(records), "records": records}
+    return report
+
+
+def format_level(level: str, overall: dict) -> str:
+    """One line of a level's overall figures."""
+    return (f"{level:>7}: expert success real {overall['real_expert_success']:.0%} -> sim "
+            f"{overall['sim_expert_success']:.0%}; replayed real actions succeed "
+            f"{overall['replay_success']:.0%}, hand drift {overall['hand_divergence_cm_final']:.1f} cm, "
+            f"object drift {overall['object_divergence_cm_final']:.1f} cm")
+
+
+def write_gap_report(out: Path, report: dict) -> Path:
+    """`report` as JSON in `out` and as the markdown of `to_markdown` beside it (.md); returns the latter."""
+    write_json(out, report)
+    write_bytes(out.with_suffix(".md"), to_markdown(report).encode())
+    return out.with_suffix(".md")
 
 
 def summarise(records: list[dict]) -> dict:

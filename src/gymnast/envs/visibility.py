@@ -8,11 +8,16 @@ chosen, and re-checked, with numbers.
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import mujoco
 import numpy as np
 
+from gymnast.config import EnvConfig
 from gymnast.envs.gap import robot_body_mask
 from gymnast.envs.metaworld import MetaWorldEnv
+from gymnast.utils.atomic import write_json
+from gymnast.utils.images import contact_sheet, save_png
 
 GOAL_MARKER = "goal marker"
 _STATIC_BODIES = {"world", "tablelink", "RetainingWall", "mocap"}
@@ -54,3 +59,19 @@ def _object_root(model: mujoco.MjModel, body: int) -> int | None:
 def effective_width(pixels: int) -> float:
     """Side of the square with the same area: a size in pixels that does not depend on shape."""
     return float(np.sqrt(pixels))
+
+
+def write_task_sheet(out: Path, tasks: tuple[str, ...], seed: int, gap: str, config: EnvConfig) -> Path:
+    """A PNG of every task's first frame (data seed `seed`, in the world `gap`), and beside it a JSON of
+    the pixels each object covers there; returns the PNG's path."""
+    frames, labels, sizes = [], [], {}
+    for task in tasks:
+        world = MetaWorldEnv(task, config, gap=gap)
+        obs, _ = world.reset(seed=seed)
+        frames.append(obs["image"])
+        labels.append(task.removesuffix("-v3"))
+        sizes[task] = object_pixel_counts(world)
+        world.close()
+    save_png(contact_sheet(frames, labels, columns=5, scale=max(1, 192 // config.image_size)), out)
+    write_json(out.with_suffix(".json"), {"image_size": config.image_size, "seed": seed, "pixels": sizes})
+    return out

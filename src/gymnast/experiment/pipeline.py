@@ -28,6 +28,7 @@ from gymnast.experiment.arms import ARMS, PERTURBATIONS, ROBUSTNESS_ARMS, arm, r
 from gymnast.experiment.config import ExperimentConfig
 from gymnast.experiment.stages import Stages
 from gymnast.utils.atomic import write_json
+from gymnast.utils.settings import from_json, saved_settings
 
 
 def run_experiment(config: ExperimentConfig, out: Path, reuse: dict[str, Path] | None = None,
@@ -196,5 +197,11 @@ def _save_settings(out: Path, config: ExperimentConfig) -> None:
     settings = json.loads(json.dumps(dataclasses.asdict(config)))
     path = out / "config.json"
     if path.exists() and json.loads(path.read_text()) != settings:
-        raise ValueError(f"{out} holds an experiment with other settings ({path}); use a new --out or the same preset")
+        raise ValueError(f"{out} holds an experiment with other settings ({path}); use a new --out, the same "
+                         f"preset or --resume")
     write_json(path, settings)
+
+
+def saved_experiment_config(out: Path) -> ExperimentConfig:
+    """The settings the experiment in `out` was started with (DIR/config.json), for ``--resume``."""
+    return from_json(ExperimentConfig, saved_settings(out))

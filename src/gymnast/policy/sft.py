@@ -23,9 +23,10 @@ from tqdm import tqdm
 from gymnast.data.lerobot import EpisodeDataset
 from gymnast.data.schema import EpisodeInfo
 from gymnast.policy.vla import EmbeddedVLA, VLAConfig
-from gymnast.utils.checkpoint import resolve_checkpoint, resume_training, save_training, saved_settings, write_run_config
+from gymnast.utils.checkpoint import resolve_checkpoint, resume_training, save_training, write_run_config
 from gymnast.utils.metrics import MetricsLog
 from gymnast.utils.optim import gradient_step, warmup_cosine
+from gymnast.utils.settings import from_json, saved_settings
 
 logger = logging.getLogger(__name__)
 
@@ -237,6 +238,5 @@ def _batch_pool(demos: DemoSet, extra: DemoSet | None, batch_size: int):
 
 def saved_sft_config(run: Path) -> SFTConfig:
     """The settings an SFT run was started with (from RUN/config.json), for ``--resume``."""
-    saved = saved_settings(run, "sft")
-    return SFTConfig(**{**saved, "vla": VLAConfig(**saved["vla"])})
+    return from_json(SFTConfig, saved_settings(run, "sft"))
 

@@ -32,9 +32,10 @@ from gymnast.reward.base import Reward, RewardContext
 from gymnast.reward.frame_judge import FrameJudge, frame_loss
 from gymnast.reward.judge import JudgeConfig, LearnedJudge, judge_loss, judged_frame_indices
 from gymnast.utils.atomic import write_json
-from gymnast.utils.checkpoint import load_model, resume_training, save_training, saved_settings, write_run_config
+from gymnast.utils.checkpoint import load_model, resume_training, save_training, write_run_config
 from gymnast.utils.metrics import MetricsLog
 from gymnast.utils.optim import gradient_step, warmup_cosine
+from gymnast.utils.settings import from_json, saved_settings
 from gymnast.world_model.base import load_world_model, rollout
 from gymnast.world_model.data import split_episodes
 
@@ -345,6 +346,19 @@ def evaluate_judge(judge: Reward, videos: list[Video]) -> dict:
     return report
 
 
+def measure_judge(reward: str, data: Path, out: Path, wm: Path | None = None, heldout_fraction: float = 0.1) -> dict:
+    """`evaluate_judge` of the 0/1 judge `reward` (judge:RUN or vlm:MODEL@BASE_URL) on the episodes of
+    the held-out scenes of `data`, and with `wm` on its re-imaginings of them; written to `out` (JSON)."""
+    from gymnast.reward.select import make_reward
+
+    if not reward.startswith(("judge:", "vlm:")):
+        raise ValueError(f"eval-judge measures judges (judge:RUN or vlm:MODEL@BASE_URL), got {reward!r}")
+    report = evaluate_judge(make_reward(reward), heldout_videos(EpisodeDataset(data), heldout_fraction, wm))
+    report |= {"reward": reward, "data": str(data), "wm": str(wm) if wm else None}
+    write_json(out, report)
+    return report
+
+
 def _rate(predicted: torch.Tensor, among: torch.Tensor) -> float | None:
     """Share of `among` predicted positive (None when there are none)."""
     return round((predicted & among).sum().item() / among.sum().item(), 4) if among.any() else None
@@ -353,9 +367,7 @@ def _rate(predicted: torch.Tensor, among: torch.Tensor) -> float | None:
 def saved_judge_config(run: Path) -> JudgeTrainConfig:
     """The settings a run was started with (RUN/config.json), for ``--resume``; runs from before
     the per-frame judge trained the video judge."""
-    saved = saved_settings(run, "train")
-    extra = tuple(Path(path) for path in saved.get("extra_data", ()))
-    return JudgeTrainConfig(**{"kind": "video", **saved, "extra_data": extra, "judge": JudgeConfig(**saved["judge"])})
+    return from_json(JudgeTrainConfig, {"kind": "video", **saved_settings(run, "train")})
 
 
 def load_judge(run: Path) -> LearnedJudge | FrameJudge:

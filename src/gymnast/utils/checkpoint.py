@@ -22,6 +22,7 @@ from safetensors.torch import load_file, save_file
 from torch import nn
 
 from gymnast.utils.atomic import write_bytes, write_json
+from gymnast.utils.settings import saved_settings  # noqa: F401  (moved to utils.settings; rl/ imports it from here)
 
 LAST = "last"
 
@@ -115,9 +116,3 @@ def load_model(run: Path, build: Callable[[dict], nn.Module]) -> nn.Module:
     return model.eval()
 
 
-def saved_settings(run: Path, section: str) -> dict:
-    """Section `section` of ``RUN/config.json``: the settings a run was started with, for ``--resume``."""
-    path = Path(run) / "config.json"
-    if not path.exists():
-        raise FileNotFoundError(f"nothing to resume: {path} does not exist")
-    return json.loads(path.read_text())[section]

@@ -29,9 +29,10 @@ from safetensors.torch import load_file
 from tqdm import tqdm
 
 from gymnast.data.lerobot import EpisodeDataset
-from gymnast.utils.checkpoint import resolve_checkpoint, resume_training, save_training, saved_settings, write_run_config
+from gymnast.utils.checkpoint import resolve_checkpoint, resume_training, save_training, write_run_config
 from gymnast.utils.metrics import MetricsLog
 from gymnast.utils.optim import gradient_step, warmup_cosine
+from gymnast.utils.settings import from_json, saved_settings
 from gymnast.world_model.data import ClipBatch, EpisodeBank, split_episodes
 from gymnast.world_model.embedded import EmbeddedWorldModel, EmbeddedWorldModelConfig
 from gymnast.world_model.metrics import moving_mask, psnr, to_unit_float
@@ -271,9 +272,5 @@ def _settings(config: WorldModelTrainConfig) -> dict:
 
 def saved_train_config(run: Path) -> WorldModelTrainConfig:
     """The settings a run was started with (from RUN/config.json), for ``--resume``."""
-    saved = saved_settings(run, "train")
-    model = {**saved["model"], "widths": tuple(saved["model"]["widths"])}
-    paths = {"init": Path(saved["init"]) if saved.get("init") else None,
-             "extra_data": tuple(Path(p) for p in saved.get("extra_data", ()))}
-    return WorldModelTrainConfig(**{**saved, **paths, "model": EmbeddedWorldModelConfig(**model)})
+    return from_json(WorldModelTrainConfig, saved_settings(run, "train"))
 

@@ -1,0 +1,46 @@
+"""What a dataset holds, for people: the summary `gymnast inspect` prints and a contact sheet of episodes."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from gymnast.data.collect import success_table
+from gymnast.data.lerobot import EpisodeDataset
+from gymnast.utils.images import contact_sheet, save_png
+
+
+def describe_dataset(dataset: EpisodeDataset) -> str:
+    """Format, episodes, steps, frame rate and image size; the codec's decoded-vs-raw error when the
+    recorder measured it; success by task and behaviour."""
+    lines = [f"{dataset.root}: LeRobot {dataset.info['codebase_version']}, {len(dataset.episodes)} episodes, "
+             f"{sum(dataset.lengths)} steps, {dataset.fps} fps, images {dataset.image_shape}"]
+    recorded = dataset.info.get("gymnast", {})
+    if "video_psnr_db" in recorded:
+        lines.append(f"video: {json.dumps(recorded['codec'])}, decoded-vs-raw PSNR "
+                     f"min {recorded['video_psnr_db']['min']:.1f} dB, mean {recorded['video_psnr_db']['mean']:.1f} dB")
+    lines.append(format_success_table(success_table(dataset.episodes)))
+    return "\n".join(lines)
+
+
+def write_episode_sheet(dataset: EpisodeDataset, path: Path, episodes: int = 10) -> Path:
+    """A PNG of the first, middle and last frame of the first `episodes` episodes, captioned."""
+    frames, labels = [], []
+    for i in range(min(episodes, len(dataset.episodes))):
+        episode = dataset.load(i)
+        for t in (0, episode.length // 2, episode.length):
+            frames.append(episode.frames[t])
+            labels.append(f"{i} {dataset.episodes[i].task[:14]} t={t}")
+    return save_png(contact_sheet(frames, labels, columns=6), path)
+
+
+def format_success_table(table: dict) -> str:
+    """`success_table` as aligned text, tasks in rows and behaviours in columns: 'successes/episodes'."""
+    behaviours = sorted({b for row in table.values() for b in row})
+    width = max([len(t) for t in table] + [4])
+    lines = [f"{'task':<{width}}  " + "  ".join(f"{b:>17}" for b in behaviours)]
+    for task, row in sorted(table.items()):
+        cells = [f"{row[b][0]:>3}/{row[b][1]:<3} ({row[b][0] / row[b][1]:>4.0%})" if b in row else f"{'-':>17}"
+                 for b in behaviours]
+        lines.append(f"{task:<{width}}  " + "  ".join(f"{c:>17}" for c in cells))
+    return "\n".join(lines)
