@@ -22,6 +22,8 @@ $(STAMP): pyproject.toml Makefile
 setup: $(STAMP)
 
 test: $(STAMP)
+	@# The import floors and "no cycles" (pyproject.toml, [tool.importlinter]) come before the tests.
+	$(BIN)/lint-imports --no-cache --no-logo
 	$(BIN)/python -m pytest
 
 # The headline experiment on a few tasks: every stage from data to report, then the table.

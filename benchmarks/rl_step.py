@@ -24,7 +24,8 @@ import tempfile
 from pathlib import Path
 
 import gymnast  # noqa: F401  (sets MUJOCO_GL)
-from gymnast.rl.train import RL_PRESETS, RLRun, train_rl
+from gymnast.rl.config import RL_PRESETS, RLRun
+from gymnast.rl.train import train_rl
 from gymnast.utils.atomic import write_json
 from gymnast.utils.metrics import read_metrics
 

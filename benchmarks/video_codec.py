@@ -35,7 +35,7 @@ CANDIDATES = {
     "h264 yuv444p qp0 (default)": DEFAULT_CODEC,
     "h264rgb qp0 (libx264rgb)": VideoCodec("libx264rgb", "rgb24", {"qp": "0"}),
 }
-# The camera gymnast's Meta-World environment uses (gymnast.envs.render.CameraPose defaults).
+# The camera gymnast's Meta-World environment uses (gymnast.config.CameraPose defaults).
 CAMERA = {"lookat": (0.0, 0.66, 0.08), "distance": 1.05, "azimuth": -135.0, "elevation": -40.0}
 FPS = 80
 

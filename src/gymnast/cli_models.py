@@ -15,7 +15,7 @@ import tyro
 from gymnast.cli_settings import flags_of, resolve, saved_inputs
 from gymnast.config import CommaFloats
 from gymnast.experiment.worldgym import DEFAULT_NOISE
-from gymnast.rl.train import RL_PRESETS, EnvName, RLConfig
+from gymnast.rl.config import RL_PRESETS, EnvName, RLConfig
 
 Preset = Literal["debug", "demo", "full"]
 RLFlags = flags_of(RLConfig, RL_PRESETS)
@@ -204,7 +204,7 @@ def eval_judge(
         wm: world-model run whose imagined videos are judged too.
         heldout_fraction: the held-out share of scenes (the world model's, so its videos are unseen).
     """
-    from gymnast.reward.train_judge import measure_judge
+    from gymnast.reward.select import measure_judge
 
     report = measure_judge(reward, data, out, wm, heldout_fraction)
     print(json.dumps(report, indent=2))
@@ -235,7 +235,8 @@ def rl(
             reward, world model and data saved there.
         config: the GRPO settings; each one left out keeps the preset's value.
     """
-    from gymnast.rl.train import RLRun, saved_rl_settings, train_rl
+    from gymnast.rl.config import RLRun, saved_rl_settings
+    from gymnast.rl.train import train_rl
 
     def saved() -> tuple[RLConfig, dict]:
         run_spec, settings = saved_rl_settings(out)

@@ -11,8 +11,6 @@ from typing import Annotated
 
 import tyro
 
-from gymnast.envs.render import CameraPose
-
 CommaFloats = Annotated[
     tuple[float, ...],
     tyro.constructors.PrimitiveConstructorSpec(
@@ -24,6 +22,32 @@ CommaFloats = Annotated[
     ),
 ]
 """A tuple of floats written on the command line as ``0,0.1,0.3``."""
+
+
+@dataclass(frozen=True)
+class CameraPose:
+    """A MuJoCo free camera: it looks at `lookat` from `distance` metres away.
+
+    Attributes:
+        lookat: world point at the centre of the image (metres).
+        distance: camera distance from `lookat` (metres).
+        azimuth: horizontal angle of the viewing direction (degrees).
+        elevation: vertical angle of the viewing direction (degrees; negative looks down).
+    """
+
+    lookat: tuple[float, float, float] = (0.0, 0.66, 0.08)
+    distance: float = 1.05
+    azimuth: float = -135.0
+    elevation: float = -40.0
+
+    def shifted(self, azimuth: float = 0.0, elevation: float = 0.0, distance_scale: float = 1.0) -> CameraPose:
+        """The same camera moved by the given offsets (used by the sim-to-real gap)."""
+        return CameraPose(
+            lookat=self.lookat,
+            distance=self.distance * distance_scale,
+            azimuth=self.azimuth + azimuth,
+            elevation=self.elevation + elevation,
+        )
 
 
 @dataclass(frozen=True)

@@ -11,10 +11,12 @@ import torch
 
 from gymnast.cli import main
 from gymnast.config import EnvConfig
+from gymnast.envs.factory import EnvFactory
+from gymnast.envs.starts import evaluation_starts
 from gymnast.experiment.imagination import ImaginationConfig, measure_imagination
 from gymnast.policy.vla import load_policy
 from gymnast.reward.select import make_reward
-from gymnast.rl.evaluate import EnvFactory, evaluation_starts, replay_actions
+from gymnast.rl.evaluate import replay_actions
 from gymnast.rl.rollout import collect_rollouts
 from gymnast.world_model.base import load_world_model
 

@@ -7,9 +7,10 @@ import numpy as np
 import pytest
 import torch
 
+from gymnast.envs.starts import Start
 from gymnast.experiment.iter_sft import rollout_samples
 from gymnast.policy.sft import SFT_PRESETS, DemoSet, _batch_pool, train_sft
-from gymnast.rl.rollout import Rollouts, Start
+from gymnast.rl.rollout import Rollouts
 
 
 def _rollouts(lengths, calls=3, chunk=2, size=8):

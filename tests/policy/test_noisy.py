@@ -11,10 +11,10 @@ import torch
 
 from gymnast.config import EnvConfig
 from gymnast.envs.sim_vector import SimVectorEnv
+from gymnast.envs.starts import evaluation_starts
 from gymnast.eval.evaluate import EvalConfig, evaluate
 from gymnast.policy.noisy import RANDOM, NoisyPolicy
 from gymnast.policy.vla import EmbeddedVLA, VLAConfig
-from gymnast.rl.evaluate import evaluation_starts
 from gymnast.rl.rollout import collect_rollouts
 
 TINY = VLAConfig(width=32, layers=1, heads=2, chunk_size=3, image_size=32)

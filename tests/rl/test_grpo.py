@@ -8,7 +8,7 @@ import pytest
 import torch
 from torch import nn
 
-from gymnast.rl.grpo import group_advantages, k3_kl, keep_groups, policy_loss
+from gymnast.rl.grpo import group_advantages, k3_kl, keep_groups, keep_varied_groups, policy_loss
 
 # ---------------------------------------------------------------- slow plain-Python references
 
@@ -35,6 +35,10 @@ def loop_keep_groups(success, low, high):
         finite = [s for s in row if math.isfinite(s)]
         keep.append(bool(finite) and low <= sum(finite) / len(finite) <= high)
     return keep
+
+
+def loop_keep_varied_groups(rewards):
+    return [len({r for r in row if math.isfinite(r)}) > 1 for row in rewards]
 
 
 def loop_policy_loss(logp, old_logp, advantages, mask, clip_low, clip_high, total, ref_logp, kl_coef,
@@ -170,6 +174,26 @@ def test_keep_groups_bounds_are_inclusive_and_unknown_groups_are_dropped():
     assert keep_groups(success, 0.0, 1.0).tolist() == [True] * 5 + [False, True]
     with pytest.raises(ValueError, match="low <= high"):
         keep_groups(success, 0.9, 0.1)
+
+
+# ---------------------------------------------------------------- keep_varied_groups
+
+
+def test_keep_varied_groups_matches_loop_reference_and_the_groups_with_advantages():
+    rewards = random_rewards(torch.Generator().manual_seed(3))
+    kept = keep_varied_groups(rewards)
+    assert kept.tolist() == loop_keep_varied_groups(rewards.tolist())
+    assert 0 < kept.sum() < len(rewards)
+    advantages, _ = group_advantages(rewards)
+    assert (advantages.abs().sum(dim=1) > 0).tolist() == kept.tolist()
+
+
+def test_keep_varied_groups_keeps_any_spread_and_drops_groups_with_fewer_than_two_rewards():
+    rewards = torch.tensor([[0.0, 0.0, 0.0], [0.0, 0.0, 1e-6], [0.3, math.nan, 0.3], [math.nan, 0.5, math.nan],
+                            [math.nan] * 3, [-1.0, 2.0, math.nan]])
+    assert keep_varied_groups(rewards).tolist() == [False, True, False, False, False, True]
+    with pytest.raises(ValueError, match=r"\(8,\)"):
+        keep_varied_groups(torch.zeros(8))
 
 
 # ---------------------------------------------------------------- k3_kl

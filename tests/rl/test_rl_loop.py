@@ -15,7 +15,8 @@ import torch
 from gymnast.cli import main
 from gymnast.policy.vla import load_policy
 from gymnast.rl.rollout import collect_rollouts, dataset_starts
-from gymnast.rl.train import RL_PRESETS, update_policy
+from gymnast.rl.config import RL_PRESETS
+from gymnast.rl.train import update_policy
 from gymnast.utils.metrics import read_metrics
 
 from rl_helpers import JUDGE, POLICY, WORLD_MODEL

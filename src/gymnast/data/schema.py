@@ -17,8 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-SCRIPTED_BEHAVIOURS = ("expert", "noisy_expert", "random", "wrong_task_expert")
-"""The behaviours that act from the simulator state (`gymnast.envs.experts.make_behaviour`)."""
+from gymnast.envs.experts import SCRIPTED_BEHAVIOURS
+
 POLICY = "policy"
 BEHAVIOURS = (*SCRIPTED_BEHAVIOURS, POLICY)
 """How the actions of an episode were produced.

@@ -15,8 +15,11 @@ from typing import Protocol
 import numpy as np
 from metaworld.policies import ENV_POLICY_MAP
 
-from gymnast.data.schema import SCRIPTED_BEHAVIOURS
 from gymnast.envs.tasks import MT50, check_task
+
+SCRIPTED_BEHAVIOURS = ("expert", "noisy_expert", "random", "wrong_task_expert")
+"""The behaviours that act from the simulator state (`make_behaviour`); the episode schema names
+them (`gymnast.data.schema.BEHAVIOURS`)."""
 
 # Meta-World's experts warn on every step whose command they clip to [-1, 1]; clipping is the
 # intended behaviour of their proportional controllers, so the warning is only noise.
@@ -67,7 +70,7 @@ def wrong_task_for(task: str, seed: int) -> str:
 
 
 def make_behaviour(behaviour: str, task: str, noise: float, seed: int) -> Behaviour:
-    """Builds the named behaviour (see `gymnast.data.schema.SCRIPTED_BEHAVIOURS`) for one episode."""
+    """Builds the named behaviour (one of `SCRIPTED_BEHAVIOURS`) for one episode."""
     rng = np.random.default_rng([zlib.crc32(task.encode()), seed, 2])
     if behaviour in ("expert", "noisy_expert"):
         return ScriptedExpert(task, noise, rng)

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from gymnast.envs.render import CameraPose
+from gymnast.config import CameraPose
 
 
 @dataclass(frozen=True)

@@ -26,7 +26,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Protocol
 
 import gymnasium as gym
 import numpy as np
@@ -36,8 +36,21 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from gymnast.envs.metaworld import CONTROL_FPS
-from gymnast.world_model.base import WorldModel
 
+
+class WorldModel(Protocol):
+    """The part of the `gymnast.world_model.base.WorldModel` contract these envs call.
+
+    Stated here rather than imported, because envs sit below world models: every world model
+    satisfies it structurally, and the contract's meaning is documented there.
+    """
+
+    image_size: int  # H = W
+    action_dim: int  # A
+
+    def init_state(self, context: torch.Tensor, generator: torch.Generator | None = None) -> Any: ...
+
+    def step(self, state: Any, actions: torch.Tensor, generator: torch.Generator | None = None) -> tuple[Any, torch.Tensor]: ...
 
 
 @dataclass(frozen=True)

@@ -17,6 +17,8 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from gymnast.config import CameraPose
+
 # MuJoCo's EGL backend terminates its display at exit; a renderer garbage-collected after that
 # fails noisily. Our exit hook is registered after the first context exists (and with it MuJoCo's
 # hook), so it runs earlier and closes every live renderer in time.
@@ -35,32 +37,6 @@ def _close_live_renderers() -> None:
 # memory. Environments of the same scene (task and gap) in one process share it: the scene is
 # rebuilt from each caller's own MjData at every frame, and poses come from the data alone.
 _SHARED: dict[Hashable, list] = {}  # key -> [mujoco.Renderer, number of SceneRenderers using it]
-
-
-@dataclass(frozen=True)
-class CameraPose:
-    """A MuJoCo free camera: it looks at `lookat` from `distance` metres away.
-
-    Attributes:
-        lookat: world point at the centre of the image (metres).
-        distance: camera distance from `lookat` (metres).
-        azimuth: horizontal angle of the viewing direction (degrees).
-        elevation: vertical angle of the viewing direction (degrees; negative looks down).
-    """
-
-    lookat: tuple[float, float, float] = (0.0, 0.66, 0.08)
-    distance: float = 1.05
-    azimuth: float = -135.0
-    elevation: float = -40.0
-
-    def shifted(self, azimuth: float = 0.0, elevation: float = 0.0, distance_scale: float = 1.0) -> CameraPose:
-        """The same camera moved by the given offsets (used by the sim-to-real gap)."""
-        return CameraPose(
-            lookat=self.lookat,
-            distance=self.distance * distance_scale,
-            azimuth=self.azimuth + azimuth,
-            elevation=self.elevation + elevation,
-        )
 
 
 @dataclass(frozen=True)

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from gymnast.experiment.config import ExperimentConfig
-from gymnast.rl.train import RLConfig, RLRun
+from gymnast.rl.config import RLConfig, RLRun
 
 
 @dataclass(frozen=True)

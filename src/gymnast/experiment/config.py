@@ -16,7 +16,7 @@ from gymnast.config import CommaFloats
 from gymnast.data.collect import CollectConfig
 from gymnast.policy.sft import SFT_PRESETS, SFTConfig
 from gymnast.reward.train_judge import JUDGE_PRESETS, JudgeTrainConfig
-from gymnast.rl.train import RL_PRESETS, RLConfig
+from gymnast.rl.config import RL_PRESETS, RLConfig
 from gymnast.world_model.train import WM_PRESETS, WorldModelTrainConfig
 
 

@@ -33,10 +33,10 @@ import torch
 from tqdm import tqdm
 
 from gymnast.config import EnvConfig
+from gymnast.envs.starts import Start
 from gymnast.eval.stats import wilson_interval
 from gymnast.policy.base import Policy
 from gymnast.reward.base import Reward
-from gymnast.rl.rollout import Start
 from gymnast.world_model.base import WorldModel
 
 logger = logging.getLogger(__name__)
@@ -96,8 +96,9 @@ def measure_imagination(policy: Policy, world_model: WorldModel, reward: Reward,
     Raises:
         ValueError: `reward` is not binary (a continuous score is no success verdict).
     """
+    from gymnast.envs.factory import EnvFactory
+    from gymnast.envs.starts import evaluation_starts
     from gymnast.envs.tasks import resolve_tasks
-    from gymnast.rl.evaluate import EnvFactory, evaluation_starts
 
     if not getattr(reward, "binary", False):
         raise ValueError(f"imagination needs a binary reward (a judge that says success or not); {type(reward).__name__} "
@@ -164,9 +165,8 @@ class _State:
 def _measure_batch(batch: Sequence[Start], size: int, policy: Policy, reward: Reward, envs, replays, seed: int,
                    state: _State) -> None:
     """Imagines, judges, replays and runs for real the scenes of one batch; adds to `state`."""
-    from gymnast.rl.batch import score_groups
     from gymnast.rl.evaluate import replay_actions, verdicts
-    from gymnast.rl.rollout import collect_rollouts
+    from gymnast.rl.rollout import collect_rollouts, score_groups
     from gymnast.world_model.metrics import masked_psnr, moving_mask, psnr, to_unit_float
 
     count = len(batch)

@@ -49,8 +49,7 @@ def imagine_successes(policy_run: Path, wm_run: Path, judge_run: Path, data: Pat
     from gymnast.envs.tasks import resolve_tasks
     from gymnast.policy.vla import load_policy
     from gymnast.reward.select import make_reward
-    from gymnast.rl.batch import concat_rollouts, score_groups
-    from gymnast.rl.rollout import collect_rollouts
+    from gymnast.rl.rollout import collect_rollouts, concat_rollouts, score_groups
     from gymnast.world_model.base import load_world_model
 
     policy, world_model = load_policy(policy_run), load_world_model(wm_run)

@@ -110,9 +110,9 @@ class WorldGym:
 
     def __init__(self, wm_run: Path, judge_run: Path, tasks: str, episodes: int, env: EnvConfig, workers: int = 2,
                  batch: int = 32) -> None:
+        from gymnast.envs.starts import evaluation_starts
         from gymnast.envs.tasks import resolve_tasks
         from gymnast.reward.select import make_reward
-        from gymnast.rl.evaluate import evaluation_starts
         from gymnast.world_model.base import load_world_model
 
         if episodes < 1:
@@ -155,7 +155,8 @@ class WorldGym:
                 for candidate in tqdm(candidates, desc="worldgym", unit="policy", disable=not progress)]
 
     def _success(self, kind: str, policy: Policy) -> dict:
-        from gymnast.rl.evaluate import EnvFactory, evaluate_in_env
+        from gymnast.envs.factory import EnvFactory
+        from gymnast.rl.evaluate import evaluate_in_env
 
         if hasattr(policy, "reseed"):  # a noisy policy: each estimate draws its own noise from the start
             policy.reseed()

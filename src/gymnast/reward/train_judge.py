@@ -346,19 +346,6 @@ def evaluate_judge(judge: Reward, videos: list[Video]) -> dict:
     return report
 
 
-def measure_judge(reward: str, data: Path, out: Path, wm: Path | None = None, heldout_fraction: float = 0.1) -> dict:
-    """`evaluate_judge` of the 0/1 judge `reward` (judge:RUN or vlm:MODEL@BASE_URL) on the episodes of
-    the held-out scenes of `data`, and with `wm` on its re-imaginings of them; written to `out` (JSON)."""
-    from gymnast.reward.select import make_reward
-
-    if not reward.startswith(("judge:", "vlm:")):
-        raise ValueError(f"eval-judge measures judges (judge:RUN or vlm:MODEL@BASE_URL), got {reward!r}")
-    report = evaluate_judge(make_reward(reward), heldout_videos(EpisodeDataset(data), heldout_fraction, wm))
-    report |= {"reward": reward, "data": str(data), "wm": str(wm) if wm else None}
-    write_json(out, report)
-    return report
-
-
 def _rate(predicted: torch.Tensor, among: torch.Tensor) -> float | None:
     """Share of `among` predicted positive (None when there are none)."""
     return round((predicted & among).sum().item() / among.sum().item(), 4) if among.any() else None

@@ -5,9 +5,10 @@ Legend: R rollouts, T actions, K actions per chunk, A action dimensions.
 
 Evaluation here uses the training loop's machinery (vector envs, batched greedy chunks) rather
 than `gymnast eval`, so that it runs in any env, imagined ones included: an imagined evaluation
-starts from the real first frame of an evaluation seed and is judged by the run's reward. Its
-protocol matches `gymnast eval` (greedy chunks executed open-loop, success at any step, the same
-horizon and seeds), so real-world figures are comparable with it.
+starts from the real first frame of an evaluation seed (`gymnast.envs.starts.evaluation_starts`)
+and is judged by the run's reward. Its protocol matches `gymnast eval` (greedy chunks executed
+open-loop, success at any step, the same horizon and seeds), so real-world figures are comparable
+with it.
 """
 
 from __future__ import annotations
@@ -18,75 +19,11 @@ import numpy as np
 import torch
 from gymnasium.vector import VectorEnv
 
-from gymnast.config import EnvConfig
+from gymnast.envs.factory import EnvFactory
+from gymnast.envs.starts import Start, start_options
 from gymnast.eval.stats import wilson_interval
 from gymnast.reward.base import Reward
-from gymnast.rl.rollout import Rollouts, Start, collect_rollouts, start_options
-
-
-class EnvFactory:
-    """Builds the vector envs a run needs, once each, by kind (imagined, sim, real) and size.
-
-    Args:
-        kind: the run's own env.
-        chunk_size: K, the policy's chunk.
-        config: image size and horizon of the simulators (the imagined env uses the same horizon).
-        gap: the software simulator's gap.
-        workers: simulator processes per env.
-        world_model: what the imagined env imagines with.
-    """
-
-    def __init__(self, kind: str, chunk_size: int, config: EnvConfig, gap: str, workers: int, world_model=None) -> None:
-        self.kind, self.chunk_size, self.config, self.gap, self.workers = kind, chunk_size, config, gap, workers
-        self.world_model = world_model
-        self.batch = 1
-        self._envs: dict[tuple[str, int], VectorEnv] = {}
-
-    def train(self, num_envs: int) -> VectorEnv:
-        """The run's own env with `num_envs` rollouts (evaluations then run in batches of that size)."""
-        self.batch = num_envs
-        return self.get(self.kind, num_envs)
-
-    def get(self, kind: str, num_envs: int) -> VectorEnv:
-        key = (kind, num_envs)
-        if key not in self._envs:
-            if kind == "imagined":
-                from gymnast.envs.imagined import BatchedImaginedEnv
-
-                self._envs[key] = BatchedImaginedEnv(self.world_model, num_envs, self.chunk_size, self.config.horizon)
-            else:
-                from gymnast.envs.sim_vector import SimVectorEnv
-
-                self._envs[key] = SimVectorEnv(num_envs, self.chunk_size, self.config, gap="none" if kind == "real" else self.gap,
-                                               workers=self.workers)
-        return self._envs[key]
-
-    def close(self) -> None:
-        for env in self._envs.values():
-            env.close()
-        self._envs.clear()
-
-
-def evaluation_starts(tasks: Sequence[str], episodes: int, config: EnvConfig) -> list[Start]:
-    """`episodes` starts per task from the evaluation seeds, with their real first frames."""
-    from gymnast.envs.tasks import eval_seed
-
-    return scene_starts([(task, eval_seed(i)) for task in tasks for i in range(episodes)], config)
-
-
-def scene_starts(scenes: Sequence[tuple[str, int]], config: EnvConfig) -> list[Start]:
-    """Starts for (task, seed) scenes with their real first frames and no reference actions.
-
-    Rendering a first frame is a reset, not an interaction: no action is taken.
-    """
-    from gymnast.envs.metaworld import ACTION_DIM
-    from gymnast.envs.parallel import cached_env
-
-    starts = []
-    for task, seed in scenes:
-        obs, info = cached_env(task, config).reset(seed=seed)
-        starts.append(Start(task, seed, info["instruction"], obs["image"][None].copy(), np.zeros((0, ACTION_DIM), np.float32)))
-    return starts
+from gymnast.rl.rollout import Rollouts, collect_rollouts, score_groups
 
 
 def verdicts(rollouts: Rollouts, scores: torch.Tensor, reward: Reward) -> torch.Tensor:
@@ -107,8 +44,6 @@ def evaluate_in_env(envs: EnvFactory, kind: str, policy, reward: Reward, starts:
     interactions when `kind` is ``real``) and, when any episode could be judged, ``_success``,
     ``_ci_low``, ``_ci_high`` and ``_success/<task>`` for every task.
     """
-    from gymnast.rl.batch import score_groups  # batch.py imports this module
-
     env = envs.get(kind, envs.batch)
     outcomes, interactions = [], 0
     for first in range(0, len(starts), env.num_envs):

@@ -22,6 +22,9 @@ Where this departs from them:
   and std, so one failed score neither trains the policy nor shifts its siblings' advantages.
 - A group with no spread in its finite rewards (or fewer than 2 of them) gets advantage 0: it
   carries no signal, and dividing by a std of ~0 would turn rounding noise into huge advantages.
+- Dynamic sampling's success-rate window applies to binary rewards only; with a continuous reward
+  a group is kept when its rewards differ at all (`keep_varied_groups`), since a group of failures
+  still ranks its rollouts by how close they came.
 - The entropy bonus takes the exact entropy of each token's categorical distribution (our action
   tokens are categorical), unlike VLA-RFT, whose flow-matching head gets its log-prob from the
   Gaussian noise of its integration steps.
@@ -71,11 +74,7 @@ def group_advantages(rewards: Tensor, normalize_std: bool = True, eps: float = 1
     count = finite.sum(dim=1, keepdim=True).clamp_min(1)  # (B, 1); the clamp only guards 0 / 0
     mean = torch.where(finite, rewards, 0.0).sum(dim=1, keepdim=True) / count
     centred = torch.where(finite, rewards - mean, 0.0)
-    # "No spread" is max == min, not std == 0: the float mean of equal rewards can round, leaving
-    # |r - mean| ~ 1e-8 and small spurious advantages (of order 1 with eps = 0).
-    top = torch.where(finite, rewards, -math.inf).amax(dim=1, keepdim=True)
-    bottom = torch.where(finite, rewards, math.inf).amin(dim=1, keepdim=True)
-    signal = (finite.sum(dim=1, keepdim=True) >= 2) & (top > bottom)  # (B, 1)
+    signal = keep_varied_groups(rewards)[:, None]  # (B, 1); a group without spread has nothing to rank
     if normalize_std:
         std = (centred.square().sum(dim=1, keepdim=True) / count).sqrt()  # population std
         centred = centred / (std + eps)
@@ -110,6 +109,32 @@ def keep_groups(success: Tensor, low: float, high: float) -> Tensor:
     # float64 so that k / G compares with the bounds as Python's k / G would: 1 / 10 >= 0.1 holds.
     rate = torch.where(finite, success.double(), 0.0).sum(dim=1) / count.clamp_min(1)
     return (count > 0) & (rate >= low) & (rate <= high)
+
+
+def keep_varied_groups(rewards: Tensor) -> Tensor:
+    """Dynamic sampling for continuous rewards: which groups' finite rewards differ at all.
+
+    These are also the groups `group_advantages` gives nonzero advantages: the others carry no
+    signal.
+
+    Args:
+        rewards: (B, G) rewards, NaN where unscored.
+
+    Returns:
+        (B,) bool: the group has two finite rewards that differ. A group with fewer than two finite
+        rewards is dropped.
+
+    Raises:
+        ValueError: rewards is not 2-D.
+    """
+    if rewards.ndim != 2:
+        raise ValueError(f"rewards must be (B, G), got {tuple(rewards.shape)}")
+    finite = rewards.isfinite()  # (B, G)
+    # Spread is max > min, not std > 0: the float mean of equal rewards can round, leaving
+    # |r - mean| ~ 1e-8 and small spurious advantages (of order 1 with eps = 0).
+    top = torch.where(finite, rewards, -math.inf).amax(dim=1)  # (B,); -inf without a finite reward
+    bottom = torch.where(finite, rewards, math.inf).amin(dim=1)  # (B,); equal to top with one
+    return top > bottom
 
 
 def k3_kl(logp: Tensor, ref_logp: Tensor) -> Tensor:

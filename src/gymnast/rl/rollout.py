@@ -10,14 +10,15 @@ loop here never asks which one it drives. Simulators also report ``executed``, `
 ``success`` in their infos, and a rollout carries them when they are there (the simulator rewards
 read them); a world model reports none, and its rollouts are judged on their video alone.
 
-A start state is real in every environment: the imagined env starts from its camera frames, a
-simulator from the (task, seed) that produced them.
+Rollouts start from real start states (`gymnast.envs.starts.Start`) and are scored by a `Reward`
+one group at a time (`score_groups`), with what the reward may read besides the video.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import dataclasses
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -25,39 +26,12 @@ import numpy as np
 import torch
 from gymnasium.vector import VectorEnv
 
-from gymnast.policy.base import Policy
+from gymnast.data.lerobot import EpisodeDataset
+from gymnast.envs.starts import Start, start_options
+from gymnast.policy.base import ActionSample, Policy
+from gymnast.reward.base import Reward, RewardContext
 
 EXPERTS = ("expert", "noisy_expert")  # the behaviours whose actions can serve as a reference
-
-
-@dataclass(frozen=True)
-class Start:
-    """A real start state.
-
-    Attributes:
-        task: Meta-World task name.
-        seed: the episode seed that fixes the initial state (a data seed for training).
-        instruction: the task in words, as the policy and the judge read it.
-        frames: (C, H, W, 3) uint8 real camera frames, the last one being "now".
-        reference_actions: (T_ref, A) float32 a demonstration's actions from this state (what the
-            verified reward imagines); empty where there is none.
-    """
-
-    task: str
-    seed: int
-    instruction: str
-    frames: np.ndarray
-    reference_actions: np.ndarray
-
-
-def start_options(starts: Sequence[Start]) -> dict:
-    """Reset options that describe `starts` to every environment (each reads what it needs)."""
-    return {
-        "frames": np.stack([start.frames for start in starts]),  # (R, C, H, W, 3)
-        "instructions": [start.instruction for start in starts],
-        "tasks": [start.task for start in starts],
-        "seeds": [start.seed for start in starts],
-    }
 
 
 @dataclass(frozen=True)
@@ -182,14 +156,43 @@ def collect_rollouts(
 
 def _sample(policy: Policy, image: torch.Tensor, instructions: list[str], temperature: float,
             generator: torch.Generator):
-    from gymnast.policy.base import ActionSample
-
     if temperature > 0:
         return policy.sample(image, instructions, temperature, generator)
     with torch.inference_mode():
         actions = policy.act(image, instructions)  # (R, K, A)
     tokens = policy.chunk_tokens(actions)
     return ActionSample(actions, tokens, torch.zeros(tokens.shape))
+
+
+def score_groups(reward: Reward, rollouts: Rollouts, size: int) -> torch.Tensor:
+    """(R,) scores, reward called once per block of `size` rollouts that share a start state."""
+    scores = []
+    for first in range(0, len(rollouts.starts), size):
+        block = rollouts.select(torch.arange(first, min(first + size, len(rollouts.starts))))
+        scores.append(reward.score(block.frames, block.instructions, reward_context(block)).float().reshape(-1))
+    return torch.cat(scores)
+
+
+def reward_context(rollouts: Rollouts) -> RewardContext:
+    """What the rewards may read besides the video (see `RewardContext`)."""
+    references = [start.reference_actions for start in rollouts.starts]
+    shortest = min(len(r) for r in references)  # a block shares one start, so all have one length
+    return RewardContext(
+        start=torch.from_numpy(np.stack([start.frames for start in rollouts.starts])),
+        reference_actions=torch.from_numpy(np.stack([r[:shortest] for r in references])),
+        success=rollouts.success,
+        env_rewards=rollouts.env_rewards,
+    )
+
+
+def concat_rollouts(parts: list[Rollouts]) -> Rollouts:
+    """One `Rollouts` of the parts in order (rollouts of one env share their shapes)."""
+    tensors = {}
+    for field in dataclasses.fields(Rollouts):
+        values = [getattr(part, field.name) for part in parts]
+        if field.name != "starts":
+            tensors[field.name] = None if values[0] is None else torch.cat(values)
+    return Rollouts(starts=tuple(start for part in parts for start in part.starts), **tensors)
 
 
 def dataset_starts(data: Path, tasks: Sequence[str] | None = None) -> list[Start]:
@@ -202,8 +205,6 @@ def dataset_starts(data: Path, tasks: Sequence[str] | None = None) -> list[Start
     Raises:
         ValueError: no scene of `tasks` has a successful expert episode.
     """
-    from gymnast.data.lerobot import EpisodeDataset
-
     dataset = EpisodeDataset(data)
     best: dict[tuple[str, int], int] = {}
     for i, info in enumerate(dataset.episodes):

@@ -1,11 +1,11 @@
 """`gymnast rl`: GRPO fine-tuning of a VLA policy in the world model, the software simulator or
 the real world, through one loop.
 
-Each step: draw B real start states, roll the policy out G times from each at the rollout
-temperature, score every video with the reward, keep the groups with something to learn
-from (dynamic sampling, refilling from fresh starts), normalise rewards within each group and
-take one clipped policy-gradient step (`gymnast.rl.grpo`). The loop drives a vector env and a
-`Reward`; it never asks where the frames come from.
+Each step (`rl_step`, top to bottom): draw B real start states, roll the policy out G times from
+each at the rollout temperature, score every video with the reward, keep the groups with
+something to learn from (dynamic sampling, refilling from fresh starts), normalise rewards within
+each group and take one clipped policy-gradient step (`gymnast.rl.grpo`). The loop drives a vector
+env and a `Reward`; it never asks where the frames come from. Its settings are `gymnast.rl.config`.
 
 Around the loop: atomic checkpoints with every random state and the sampler position (``--resume``
 continues exactly), metrics.jsonl and TensorBoard, rollout videos with their rewards, a
@@ -19,136 +19,35 @@ N action tokens per call, T actions.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import json
 import logging
 import time
-from dataclasses import dataclass
+from collections.abc import Callable
 from pathlib import Path
-from typing import Literal
 
 import numpy as np
 import torch
+from gymnasium.vector import VectorEnv
 from tqdm import tqdm
 
 from gymnast.config import EnvConfig
+from gymnast.envs.factory import EnvFactory
+from gymnast.envs.starts import Start, evaluation_starts, start_sampler
 from gymnast.envs.tasks import resolve_tasks
+from gymnast.reward.base import Reward
 from gymnast.rl import grpo
-from gymnast.rl.batch import gather_batch, start_sampler
-from gymnast.rl.evaluate import EnvFactory, evaluate_in_env, evaluation_starts, verdicts, watch_hacking
-from gymnast.rl.rollout import Rollouts, dataset_starts
+from gymnast.rl.config import RLConfig, RLRun
+from gymnast.rl.evaluate import evaluate_in_env, verdicts, watch_hacking
+from gymnast.rl.rollout import Rollouts, collect_rollouts, concat_rollouts, dataset_starts, score_groups
 from gymnast.rl.videos import write_group_video
 from gymnast.utils.atomic import write_json
-from gymnast.utils.checkpoint import (load_checkpoint, resolve_checkpoint, save_checkpoint, saved_settings,
-                                      write_run_config)
+from gymnast.utils.checkpoint import load_checkpoint, resolve_checkpoint, save_checkpoint, write_run_config
 from gymnast.utils.metrics import MetricsLog
 from gymnast.utils.optim import warmup_cosine
 
 logger = logging.getLogger(__name__)
-
-EnvName = Literal["imagined", "sim", "real"]
-
-
-@dataclass(frozen=True)
-class RLConfig:
-    """GRPO settings. Defaults follow World-Gymnast except where docs/rl.md says why not."""
-
-    steps: int = 100
-    """RL steps (one policy update each)."""
-    tasks: str = "mt10"
-    """Tasks whose start states are trained on (task names or sets, comma-separated)."""
-    fresh_scenes: bool = False
-    """Simulators only: start each group from a new scene (a random data seed) instead of the
-    dataset's scenes; a simulator can set up any scene, a world model only continues real frames."""
-    starts_per_step: int = 4
-    """Start states B per step (groups)."""
-    group_size: int = 8
-    """Rollouts G per start state."""
-    temperature: float = 1.0
-    """Sampling temperature of the rollouts (the log-probabilities use the same). World-Gymnast's 1.6
-    halves our policy's success (docs/rl.md), so we sample at 1.0."""
-    horizon: int = 150
-    """Actions per rollout, as in evaluation."""
-    clip_low: float = 0.2
-    """PPO ratio clip below 1."""
-    clip_high: float = 0.28
-    """PPO ratio clip above 1 (clip-higher)."""
-    kl_coef: float = 0.0
-    """Weight of the k3 KL to the starting policy (0: no reference model is kept)."""
-    entropy_coef: float = 0.0
-    """Weight of the entropy bonus."""
-    normalize_std: bool = True
-    """Divide group advantages by the group's standard deviation."""
-    keep_low: float = 0.1
-    """Dynamic sampling: keep groups whose success rate is at least this (binary rewards)."""
-    keep_high: float = 0.9
-    """... and at most this."""
-    max_rounds: int = 3
-    """Rollout rounds per step at most while refilling dropped groups."""
-    lr: float = 1e-5
-    """Peak learning rate (AdamW; linear warm-up, then constant)."""
-    warmup_steps: int = 5
-    """Linear warm-up steps."""
-    max_grad_norm: float = 1.0
-    """Gradient-norm clip."""
-    minibatches: int = 1
-    """Optimizer steps per RL step (1: on-policy, the ratio is 1 and clipping is inert)."""
-    micro_batch: int = 256
-    """Policy calls per forward/backward pass (gradients accumulate; results do not depend on it)."""
-    gap: str = "mild"
-    """Sim-to-real gap of the software simulator (``--env sim``)."""
-    workers: int = 2
-    """Simulator processes (sim/real rollouts, evaluation, the watch)."""
-    eval_every: int = 25
-    """Steps between evaluations (also at the start and the end); 0 evaluates only at both ends."""
-    eval_episodes: int = 10
-    """Evaluation episodes per task, from the evaluation seeds."""
-    real_eval: bool = True
-    """Also evaluate in the real world when training elsewhere (its interactions are counted)."""
-    watch_every: int = 10
-    """Steps between reward-hacking checks (0: never): imagined actions replayed in the real world."""
-    watch_rollouts: int = 16
-    """Rollouts replayed per check."""
-    video_every: int = 25
-    """Steps between rollout videos (RUN/videos/)."""
-    checkpoint_every: int = 10
-    """Steps between checkpoints."""
-    tensorboard: bool = True
-    """Also write TensorBoard event files (RUN/tensorboard/)."""
-    seed: int = 0
-    """Seed of start sampling, rollouts and environment resets."""
-
-    def __post_init__(self) -> None:
-        for name in ("steps", "starts_per_step", "group_size", "horizon", "max_rounds", "minibatches", "micro_batch",
-                     "workers", "eval_episodes", "checkpoint_every", "video_every"):
-            if getattr(self, name) < 1:
-                raise ValueError(f"RLConfig.{name} must be at least 1, got {getattr(self, name)}")
-        if self.group_size < 2:
-            raise ValueError(f"RLConfig.group_size must be at least 2 (advantages compare a group), got {self.group_size}")
-        if self.temperature <= 0:
-            raise ValueError(f"RLConfig.temperature must be positive, got {self.temperature}")
-        if not 0 <= self.keep_low <= self.keep_high <= 1:
-            raise ValueError(f"need 0 <= keep_low <= keep_high <= 1, got {self.keep_low}, {self.keep_high}")
-
-
-RL_PRESETS: dict[str, RLConfig] = {
-    "debug": RLConfig(steps=2, tasks="reach-v3", starts_per_step=2, group_size=2, horizon=10, max_rounds=1,
-                      warmup_steps=1, micro_batch=3, workers=1, eval_episodes=1, watch_every=1, watch_rollouts=2,
-                      video_every=1, checkpoint_every=1, keep_low=0.0, keep_high=1.0),
-    "demo": RLConfig(steps=30, tasks="reach-v3,push-v3", eval_every=10, video_every=10),
-    "full": RLConfig(),
-}
-
-
-@dataclass(frozen=True)
-class RLRun:
-    """What one run trains with: the policy's run, the env and the reward, by name."""
-
-    policy: str
-    env: EnvName
-    reward: str
-    wm: str | None = None
-    data: str | None = None
 
 
 def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False, progress: bool = True) -> dict:
@@ -223,17 +122,11 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
         for step in bar:
             done = step + 1
             started = time.perf_counter()
-            batch, scores, values = gather_batch(envs.train(config.starts_per_step * config.group_size), policy,
-                                                 reward, draw_starts, config, sampler, actions)
+            batch, scores, values = rl_step(envs.train(config.starts_per_step * config.group_size), policy, reward,
+                                            draw_starts, config, sampler, actions, optimizer, schedule, reference)
             interactions = int(values.pop("rollout/interactions"))
             if run_spec.env == "real":  # only the real world's actions are real interactions
                 state["real_interactions"] += interactions
-            updated = time.perf_counter()
-            if batch is not None:
-                advantages, advantage_metrics = grpo.group_advantages(scores.view(-1, config.group_size), config.normalize_std)
-                values |= advantage_metrics | update_policy(policy, optimizer, batch, advantages.reshape(-1), config, reference)
-            schedule.step()
-            values["time/update_s"] = time.perf_counter() - updated
             values["time/step_s"] = time.perf_counter() - started
             values["train/lr"] = schedule.get_last_lr()[0]
             values["rollout/real_interactions"] = state["real_interactions"]
@@ -259,6 +152,76 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
         if board is not None:
             board.close()
     return write_summary(out, run_spec, config, state)
+
+
+def rl_step(env: VectorEnv, policy, reward: Reward, draw_starts: Callable[[int, torch.Generator], list[Start]],
+            config: RLConfig, sampler: torch.Generator, actions: torch.Generator, optimizer: torch.optim.Optimizer,
+            schedule: torch.optim.lr_scheduler.LRScheduler, reference=None
+            ) -> tuple[Rollouts | None, torch.Tensor | None, dict[str, float]]:
+    """One RL step, from start states to the policy update.
+
+    1. Draw B start states and roll the policy out G times from each, at the rollout temperature.
+    2. Score every rollout with the reward, one group (one start state) at a time.
+    3. Dynamic sampling: keep the groups with something to learn from, refilling from fresh starts
+       for at most `max_rounds` rounds. A binary reward keeps a group when its success rate lies in
+       [keep_low, keep_high]; a continuous one (dense, verified) when its rewards differ at all.
+    4. Group-normalised advantages and `minibatches` clipped policy-gradient steps; the learning
+       rate schedule advances even when no group was kept, so steps and the schedule stay aligned.
+
+    Args:
+        env: the run's vector env with R = B * G rollouts.
+        draw_starts: `draw(count, generator)` start states (`gymnast.envs.starts.start_sampler`).
+        sampler: draws the start states and the env's reset seeds.
+        actions: draws the policy's tokens.
+        reference: the frozen starting policy of the KL penalty, or None.
+
+    Returns:
+        (the kept rollouts or None, their (R,) scores or None, metrics), the metrics including
+        ``rollout/interactions``: the actions taken in every round.
+    """
+    groups, size = config.starts_per_step, config.group_size
+    binary = getattr(reward, "binary", False)
+    kept: list[Rollouts] = []
+    kept_scores: list[torch.Tensor] = []
+    values: dict[str, float] = {"rollout/interactions": 0, "time/rollout_s": 0.0, "time/policy_s": 0.0,
+                                "time/reward_s": 0.0}
+    for round_ in range(config.max_rounds):
+        starts = draw_starts(groups, sampler)
+        seed = int(torch.randint(2**31 - 1, (1,), generator=sampler))
+        timer: dict[str, float] = {}
+        began = time.perf_counter()
+        rollouts = collect_rollouts(env, policy, [start for start in starts for _ in range(size)], config.temperature,
+                                    actions, seed, calls=-(-config.horizon // policy.chunk_size), timer=timer)
+        values["time/rollout_s"] += time.perf_counter() - began
+        values["time/policy_s"] += timer.get("policy_s", 0.0)
+        began = time.perf_counter()
+        scores = score_groups(reward, rollouts, size)  # (R,)
+        values["time/reward_s"] += time.perf_counter() - began
+        values["rollout/interactions"] += int(rollouts.lengths.sum())
+        if round_ == 0:  # the first round is an unbiased sample of the current policy
+            finite = scores[torch.isfinite(scores)]
+            values |= {"reward/mean": finite.mean().item() if len(finite) else float("nan"),
+                       "reward/std": finite.std().item() if len(finite) > 1 else float("nan"),
+                       "rollout/success": torch.nanmean(verdicts(rollouts, scores, reward)).item(),
+                       "rollout/length": rollouts.lengths.float().mean().item()}
+        grouped = scores.view(groups, size)  # (B, G)
+        keep = grpo.keep_groups(grouped, config.keep_low, config.keep_high) if binary else grpo.keep_varied_groups(grouped)
+        for g in keep.nonzero().flatten().tolist()[: groups - len(kept)]:
+            index = torch.arange(g * size, (g + 1) * size)
+            kept.append(rollouts.select(index))
+            kept_scores.append(scores[index])
+        if len(kept) == groups:
+            break
+    values |= {"rollout/kept_groups": len(kept), "rollout/rounds": round_ + 1}
+
+    batch, scores = (concat_rollouts(kept), torch.cat(kept_scores)) if kept else (None, None)
+    updated = time.perf_counter()
+    if batch is not None:
+        advantages, advantage_metrics = grpo.group_advantages(scores.view(-1, size), config.normalize_std)
+        values |= advantage_metrics | update_policy(policy, optimizer, batch, advantages.reshape(-1), config, reference)
+    schedule.step()
+    values["time/update_s"] = time.perf_counter() - updated
+    return batch, scores, values
 
 
 def update_policy(policy, optimizer: torch.optim.Optimizer, batch: Rollouts, advantages: torch.Tensor,
@@ -351,8 +314,6 @@ def _policy_data(policy_run: str) -> str:
 
 
 def _frozen_copy(policy):
-    import copy
-
     reference = copy.deepcopy(policy).eval()
     reference.requires_grad_(False)
     return reference
@@ -364,7 +325,3 @@ def _tensorboard(out: Path, start_step: int):
     # purge_step drops events past the resumed checkpoint, as metrics.jsonl does.
     return SummaryWriter(str(out / "tensorboard"), purge_step=start_step or None)
 
-
-def saved_rl_settings(run: Path) -> tuple[RLRun, RLConfig]:
-    """The run and settings an RL run was started with (RUN/config.json), for ``--resume``."""
-    return RLRun(**saved_settings(run, "run")), RLConfig(**saved_settings(run, "rl"))

@@ -22,7 +22,6 @@ from safetensors.torch import load_file, save_file
 from torch import nn
 
 from gymnast.utils.atomic import write_bytes, write_json
-from gymnast.utils.settings import saved_settings  # noqa: F401  (moved to utils.settings; rl/ imports it from here)
 
 LAST = "last"
 

@@ -1,0 +1,56 @@
+"""The chunked vector envs a run rolls out in, built by kind: imagined, sim or real.
+
+Legend: B rollouts stepped together, K actions per chunk, A action dimensions.
+
+Both kinds follow one contract (see `gymnast.envs.sim_vector`): one step is a (B, K, A) action
+chunk, its frames in ``infos["frames"]``, no autoreset. A run needs its own env at the training
+batch size and, for evaluation and the reward-hacking watch, others (the real world among them);
+each is built once, since a simulator's worker processes are costly to start.
+"""
+
+from __future__ import annotations
+
+from gymnasium.vector import VectorEnv
+
+from gymnast.config import EnvConfig
+from gymnast.envs.imagined import BatchedImaginedEnv
+from gymnast.envs.sim_vector import SimVectorEnv
+
+
+class EnvFactory:
+    """Builds the vector envs a run needs, once each, by kind (imagined, sim, real) and size.
+
+    Args:
+        kind: the run's own env.
+        chunk_size: K, the policy's chunk.
+        config: image size and horizon of the simulators (the imagined env uses the same horizon).
+        gap: the software simulator's gap.
+        workers: simulator processes per env.
+        world_model: what the imagined env imagines with.
+    """
+
+    def __init__(self, kind: str, chunk_size: int, config: EnvConfig, gap: str, workers: int, world_model=None) -> None:
+        self.kind, self.chunk_size, self.config, self.gap, self.workers = kind, chunk_size, config, gap, workers
+        self.world_model = world_model
+        self.batch = 1
+        self._envs: dict[tuple[str, int], VectorEnv] = {}
+
+    def train(self, num_envs: int) -> VectorEnv:
+        """The run's own env with `num_envs` rollouts (evaluations then run in batches of that size)."""
+        self.batch = num_envs
+        return self.get(self.kind, num_envs)
+
+    def get(self, kind: str, num_envs: int) -> VectorEnv:
+        key = (kind, num_envs)
+        if key not in self._envs:
+            if kind == "imagined":
+                self._envs[key] = BatchedImaginedEnv(self.world_model, num_envs, self.chunk_size, self.config.horizon)
+            else:
+                self._envs[key] = SimVectorEnv(num_envs, self.chunk_size, self.config, gap="none" if kind == "real" else self.gap,
+                                               workers=self.workers)
+        return self._envs[key]
+
+    def close(self) -> None:
+        for env in self._envs.values():
+            env.close()
+        self._envs.clear()

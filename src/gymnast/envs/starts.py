@@ -1,0 +1,83 @@
+"""Real start states for batched rollouts: the scenes a rollout starts from, in every env kind.
+
+Legend: R rollouts, C start frames, H/W image size, A action dimensions.
+
+A start state is real in every environment: the imagined env starts from its camera frames, a
+simulator from the (task, seed) that produced them. Training draws them from data seeds (a
+dataset's scenes, or fresh ones in a simulator); evaluation takes them from the evaluation seeds.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from gymnast.config import EnvConfig
+from gymnast.envs.metaworld import ACTION_DIM
+from gymnast.envs.parallel import cached_env
+from gymnast.envs.tasks import DATA_SEEDS, eval_seed
+
+
+@dataclass(frozen=True)
+class Start:
+    """A real start state.
+
+    Attributes:
+        task: Meta-World task name.
+        seed: the episode seed that fixes the initial state (a data seed for training).
+        instruction: the task in words, as the policy and the judge read it.
+        frames: (C, H, W, 3) uint8 real camera frames, the last one being "now".
+        reference_actions: (T_ref, A) float32 a demonstration's actions from this state (what the
+            verified reward imagines); empty where there is none.
+    """
+
+    task: str
+    seed: int
+    instruction: str
+    frames: np.ndarray
+    reference_actions: np.ndarray
+
+
+def start_options(starts: Sequence[Start]) -> dict:
+    """Reset options that describe `starts` to every environment (each reads what it needs)."""
+    return {
+        "frames": np.stack([start.frames for start in starts]),  # (R, C, H, W, 3)
+        "instructions": [start.instruction for start in starts],
+        "tasks": [start.task for start in starts],
+        "seeds": [start.seed for start in starts],
+    }
+
+
+def scene_starts(scenes: Sequence[tuple[str, int]], config: EnvConfig) -> list[Start]:
+    """Starts for (task, seed) scenes with their real first frames and no reference actions.
+
+    Rendering a first frame is a reset, not an interaction: no action is taken.
+    """
+    starts = []
+    for task, seed in scenes:
+        obs, info = cached_env(task, config).reset(seed=seed)
+        starts.append(Start(task, seed, info["instruction"], obs["image"][None].copy(), np.zeros((0, ACTION_DIM), np.float32)))
+    return starts
+
+
+def evaluation_starts(tasks: Sequence[str], episodes: int, config: EnvConfig) -> list[Start]:
+    """`episodes` starts per task from the evaluation seeds, with their real first frames."""
+    return scene_starts([(task, eval_seed(i)) for task in tasks for i in range(episodes)], config)
+
+
+def start_sampler(tasks: Sequence[str], dataset: list[Start] | None, config: EnvConfig
+                  ) -> Callable[[int, torch.Generator], list[Start]]:
+    """`draw(count, generator)`: start states drawn from the dataset's scenes, or (`dataset` None)
+    fresh scenes of `tasks` from random data seeds, rendered by a reset."""
+
+    def draw(count: int, generator: torch.Generator) -> list[Start]:
+        if dataset is not None:
+            return [dataset[i] for i in torch.randint(len(dataset), (count,), generator=generator).tolist()]
+        picks = torch.randint(len(tasks), (count,), generator=generator).tolist()
+        seeds = torch.randint(DATA_SEEDS.start, DATA_SEEDS.stop, (count,), generator=generator).tolist()
+        return scene_starts([(tasks[t], seed) for t, seed in zip(picks, seeds)], config)
+
+    return draw

@@ -1,0 +1,122 @@
+"""The settings of an RL run: what it trains with (`RLRun`) and how (`RLConfig`, with presets).
+
+They live apart from the loop so that the CLI, the experiment and the loop's helpers read them
+without importing the loop itself.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal
+
+from gymnast.utils.settings import saved_settings
+
+EnvName = Literal["imagined", "sim", "real"]
+
+
+@dataclass(frozen=True)
+class RLConfig:
+    """GRPO settings. Defaults follow World-Gymnast except where docs/rl.md says why not."""
+
+    steps: int = 100
+    """RL steps (one policy update each)."""
+    tasks: str = "mt10"
+    """Tasks whose start states are trained on (task names or sets, comma-separated)."""
+    fresh_scenes: bool = False
+    """Simulators only: start each group from a new scene (a random data seed) instead of the
+    dataset's scenes; a simulator can set up any scene, a world model only continues real frames."""
+    starts_per_step: int = 4
+    """Start states B per step (groups)."""
+    group_size: int = 8
+    """Rollouts G per start state."""
+    temperature: float = 1.0
+    """Sampling temperature of the rollouts (the log-probabilities use the same). World-Gymnast's 1.6
+    halves our policy's success (docs/rl.md), so we sample at 1.0."""
+    horizon: int = 150
+    """Actions per rollout, as in evaluation."""
+    clip_low: float = 0.2
+    """PPO ratio clip below 1."""
+    clip_high: float = 0.28
+    """PPO ratio clip above 1 (clip-higher)."""
+    kl_coef: float = 0.0
+    """Weight of the k3 KL to the starting policy (0: no reference model is kept)."""
+    entropy_coef: float = 0.0
+    """Weight of the entropy bonus."""
+    normalize_std: bool = True
+    """Divide group advantages by the group's standard deviation."""
+    keep_low: float = 0.1
+    """Dynamic sampling: keep groups whose success rate is at least this (binary rewards)."""
+    keep_high: float = 0.9
+    """... and at most this."""
+    max_rounds: int = 3
+    """Rollout rounds per step at most while refilling dropped groups."""
+    lr: float = 1e-5
+    """Peak learning rate (AdamW; linear warm-up, then constant)."""
+    warmup_steps: int = 5
+    """Linear warm-up steps."""
+    max_grad_norm: float = 1.0
+    """Gradient-norm clip."""
+    minibatches: int = 1
+    """Optimizer steps per RL step (1: on-policy, the ratio is 1 and clipping is inert)."""
+    micro_batch: int = 256
+    """Policy calls per forward/backward pass (gradients accumulate; results do not depend on it)."""
+    gap: str = "mild"
+    """Sim-to-real gap of the software simulator (``--env sim``)."""
+    workers: int = 2
+    """Simulator processes (sim/real rollouts, evaluation, the watch)."""
+    eval_every: int = 25
+    """Steps between evaluations (also at the start and the end); 0 evaluates only at both ends."""
+    eval_episodes: int = 10
+    """Evaluation episodes per task, from the evaluation seeds."""
+    real_eval: bool = True
+    """Also evaluate in the real world when training elsewhere (its interactions are counted)."""
+    watch_every: int = 10
+    """Steps between reward-hacking checks (0: never): imagined actions replayed in the real world."""
+    watch_rollouts: int = 16
+    """Rollouts replayed per check."""
+    video_every: int = 25
+    """Steps between rollout videos (RUN/videos/)."""
+    checkpoint_every: int = 10
+    """Steps between checkpoints."""
+    tensorboard: bool = True
+    """Also write TensorBoard event files (RUN/tensorboard/)."""
+    seed: int = 0
+    """Seed of start sampling, rollouts and environment resets."""
+
+    def __post_init__(self) -> None:
+        for name in ("steps", "starts_per_step", "group_size", "horizon", "max_rounds", "minibatches", "micro_batch",
+                     "workers", "eval_episodes", "checkpoint_every", "video_every"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"RLConfig.{name} must be at least 1, got {getattr(self, name)}")
+        if self.group_size < 2:
+            raise ValueError(f"RLConfig.group_size must be at least 2 (advantages compare a group), got {self.group_size}")
+        if self.temperature <= 0:
+            raise ValueError(f"RLConfig.temperature must be positive, got {self.temperature}")
+        if not 0 <= self.keep_low <= self.keep_high <= 1:
+            raise ValueError(f"need 0 <= keep_low <= keep_high <= 1, got {self.keep_low}, {self.keep_high}")
+
+
+RL_PRESETS: dict[str, RLConfig] = {
+    "debug": RLConfig(steps=2, tasks="reach-v3", starts_per_step=2, group_size=2, horizon=10, max_rounds=1,
+                      warmup_steps=1, micro_batch=3, workers=1, eval_episodes=1, watch_every=1, watch_rollouts=2,
+                      video_every=1, checkpoint_every=1, keep_low=0.0, keep_high=1.0),
+    "demo": RLConfig(steps=30, tasks="reach-v3,push-v3", eval_every=10, video_every=10),
+    "full": RLConfig(),
+}
+
+
+@dataclass(frozen=True)
+class RLRun:
+    """What one run trains with: the policy's run, the env and the reward, by name."""
+
+    policy: str
+    env: EnvName
+    reward: str
+    wm: str | None = None
+    data: str | None = None
+
+
+def saved_rl_settings(run: Path) -> tuple[RLRun, RLConfig]:
+    """The run and settings an RL run was started with (RUN/config.json), for ``--resume``."""
+    return RLRun(**saved_settings(run, "run")), RLConfig(**saved_settings(run, "rl"))
