@@ -10,7 +10,8 @@ from gymnasium.utils.env_checker import check_env
 from gymnasium.vector import AutoresetMode
 
 import gymnast  # noqa: F401  (sets MUJOCO_GL before Meta-World imports mujoco)
-from gymnast.envs.imagined import BatchedImaginedEnv, ImaginedEnv, StartState
+from gymnast.envs.imagined import BatchedImaginedEnv, ImaginedEnv
+from gymnast.envs.starts import Start
 from gymnast.envs.metaworld import MetaWorldEnv
 from gymnast.world_model.embedded import EmbeddedWorldModel, EmbeddedWorldModelConfig
 
@@ -20,13 +21,13 @@ TINY = EmbeddedWorldModelConfig(image_size=SIZE, latent_channels=16, widths=(8, 
 
 
 @pytest.fixture(scope="module")
-def starts() -> list[StartState]:
+def starts() -> list[Start]:
     """Real camera frames and instructions from the simulator (slow to build, so built once)."""
     env = MetaWorldEnv("reach-v3")
     result = []
     for seed in range(3):
         obs, info = env.reset(seed=seed)
-        result.append(StartState(obs["image"][None].copy(), info["instruction"]))
+        result.append(Start("reach-v3", seed, info["instruction"], obs["image"][None].copy()))
     env.close()
     return result
 
@@ -147,7 +148,7 @@ def test_bad_start_frames_raise_value_error_naming_the_shapes(model, frames):
         ImaginedEnv(model).reset(options={"frames": frames, "instruction": "x"})
     assert expected in str(error.value) and actual in str(error.value)
     with pytest.raises(ValueError, match="uint8"):
-        ImaginedEnv(model, starts=[StartState(frames, "x")])  # caught when the env is built
+        ImaginedEnv(model, starts=[Start("reach-v3", 0, "x", frames)])  # caught when the env is built
 
 
 @pytest.mark.parametrize("shape", [(4,), (4, 5), (5, 3), (1, 5, 4)])

@@ -7,8 +7,8 @@ The RL loop drives `ImaginedEnv` like `MetaWorldEnv` (the same ``"image"`` (H, W
 ``info["instruction"]``; no ``"state"``, which a video model does not imagine), so it never knows
 where the frames come from. What differs, and why:
 
-- An episode starts from a *real* camera frame and instruction (`StartState`, or the reset
-  options): a world model can continue a scene but not invent a faithful one.
+- An episode starts from a *real* camera frame and instruction (a `gymnast.envs.starts.Start`, or
+  the reset options): a world model can continue a scene but not invent a faithful one.
 - One step is one action chunk (K, A), imagined as K frames in one model call: all are in
   ``info["frames"]``, and the whole video in `video()`.
 - ``reward`` is always 0.0 and ``terminated`` always False: the world model cannot tell success.
@@ -25,7 +25,6 @@ Observations and infos are fresh arrays on every call (check_env insists, and us
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
 from typing import Any, Protocol
 
 import gymnasium as gym
@@ -36,6 +35,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from gymnast.envs.metaworld import CONTROL_FPS
+from gymnast.envs.starts import Start
 
 
 class WorldModel(Protocol):
@@ -51,19 +51,6 @@ class WorldModel(Protocol):
     def init_state(self, context: torch.Tensor, generator: torch.Generator | None = None) -> Any: ...
 
     def step(self, state: Any, actions: torch.Tensor, generator: torch.Generator | None = None) -> tuple[Any, torch.Tensor]: ...
-
-
-@dataclass(frozen=True)
-class StartState:
-    """A real start of an imagined episode.
-
-    Attributes:
-        frames: (C, H, W, 3) uint8 real camera frames, the last one being "now".
-        instruction: the task in words, as the policy (and the judge) will read it.
-    """
-
-    frames: np.ndarray
-    instruction: str
 
 
 def _spaces(model: WorldModel, chunk_size: int) -> tuple[Dict, Box]:
@@ -144,7 +131,8 @@ class ImaginedEnv(gym.Env):
 
     Args:
         model: any `WorldModel`.
-        starts: real start states that `reset` without options draws from (with `np_random`).
+        starts: real start states that `reset` without options draws from (with `np_random`); it
+            reads their frames and instruction.
         chunk_size: K, actions per step.
         horizon: actions per episode; the episode is truncated when they are taken.
         render_mode: None or ``rgb_array`` (the latest frame).
@@ -155,7 +143,7 @@ class ImaginedEnv(gym.Env):
     def __init__(
         self,
         model: WorldModel,
-        starts: Sequence[StartState] = (),
+        starts: Sequence[Start] = (),
         chunk_size: int = 5,
         horizon: int = 150,
         render_mode: str | None = None,
@@ -184,7 +172,7 @@ class ImaginedEnv(gym.Env):
         else:
             raise ValueError(
                 "the imagined env needs a real start frame and instruction: pass "
-                'reset(options={"frames": ..., "instruction": ...}) or build it with starts=[StartState(...)]'
+                'reset(options={"frames": ..., "instruction": ...}) or build it with starts=[Start(...)]'
             )
         context = _check_frames(frames, self._sim.model.image_size)
         self._instruction = instruction

@@ -3,14 +3,15 @@
 Legend: R rollouts, C start frames, H/W image size, A action dimensions.
 
 A start state is real in every environment: the imagined env starts from its camera frames, a
-simulator from the (task, seed) that produced them. Training draws them from data seeds (a
+simulator from the (task, seed) that produced them. `Start` is the one start-state type, for the
+batched rollouts and for `gymnast.envs.imagined.ImaginedEnv` alike. Training draws them from data seeds (a
 dataset's scenes, or fresh ones in a simulator); evaluation takes them from the evaluation seeds.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import torch
@@ -31,14 +32,14 @@ class Start:
         instruction: the task in words, as the policy and the judge read it.
         frames: (C, H, W, 3) uint8 real camera frames, the last one being "now".
         reference_actions: (T_ref, A) float32 a demonstration's actions from this state (what the
-            verified reward imagines); empty where there is none.
+            verified reward imagines); empty (the default) where there is none.
     """
 
     task: str
     seed: int
     instruction: str
     frames: np.ndarray
-    reference_actions: np.ndarray
+    reference_actions: np.ndarray = field(default_factory=lambda: np.zeros((0, ACTION_DIM), np.float32))
 
 
 def start_options(starts: Sequence[Start]) -> dict:
@@ -59,7 +60,7 @@ def scene_starts(scenes: Sequence[tuple[str, int]], config: EnvConfig) -> list[S
     starts = []
     for task, seed in scenes:
         obs, info = cached_env(task, config).reset(seed=seed)
-        starts.append(Start(task, seed, info["instruction"], obs["image"][None].copy(), np.zeros((0, ACTION_DIM), np.float32)))
+        starts.append(Start(task, seed, info["instruction"], obs["image"][None].copy()))
     return starts
 
 
