@@ -15,7 +15,9 @@ import tyro
 from gymnast.cli_settings import flags_of, resolve, saved_inputs
 from gymnast.config import CommaFloats
 from gymnast.experiment.worldgym import DEFAULT_NOISE
-from gymnast.rl.config import RL_PRESETS, EnvName, RLConfig
+from gymnast.envs.kinds import EnvName, env_kind
+from gymnast.reward.spec import RewardSpec
+from gymnast.rl.config import RL_PRESETS, RLConfig
 
 Preset = Literal["debug", "demo", "full"]
 RLFlags = flags_of(RLConfig, RL_PRESETS)
@@ -206,7 +208,7 @@ def eval_judge(
     """
     from gymnast.reward.select import measure_judge
 
-    report = measure_judge(reward, data, out, wm, heldout_fraction)
+    report = measure_judge(RewardSpec.parse(reward), data, out, wm, heldout_fraction)
     print(json.dumps(report, indent=2))
 
 
@@ -240,11 +242,13 @@ def rl(
 
     def saved() -> tuple[RLConfig, dict]:
         run_spec, settings = saved_rl_settings(out)
-        return settings, dataclasses.asdict(run_spec)
+        return settings, {field.name: getattr(run_spec, field.name) for field in dataclasses.fields(run_spec)}
 
+    # Parsed here, once: the library takes the env kind and the reward spec, never their names.
     settings, inputs = resolve(
         "rl", out, resume, RL_PRESETS[preset], overrides=dataclasses.asdict(config), saved=saved,
-        inputs={"policy": policy, "env": env, "reward": reward, "wm": wm, "data": data},
+        inputs={"policy": policy, "env": None if env is None else env_kind(env),
+                "reward": None if reward is None else RewardSpec.parse(reward), "wm": wm, "data": data},
         required=("policy", "env", "reward"))
     run_spec = RLRun(**{name: str(value) if isinstance(value, Path) else value for name, value in inputs.items()})
     summary = train_rl(run_spec, out, settings, resume=resume)
@@ -357,6 +361,6 @@ def imagination(
 
     config = ImaginationConfig(tasks=tasks, episodes=episodes, horizon=horizon, batch=batch, workers=workers,
                                videos=videos, seed=seed)
-    report = measure_imagination_runs(policy, wm, reward, config, out)
+    report = measure_imagination_runs(policy, wm, RewardSpec.parse(reward), config, out)
     print(format_imagination(report))
     print(f"report: {out / 'imagination.md'}")

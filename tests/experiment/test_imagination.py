@@ -12,10 +12,12 @@ import torch
 from gymnast.cli import main
 from gymnast.config import EnvConfig
 from gymnast.envs.factory import EnvFactory
+from gymnast.envs.kinds import REAL
 from gymnast.envs.starts import evaluation_starts
 from gymnast.experiment.imagination import ImaginationConfig, measure_imagination
 from gymnast.policy.vla import load_policy
 from gymnast.reward.select import make_reward
+from gymnast.reward.spec import RewardSpec
 from gymnast.rl.evaluate import replay_actions
 from gymnast.rl.rollout import collect_rollouts
 from gymnast.world_model.base import load_world_model
@@ -67,7 +69,7 @@ def models():
 @pytest.fixture(scope="module")
 def measured(models, tmp_path_factory):
     policy, world_model = models
-    spy = SpyReward(make_reward(f"judge:{JUDGE}"))
+    spy = SpyReward(make_reward(RewardSpec.judge(JUDGE)))
     out = tmp_path_factory.mktemp("imagination")
     return measure_imagination(policy, world_model, spy, CONFIG, out, progress=False), spy, out
 
@@ -145,12 +147,12 @@ def test_replaying_a_real_rollout_reproduces_its_outcome_and_frames(models):
     policy, _ = models
     config = EnvConfig(image_size=96, horizon=30)
     starts = evaluation_starts(["reach-v3"], 2, config)
-    envs = EnvFactory("real", policy.chunk_size, config, "none", workers=1)
-    replays = EnvFactory("real", policy.chunk_size, EnvConfig(image_size=96, horizon=30, terminate_on_success=False),
+    envs = EnvFactory(REAL, policy.chunk_size, config, "none", workers=1)
+    replays = EnvFactory(REAL, policy.chunk_size, EnvConfig(image_size=96, horizon=30, terminate_on_success=False),
                          "none", workers=1)
     try:
-        rollouts = collect_rollouts(envs.get("real", 2), policy, starts, 0.0, torch.Generator())
-        success, frames, interactions = replay_actions(replays.get("real", 2), rollouts.starts, rollouts.actions,
+        rollouts = collect_rollouts(envs.get(REAL, 2), policy, starts, 0.0, torch.Generator())
+        success, frames, interactions = replay_actions(replays.get(REAL, 2), rollouts.starts, rollouts.actions,
                                                        rollouts.lengths)
     finally:
         envs.close()

@@ -77,7 +77,9 @@ def test_rl_in_a_simulator_can_start_from_fresh_scenes_without_a_dataset(tmp_pat
 def test_rl_rejects_a_reward_the_env_cannot_give(rl_dataset, tmp_path, capsys):
     with pytest.raises(SystemExit):
         main(_rl_args("imagined", "sim", tmp_path / "run", rl_dataset))
-    assert "simulator" in capsys.readouterr().err
+    error = capsys.readouterr().err
+    assert "simulator" in error
+    assert "--reward sim cannot score rollouts of --env imagined" in error
 
 
 def _comparable(metrics):

@@ -1,4 +1,4 @@
-"""The chunked vector envs a run rolls out in, built by kind: imagined, sim or real.
+"""The chunked vector envs a run rolls out in, built by kind (`gymnast.envs.kinds`): imagined, sim or real.
 
 Legend: B rollouts stepped together, K actions per chunk, A action dimensions.
 
@@ -14,6 +14,7 @@ from gymnasium.vector import VectorEnv
 
 from gymnast.config import EnvConfig
 from gymnast.envs.imagined import BatchedImaginedEnv
+from gymnast.envs.kinds import EnvKind
 from gymnast.envs.sim_vector import SimVectorEnv
 
 
@@ -24,12 +25,12 @@ class EnvFactory:
         kind: the run's own env.
         chunk_size: K, the policy's chunk.
         config: image size and horizon of the simulators (the imagined env uses the same horizon).
-        gap: the software simulator's gap.
+        gap: the software simulator's gap (the real world has none).
         workers: simulator processes per env.
         world_model: what the imagined env imagines with.
     """
 
-    def __init__(self, kind: str, chunk_size: int, config: EnvConfig, gap: str, workers: int, world_model=None) -> None:
+    def __init__(self, kind: EnvKind, chunk_size: int, config: EnvConfig, gap: str, workers: int, world_model=None) -> None:
         self.kind, self.chunk_size, self.config, self.gap, self.workers = kind, chunk_size, config, gap, workers
         self.world_model = world_model
         self.batch = 1
@@ -40,14 +41,14 @@ class EnvFactory:
         self.batch = num_envs
         return self.get(self.kind, num_envs)
 
-    def get(self, kind: str, num_envs: int) -> VectorEnv:
-        key = (kind, num_envs)
+    def get(self, kind: EnvKind, num_envs: int) -> VectorEnv:
+        key = (kind.name, num_envs)
         if key not in self._envs:
-            if kind == "imagined":
+            if kind.imagined:
                 self._envs[key] = BatchedImaginedEnv(self.world_model, num_envs, self.chunk_size, self.config.horizon)
             else:
-                self._envs[key] = SimVectorEnv(num_envs, self.chunk_size, self.config, gap="none" if kind == "real" else self.gap,
-                                               workers=self.workers)
+                gap = "none" if kind.real_interactions else self.gap
+                self._envs[key] = SimVectorEnv(num_envs, self.chunk_size, self.config, gap=gap, workers=self.workers)
         return self._envs[key]
 
     def close(self) -> None:

@@ -12,7 +12,9 @@ import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
+from gymnast.envs.kinds import IMAGINED, REAL, SIM, EnvKind
 from gymnast.experiment.config import ExperimentConfig
+from gymnast.reward.spec import RewardKind, RewardSpec
 from gymnast.rl.config import RLConfig, RLRun
 
 
@@ -24,13 +26,13 @@ class Arm:
         name: key in summary.json and the stage names.
         title: what the report calls it.
         env: where it practises (None: no practice, or imitation only).
-        reward: its reward name (``judge`` and ``verified`` are bound to the experiment's own models).
+        reward: its reward's kind (``judge`` and ``verified`` are bound to the experiment's own models).
     """
 
     name: str
     title: str
-    env: str | None = None
-    reward: str | None = None
+    env: EnvKind | None = None
+    reward: RewardKind | None = None
 
     @property
     def is_rl(self) -> bool:
@@ -40,10 +42,10 @@ class Arm:
 ARMS = (
     Arm("sft", "SFT"),
     Arm("iter_sft", "Iter-SFT (judged imagined successes + demos)"),
-    Arm("rl_sim", "RL in the software simulator (dense reward)", "sim", "sim-dense"),
-    Arm("rl_wm_judge", "RL in the world model, judge (World-Gymnast)", "imagined", "judge"),
-    Arm("rl_wm_verified", "RL in the world model, verified (VLA-RFT)", "imagined", "verified"),
-    Arm("rl_real", "RL in the real world (dense reward; upper bound)", "real", "sim-dense"),
+    Arm("rl_sim", "RL in the software simulator (dense reward)", SIM, "sim-dense"),
+    Arm("rl_wm_judge", "RL in the world model, judge (World-Gymnast)", IMAGINED, "judge"),
+    Arm("rl_wm_verified", "RL in the world model, verified (VLA-RFT)", IMAGINED, "verified"),
+    Arm("rl_real", "RL in the real world (dense reward; upper bound)", REAL, "sim-dense"),
 )
 ARM_NAMES = tuple(arm.name for arm in ARMS)
 WM_ARMS = ("rl_wm_judge", "rl_wm_verified")
@@ -64,8 +66,8 @@ def arm(name: str) -> Arm:
 def rl_setup(spec: Arm, config: ExperimentConfig, sft: Path, wm: Path, judge: Path, data: Path
              ) -> tuple[RLRun, RLConfig]:
     """The `gymnast rl` run an RL arm is: its env and reward on the experiment's models."""
-    reward = f"judge:{judge}" if spec.reward == "judge" else spec.reward
-    imagined = spec.env == "imagined"
+    reward = RewardSpec.judge(judge) if spec.reward == "judge" else RewardSpec(spec.reward)
+    imagined = spec.env.imagined
     run = RLRun(str(sft), spec.env, reward, wm=str(wm) if imagined else None, data=str(data))
     rl = dataclasses.replace(config.rl, fresh_scenes=not imagined,
                              # the watch replays imagined actions in the real world; elsewhere it has nothing to check

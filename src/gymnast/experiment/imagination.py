@@ -33,10 +33,12 @@ import torch
 from tqdm import tqdm
 
 from gymnast.config import EnvConfig
+from gymnast.envs.kinds import IMAGINED, REAL
 from gymnast.envs.starts import Start
 from gymnast.eval.stats import wilson_interval
 from gymnast.policy.base import Policy
 from gymnast.reward.base import Reward
+from gymnast.reward.spec import RewardSpec
 from gymnast.world_model.base import WorldModel
 
 logger = logging.getLogger(__name__)
@@ -100,7 +102,7 @@ def measure_imagination(policy: Policy, world_model: WorldModel, reward: Reward,
     from gymnast.envs.starts import evaluation_starts
     from gymnast.envs.tasks import resolve_tasks
 
-    if not getattr(reward, "binary", False):
+    if not reward.binary:
         raise ValueError(f"imagination needs a binary reward (a judge that says success or not); {type(reward).__name__} "
                          "gives continuous scores, which are no success verdict to compare with the real world")
     began = time.perf_counter()
@@ -108,9 +110,9 @@ def measure_imagination(policy: Policy, world_model: WorldModel, reward: Reward,
     env_config = EnvConfig(image_size=world_model.image_size, horizon=config.horizon)
     starts = evaluation_starts(tasks, config.episodes, env_config)
     size = min(config.batch, len(starts))
-    envs = EnvFactory("imagined", policy.chunk_size, env_config, "none", config.workers, world_model)
+    envs = EnvFactory(IMAGINED, policy.chunk_size, env_config, "none", config.workers, world_model)
     # Replays run in an env that goes on after success, so each imagined frame has a real one.
-    replays = EnvFactory("real", policy.chunk_size, dataclasses.replace(env_config, terminate_on_success=False), "none",
+    replays = EnvFactory(REAL, policy.chunk_size, dataclasses.replace(env_config, terminate_on_success=False), "none",
                          config.workers)
     state = _State(config.videos)
     try:
@@ -132,17 +134,17 @@ def measure_imagination(policy: Policy, world_model: WorldModel, reward: Reward,
     return report
 
 
-def measure_imagination_runs(policy: str | Path, wm: str | Path, reward: str, config: ImaginationConfig,
+def measure_imagination_runs(policy: str | Path, wm: str | Path, reward: RewardSpec, config: ImaginationConfig,
                              out: Path | None = None, progress: bool = True) -> dict:
     """`measure_imagination` of saved runs: a policy run, a world-model run and a reward spec
-    (``judge:RUN`` or ``vlm:MODEL@BASE_URL``, see `gymnast.reward.select`)."""
+    (``judge:RUN`` or ``vlm:MODEL@BASE_URL``, see `gymnast.reward.spec`)."""
     from gymnast.policy.vla import load_policy
     from gymnast.reward.select import make_reward
     from gymnast.world_model.base import load_world_model
 
     world_model = load_world_model(wm)
     judge = make_reward(reward, world_model)
-    labels = {"policy": str(policy), "wm": str(wm), "reward": reward}
+    labels = {"policy": str(policy), "wm": str(wm), "reward": str(reward)}
     return measure_imagination(load_policy(policy), world_model, judge, config, out, progress, labels)
 
 
@@ -178,13 +180,13 @@ def _measure_batch(batch: Sequence[Start], size: int, policy: Policy, reward: Re
         state.seconds[name] += time.perf_counter() - began
         return result
 
-    imagined = timed("imagine", lambda: collect_rollouts(envs.get("imagined", size), policy, batch, 0.0,
+    imagined = timed("imagine", lambda: collect_rollouts(envs.get(IMAGINED, size), policy, batch, 0.0,
                                                          torch.Generator(), seed))
     imagined_scores = timed("judge", lambda: score_groups(reward, imagined, 1))  # (R,)
     verdict = verdicts(imagined, imagined_scores, reward)  # (R,) 0/1, NaN where unjudged
     replay_success, replayed, replay_steps = timed("replay", lambda: replay_actions(
-        replays.get("real", size), imagined.starts, imagined.actions, imagined.lengths))
-    real = timed("real", lambda: collect_rollouts(envs.get("real", size), policy, batch, 0.0, torch.Generator(), seed))
+        replays.get(REAL, size), imagined.starts, imagined.actions, imagined.lengths))
+    real = timed("real", lambda: collect_rollouts(envs.get(REAL, size), policy, batch, 0.0, torch.Generator(), seed))
     real_scores = timed("judge", lambda: score_groups(reward, real, 1))  # (R,)
     # The padding rollouts' interactions are not counted (`gymnast eval` would not run them). Every
     # imagined rollout runs to the horizon, so every replay executes as many actions.

@@ -49,11 +49,12 @@ def imagine_successes(policy_run: Path, wm_run: Path, judge_run: Path, data: Pat
     from gymnast.envs.tasks import resolve_tasks
     from gymnast.policy.vla import load_policy
     from gymnast.reward.select import make_reward
+    from gymnast.reward.spec import RewardSpec
     from gymnast.rl.rollout import collect_rollouts, concat_rollouts, score_groups
     from gymnast.world_model.base import load_world_model
 
     policy, world_model = load_policy(policy_run), load_world_model(wm_run)
-    judge = make_reward(f"judge:{judge_run}")
+    judge = make_reward(RewardSpec.judge(judge_run))
     size = config.iter_sft.group_size
     starts = [start for start in dataset_starts(data, resolve_tasks(config.tasks)) for _ in range(size)]
     env = BatchedImaginedEnv(world_model, min(len(starts), config.rl.starts_per_step * size), policy.chunk_size,

@@ -58,7 +58,7 @@ def _curves(stages: Stages) -> dict[str, list[dict]]:
         if not spec.is_rl:
             continue
         summary = json.loads((stages.path(f"arm_{spec.name}") / "summary.json").read_text())
-        where = "own" if spec.env == "real" else "real"
+        where = "own" if spec.env.real_interactions else "real"
         curves[spec.name] = [{"step": point["step"], "real": point.get(f"eval/{where}_success"),
                               "real_ci": [point.get(f"eval/{where}_ci_low"), point.get(f"eval/{where}_ci_high")],
                               "own": point.get("eval/own_success")} for point in summary["curve"]]

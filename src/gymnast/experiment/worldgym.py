@@ -26,6 +26,7 @@ from typing import TYPE_CHECKING
 from tqdm import tqdm
 
 from gymnast.config import EnvConfig
+from gymnast.envs.kinds import IMAGINED, REAL, EnvKind
 
 if TYPE_CHECKING:  # torch stays unimported until a policy is loaded (the CLI reads DEFAULT_NOISE)
     from gymnast.policy.base import Policy
@@ -113,13 +114,14 @@ class WorldGym:
         from gymnast.envs.starts import evaluation_starts
         from gymnast.envs.tasks import resolve_tasks
         from gymnast.reward.select import make_reward
+        from gymnast.reward.spec import RewardSpec
         from gymnast.world_model.base import load_world_model
 
         if episodes < 1:
             raise ValueError(f"WorldGym needs at least one episode per task, got {episodes}")
         self.tasks, self.env, self.workers = resolve_tasks(tasks), env, workers
         self.world_model = load_world_model(wm_run)
-        self.judge = make_reward(f"judge:{judge_run}")
+        self.judge = make_reward(RewardSpec.judge(judge_run))
         self.starts = evaluation_starts(self.tasks, episodes, env)
         # Equal batches: 100 starts run as 4 x 25 rather than 32 + 32 + 32 + 4 padded to 32.
         self.batch = math.ceil(len(self.starts) / math.ceil(len(self.starts) / batch))
@@ -127,12 +129,12 @@ class WorldGym:
 
     def imagined(self, policy: Policy) -> dict:
         """Judged success of `policy`'s greedy imagined rollouts (see `real` for the keys)."""
-        return self._success("imagined", policy)
+        return self._success(IMAGINED, policy)
 
     def real(self, policy: Policy) -> dict:
         """Real-world success of `policy`'s greedy rollouts: ``success``, ``ci_low``,
         ``ci_high`` (95% Wilson), ``episodes`` and ``per_task``."""
-        return self._success("real", policy)
+        return self._success(REAL, policy)
 
     def row(self, candidate: Candidate, real: Mapping | None = None) -> dict:
         """`candidate`'s WorldGym row; `real` (a `gymnast eval` report) replaces its real rollouts."""
@@ -154,14 +156,14 @@ class WorldGym:
         return [self.row(candidate, real.get(candidate.name))
                 for candidate in tqdm(candidates, desc="worldgym", unit="policy", disable=not progress)]
 
-    def _success(self, kind: str, policy: Policy) -> dict:
+    def _success(self, kind: EnvKind, policy: Policy) -> dict:
         from gymnast.envs.factory import EnvFactory
         from gymnast.rl.evaluate import evaluate_in_env
 
         if hasattr(policy, "reseed"):  # a noisy policy: each estimate draws its own noise from the start
             policy.reseed()
         if policy.chunk_size not in self._factories:
-            factory = EnvFactory("imagined", policy.chunk_size, self.env, "none", self.workers, self.world_model)
+            factory = EnvFactory(IMAGINED, policy.chunk_size, self.env, "none", self.workers, self.world_model)
             factory.batch = self.batch
             self._factories[policy.chunk_size] = factory
         values = evaluate_in_env(self._factories[policy.chunk_size], kind, policy, self.judge, self.starts, prefix="wg")

@@ -1,4 +1,4 @@
-"""The `Reward` contract: a score for each rollout's video.
+"""The `Reward` contract: a score for each rollout's video, and what a reward declares it needs.
 
 Legend: B rollouts, T frames, H/W image size, C' start frames, A action dimensions.
 
@@ -6,6 +6,10 @@ Frames are camera frames as the environments and world models produce them, (B, 
 uint8, so a reward never needs to know where a video came from. A score of NaN means "could not
 score" (a judge's malformed answer, a missing reference): RL leaves such rollouts out of its group
 statistics and gives them zero advantage, rather than reading NaN as failure.
+
+A reward also declares what it needs besides the video (`RewardNeeds`), so that a run checks its
+env against it before it starts (`check_fits`) instead of failing mid-run or, worse, scoring
+something else than it meant to.
 """
 
 from __future__ import annotations
@@ -15,6 +19,8 @@ from dataclasses import dataclass
 from typing import Protocol
 
 import torch
+
+from gymnast.envs.kinds import ENV_KINDS, EnvKind
 
 
 @dataclass(frozen=True)
@@ -36,13 +42,63 @@ class RewardContext:
     env_rewards: torch.Tensor | None = None
 
 
+@dataclass(frozen=True)
+class RewardNeeds:
+    """What a reward needs besides the video and the instructions."""
+
+    world_model: bool = False
+    """It is built with a world model and scores only videos that model imagined (a real video
+    against an imagined one would measure the model's errors, not the policy)."""
+    simulator_success: bool = False
+    """It reads a simulator's own outcome (`RewardContext.success`, ``env_rewards``)."""
+    reference_actions: bool = False
+    """It reads a demonstration's actions from each start (`RewardContext.reference_actions`)."""
+
+
 class Reward(Protocol):
     """Scores B rollouts."""
 
     binary: bool
     """Scores are 0/1 verdicts (success or not), not degrees: RL's dynamic sampling filters groups
-    by their success rate only for binary rewards."""
+    by their success rate only for binary rewards, and only a binary reward's score is a verdict."""
+
+    needs: RewardNeeds
+    """What it reads besides the video; `check_fits` holds it against an env."""
 
     def score(self, frames: torch.Tensor, instructions: Sequence[str], context: RewardContext) -> torch.Tensor:
         """(B,) float32 scores for (B, T, H, W, 3) uint8 rollout videos; NaN where one cannot be scored."""
         ...
+
+    def metrics(self) -> dict[str, float]:
+        """What it counted so far (requests, retries, tokens...) as ``reward/...`` floats for the
+        metrics log; empty for a reward that counts nothing."""
+        ...
+
+
+def env_mismatch(needs: RewardNeeds, env: EnvKind, demonstrations: bool = True) -> str | None:
+    """Why a reward that `needs` these cannot score rollouts of `env` (starting from scenes with
+    `demonstrations` or not), or None when it can."""
+    if needs.simulator_success and not env.reports_success:
+        return f"it reads a simulator's own verdict, which --env {env} does not report"
+    if needs.world_model and not env.imagined:
+        return f"it compares videos imagined by its world model, which --env {env} does not imagine"
+    if needs.reference_actions and not demonstrations:
+        return "it reads a demonstration's actions from each start, and fresh scenes have none"
+    return None
+
+
+def check_fits(reward: Reward, name: str, env: EnvKind, demonstrations: bool = True) -> None:
+    """Raises ValueError, naming the reward and the env, when `env` cannot give what `reward` needs.
+
+    Args:
+        reward: the reward, whose `needs` are checked.
+        name: what the command line called it (``str(spec)``), for the message.
+        env: the kind of env its rollouts run in.
+        demonstrations: whether the starts carry a demonstration's actions (a dataset's scenes do,
+            fresh scenes do not).
+    """
+    why = env_mismatch(reward.needs, env, demonstrations)
+    if why is not None:
+        fitting = " or ".join(kind.name for kind in ENV_KINDS.values() if env_mismatch(reward.needs, kind) is None)
+        scenes = " from a dataset's scenes" if reward.needs.reference_actions else ""
+        raise ValueError(f"--reward {name} cannot score rollouts of --env {env}: {why} (it fits --env {fitting}{scenes})")

@@ -25,7 +25,7 @@ from torch import nn
 
 from gymnast.policy.text import EMBEDDING_DIM, InstructionEncoder
 from gymnast.policy.vision import to_float_image
-from gymnast.reward.base import RewardContext
+from gymnast.reward.base import RewardContext, RewardNeeds
 from gymnast.reward.judge import JudgeConfig, check_videos
 
 FRAMES_PER_PASS = 512  # frames through the CNN at once: bounds memory on long batches of videos
@@ -50,6 +50,7 @@ class FrameJudge(nn.Module):
 
     backend = "frame-judge"
     binary = True
+    needs = RewardNeeds()  # the video and the instructions only
 
     def __init__(self, config: JudgeConfig = JudgeConfig()) -> None:
         super().__init__()
@@ -88,6 +89,9 @@ class FrameJudge(nn.Module):
     def probability(self, videos: torch.Tensor, instructions: Sequence[str]) -> torch.Tensor:
         """(B,) P(success) of each video: that of its most convincing frame."""
         return self.frame_probabilities(videos, instructions).max(dim=1).values
+
+    def metrics(self) -> dict[str, float]:
+        return {}  # counts nothing
 
     def score(self, frames: torch.Tensor, instructions: Sequence[str], context: RewardContext | None = None) -> torch.Tensor:
         """1.0 where some frame shows success (P >= the chosen threshold), else 0.0."""

@@ -26,7 +26,7 @@ from torch import nn
 
 from gymnast.policy.text import EMBEDDING_DIM, InstructionEncoder
 from gymnast.policy.vision import SmallCNN, to_float_image
-from gymnast.reward.base import RewardContext
+from gymnast.reward.base import RewardContext, RewardNeeds
 
 JUDGED_FRAMES = 4
 
@@ -55,6 +55,7 @@ class LearnedJudge(nn.Module):
 
     backend = "embedded-judge"
     binary = True
+    needs = RewardNeeds()  # the video and the instructions only
 
     def __init__(self, config: JudgeConfig = JudgeConfig()) -> None:
         super().__init__()
@@ -78,6 +79,9 @@ class LearnedJudge(nn.Module):
         check_videos(videos, instructions)
         picked = videos[:, judged_frame_indices(videos.shape[1])]  # (B, F, H, W, 3)
         return torch.sigmoid(self(picked, self.encoder(instructions)))
+
+    def metrics(self) -> dict[str, float]:
+        return {}  # counts nothing
 
     def score(self, frames: torch.Tensor, instructions: Sequence[str], context: RewardContext | None = None) -> torch.Tensor:
         """1.0 where the judge says success (P >= the threshold), else 0.0."""

@@ -13,7 +13,7 @@ from collections.abc import Sequence
 
 import torch
 
-from gymnast.reward.base import RewardContext
+from gymnast.reward.base import RewardContext, RewardNeeds
 
 META_WORLD_MAX_STEP_REWARD = 10.0  # Meta-World v3 shapes every step's reward into [0, 10]
 
@@ -22,6 +22,10 @@ class SimSuccess:
     """`Reward`: 1.0 if the simulator reported success during the rollout, else 0.0."""
 
     binary = True
+    needs = RewardNeeds(simulator_success=True)
+
+    def metrics(self) -> dict[str, float]:
+        return {}  # counts nothing
 
     def score(self, frames: torch.Tensor, instructions: Sequence[str], context: RewardContext) -> torch.Tensor:
         if context.success is None:
@@ -39,6 +43,10 @@ class SimDense:
     """
 
     binary = False
+    needs = RewardNeeds(simulator_success=True)
+
+    def metrics(self) -> dict[str, float]:
+        return {}  # counts nothing
 
     def score(self, frames: torch.Tensor, instructions: Sequence[str], context: RewardContext) -> torch.Tensor:
         if context.env_rewards is None:

@@ -25,7 +25,7 @@ from collections.abc import Sequence
 
 import torch
 
-from gymnast.reward.base import RewardContext
+from gymnast.reward.base import RewardContext, RewardNeeds
 from gymnast.world_model.base import WorldModel, rollout
 from gymnast.world_model.metrics import PerceptualDistance, to_unit_float
 
@@ -43,10 +43,14 @@ class VerifiedReward:
     """
 
     binary = False
+    needs = RewardNeeds(world_model=True, reference_actions=True)
 
     def __init__(self, model: WorldModel, perceptual: PerceptualDistance | None = None) -> None:
         self.model = model
         self.perceptual = perceptual or PerceptualDistance()
+
+    def metrics(self) -> dict[str, float]:
+        return {}  # counts nothing
 
     def score(self, frames: torch.Tensor, instructions: Sequence[str], context: RewardContext) -> torch.Tensor:
         if context.start is None or context.reference_actions is None:

@@ -43,7 +43,7 @@ import openai
 import torch
 from PIL import Image
 
-from gymnast.reward.base import RewardContext
+from gymnast.reward.base import RewardContext, RewardNeeds
 
 logger = logging.getLogger(__name__)
 
@@ -141,6 +141,7 @@ class VLMJudge:
     """
 
     binary = True  # majority votes of 0/1 answers (NaN where none could be had)
+    needs = RewardNeeds()  # the video and the instructions only
 
     def __init__(self, config: VLMJudgeConfig, client: openai.OpenAI | None = None) -> None:
         self.config = config

@@ -8,11 +8,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
+from typing import Any
 
+from gymnast.envs.kinds import EnvKind, env_kind
+from gymnast.reward.spec import RewardSpec
 from gymnast.utils.settings import saved_settings
-
-EnvName = Literal["imagined", "sim", "real"]
 
 
 @dataclass(frozen=True)
@@ -108,15 +108,25 @@ RL_PRESETS: dict[str, RLConfig] = {
 
 @dataclass(frozen=True)
 class RLRun:
-    """What one run trains with: the policy's run, the env and the reward, by name."""
+    """What one run trains with: the policy's run, the env and the reward (parsed), and the world
+    model's and dataset's runs."""
 
     policy: str
-    env: EnvName
-    reward: str
+    env: EnvKind
+    reward: RewardSpec
     wm: str | None = None
     data: str | None = None
+
+    def to_json(self) -> dict[str, Any]:
+        """The run as RUN/config.json keeps it: the env and the reward as the command line names them."""
+        return {"policy": self.policy, "env": self.env.name, "reward": str(self.reward), "wm": self.wm,
+                "data": self.data}
+
+    @classmethod
+    def from_json(cls, saved: dict[str, Any]) -> RLRun:
+        return cls(**saved | {"env": env_kind(saved["env"]), "reward": RewardSpec.parse(saved["reward"])})
 
 
 def saved_rl_settings(run: Path) -> tuple[RLRun, RLConfig]:
     """The run and settings an RL run was started with (RUN/config.json), for ``--resume``."""
-    return RLRun(**saved_settings(run, "run")), RLConfig(**saved_settings(run, "rl"))
+    return RLRun.from_json(saved_settings(run, "run")), RLConfig(**saved_settings(run, "rl"))

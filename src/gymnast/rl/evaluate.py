@@ -15,11 +15,12 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-import numpy as np
 import torch
 from gymnasium.vector import VectorEnv
 
+from gymnast.envs.engine import run_batch
 from gymnast.envs.factory import EnvFactory
+from gymnast.envs.kinds import REAL, EnvKind
 from gymnast.envs.starts import Start, start_options
 from gymnast.eval.stats import wilson_interval
 from gymnast.reward.base import Reward
@@ -31,17 +32,17 @@ def verdicts(rollouts: Rollouts, scores: torch.Tensor, reward: Reward) -> torch.
     (a judge's), else NaN (a continuous reward on imagined video says nothing about success)."""
     if rollouts.success is not None:
         return rollouts.success.float()
-    if getattr(reward, "binary", False):
+    if reward.binary:
         return scores.float()
     return torch.full_like(scores, float("nan"), dtype=torch.float32)
 
 
-def evaluate_in_env(envs: EnvFactory, kind: str, policy, reward: Reward, starts: Sequence[Start],
+def evaluate_in_env(envs: EnvFactory, kind: EnvKind, policy, reward: Reward, starts: Sequence[Start],
                     prefix: str) -> dict[str, float]:
     """Greedy rollouts from `starts` in env `kind`; success with its 95% Wilson interval.
 
     Returns ``{prefix}_episodes`` (judged), ``_interactions`` (actions taken, which are real
-    interactions when `kind` is ``real``) and, when any episode could be judged, ``_success``,
+    interactions when `kind` declares ``real_interactions``) and, when any episode could be judged, ``_success``,
     ``_ci_low``, ``_ci_high`` and ``_success/<task>`` for every task.
     """
     env = envs.get(kind, envs.batch)
@@ -95,22 +96,19 @@ def replay_actions(env: VectorEnv, starts: Sequence[Start], actions: torch.Tenso
         raise ValueError(f"the env runs {env.num_envs} episodes; got {len(starts)} starts, actions "
                          f"{tuple(actions.shape)} and lengths {tuple(lengths.shape)}")
     chunk = env.single_action_space.shape[0]
-    obs, _ = env.reset(seed=0, options=start_options(starts))
-    frames = [torch.from_numpy(obs["image"])[:, None]]  # (R, 1, H, W, 3)
     last_chunk = (lengths - 1).clamp(min=0) // chunk  # (R,) the chunk that ends each replay
-    success = torch.zeros(count, dtype=torch.bool)
-    interactions = 0
-    for index in range(int(last_chunk.max()) + 1):
-        step = actions[:, index * chunk: (index + 1) * chunk].float()  # (R, k, A)
-        if step.shape[1] < chunk:
-            step = torch.cat([step, torch.zeros(count, chunk - step.shape[1], step.shape[2])], 1)
-        _, _, terminated, truncated, infos = env.step(step.numpy())
-        frames.append(torch.from_numpy(infos["frames"]))  # (R, K, H, W, 3)
-        interactions += int(np.asarray(infos["executed"]).sum())
-        now = torch.from_numpy(np.asarray(infos["success"], dtype=bool))
-        success = torch.where(last_chunk >= index, now, success)  # success only accumulates
-        if (np.asarray(terminated) | np.asarray(truncated)).all():
-            break
+    calls = int(last_chunk.max()) + 1
+    planned = torch.zeros(count, calls * chunk, actions.shape[2])  # zero actions after the end
+    planned[:, : min(steps, calls * chunk)] = actions[:, : calls * chunk].float()
+    plan = iter(planned.split(chunk, dim=1))  # (R, K, A) each
+    frames, success, interactions = [], torch.zeros(count, dtype=torch.bool), 0
+    for index, result in enumerate(run_batch(env, lambda images, instructions: next(plan).numpy(),
+                                             start_options(starts), seed=0, max_calls=calls)):
+        if not frames:
+            frames.append(torch.from_numpy(result.observation)[:, None])  # (R, 1, H, W, 3) the start frame
+        frames.append(torch.from_numpy(result.frames))  # (R, K, H, W, 3)
+        interactions += int(result.executed.sum())
+        success = torch.where(last_chunk >= index, torch.from_numpy(result.success), success)  # only accumulates
     video = torch.cat(frames, dim=1)[:, : steps + 1]  # (R, <= T + 1, H, W, 3)
     ends = lengths.clamp(max=video.shape[1] - 1)  # (R,) the frame at each rollout's end
     index = torch.minimum(torch.arange(steps + 1)[None], ends[:, None])  # (R, T + 1): the end frame repeats
@@ -136,7 +134,7 @@ def watch_hacking(envs: EnvFactory, rollouts: Rollouts, scores: torch.Tensor, ve
     count = min(count, len(rollouts.starts))
     pick = torch.linspace(0, len(rollouts.starts) - 1, count).round().long()
     chosen = rollouts.select(pick)
-    real, _, interactions = replay_actions(envs.get("real", count), chosen.starts, chosen.actions, chosen.lengths)
+    real, _, interactions = replay_actions(envs.get(REAL, count), chosen.starts, chosen.actions, chosen.lengths)
     values = {"eval/watch_real_success": real.float().mean().item(), "eval/watch_interactions": interactions}
     judged = torch.isfinite(verdict[pick])
     if judged.any():

@@ -5,7 +5,9 @@ Each step (`rl_step`, top to bottom): draw B real start states, roll the policy 
 each at the rollout temperature, score every video with the reward, keep the groups with
 something to learn from (dynamic sampling, refilling from fresh starts), normalise rewards within
 each group and take one clipped policy-gradient step (`gymnast.rl.grpo`). The loop drives a vector
-env and a `Reward`; it never asks where the frames come from. Its settings are `gymnast.rl.config`.
+env and a `Reward`; it never asks where the frames come from. What it does around the step
+depends only on what the env kind and the reward declare (`gymnast.envs.kinds.EnvKind`,
+`gymnast.reward.base.RewardNeeds`). Its settings are `gymnast.rl.config`.
 
 Around the loop: atomic checkpoints with every random state and the sampler position (``--resume``
 continues exactly), metrics.jsonl and TensorBoard, rollout videos with their rewards, a
@@ -34,9 +36,10 @@ from tqdm import tqdm
 
 from gymnast.config import EnvConfig
 from gymnast.envs.factory import EnvFactory
+from gymnast.envs.kinds import REAL
 from gymnast.envs.starts import Start, evaluation_starts, start_sampler
 from gymnast.envs.tasks import resolve_tasks
-from gymnast.reward.base import Reward
+from gymnast.reward.base import Reward, check_fits
 from gymnast.rl import grpo
 from gymnast.rl.config import RLConfig, RLRun
 from gymnast.rl.evaluate import evaluate_in_env, verdicts, watch_hacking
@@ -56,18 +59,21 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
     from gymnast.reward.select import make_reward
     from gymnast.world_model.base import load_world_model
 
+    env = run_spec.env
+    if env.imagined and run_spec.wm is None:
+        raise ValueError(f"--env {env} practises in a world model: give it with --wm RUN")
+    if config.fresh_scenes and env.imagined:
+        raise ValueError(f"fresh scenes need a simulator: --env {env} starts only from the dataset's real frames")
     policy = load_policy(run_spec.policy)
     world_model = load_world_model(run_spec.wm) if run_spec.wm else None
-    _check_combination(run_spec, world_model)
     reward = make_reward(run_spec.reward, world_model)
-    if config.fresh_scenes and run_spec.env == "imagined":
-        raise ValueError("fresh scenes need a simulator: the imagined env starts only from the dataset's real frames")
+    check_fits(reward, str(run_spec.reward), env, demonstrations=not config.fresh_scenes)
     data = None if config.fresh_scenes else Path(run_spec.data or _policy_data(run_spec.policy))
     tasks = resolve_tasks(config.tasks)
     env_config = EnvConfig(image_size=policy.config.image_size, horizon=config.horizon)
     draw_starts = start_sampler(tasks, None if config.fresh_scenes else dataset_starts(data, tasks), env_config)
-    envs = EnvFactory(run_spec.env, policy.chunk_size, env_config, config.gap, config.workers, world_model)
-    resolved = {"rl": dataclasses.asdict(config), "run": dataclasses.asdict(run_spec), "model": policy.spec(),
+    envs = EnvFactory(env, policy.chunk_size, env_config, config.gap, config.workers, world_model)
+    resolved = {"rl": dataclasses.asdict(config), "run": run_spec.to_json(), "model": policy.spec(),
                 "data": str(data) if data else None}
 
     optimizer = torch.optim.AdamW(policy.parameters(), lr=config.lr, weight_decay=0.0)
@@ -99,13 +105,13 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
                 board.add_scalar(key, value, step)
 
     def evaluate(step: int) -> None:
-        values = evaluate_in_env(envs, run_spec.env, policy, reward, eval_starts, prefix="eval/own")
-        if config.real_eval and run_spec.env != "real":
-            real = evaluate_in_env(envs, "real", policy, reward, eval_starts, prefix="eval/real")
+        values = evaluate_in_env(envs, env, policy, reward, eval_starts, prefix="eval/own")
+        if config.real_eval and not env.real_interactions:  # else its own evaluation is the real one
+            real = evaluate_in_env(envs, REAL, policy, reward, eval_starts, prefix="eval/real")
             state["eval_real_interactions"] += int(real.pop("eval/real_interactions"))
             values |= real
         own = int(values.pop("eval/own_interactions", 0))
-        if run_spec.env == "real":  # evaluating in the real world spends real interactions too
+        if env.real_interactions:  # evaluating in the real world spends real interactions too
             state["eval_real_interactions"] += own
         values["eval/real_interactions"] = state["eval_real_interactions"]
         values = {key: value for key, value in values.items() if np.isfinite(value)}  # JSON has no NaN
@@ -117,7 +123,7 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
             began = time.perf_counter()
             evaluate(0)
             state["wall_s"] += time.perf_counter() - began
-        bar = tqdm(range(start_step, config.steps), initial=start_step, total=config.steps, desc=f"rl {run_spec.env}",
+        bar = tqdm(range(start_step, config.steps), initial=start_step, total=config.steps, desc=f"rl {env}",
                    disable=not progress)
         for step in bar:
             done = step + 1
@@ -125,14 +131,14 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
             batch, scores, values = rl_step(envs.train(config.starts_per_step * config.group_size), policy, reward,
                                             draw_starts, config, sampler, actions, optimizer, schedule, reference)
             interactions = int(values.pop("rollout/interactions"))
-            if run_spec.env == "real":  # only the real world's actions are real interactions
+            if env.real_interactions:
                 state["real_interactions"] += interactions
             values["time/step_s"] = time.perf_counter() - started
             values["train/lr"] = schedule.get_last_lr()[0]
             values["rollout/real_interactions"] = state["real_interactions"]
-            if hasattr(reward, "metrics"):  # a VLM judge's request, retry, cache and token counts
-                values |= reward.metrics()
-            if batch is not None and config.watch_every and done % config.watch_every == 0 and run_spec.env != "real":
+            values |= reward.metrics()  # a VLM judge's request, retry, cache and token counts
+            # The watch replays actions in the real world: with real interactions there is nothing to check.
+            if batch is not None and config.watch_every and done % config.watch_every == 0 and not env.real_interactions:
                 watched = watch_hacking(envs, batch, scores, verdicts(batch, scores, reward), config.watch_rollouts)
                 state["watch_real_interactions"] += int(watched.pop("eval/watch_interactions"))
                 values |= watched | {"eval/watch_real_interactions": state["watch_real_interactions"]}
@@ -180,7 +186,6 @@ def rl_step(env: VectorEnv, policy, reward: Reward, draw_starts: Callable[[int, 
         ``rollout/interactions``: the actions taken in every round.
     """
     groups, size = config.starts_per_step, config.group_size
-    binary = getattr(reward, "binary", False)
     kept: list[Rollouts] = []
     kept_scores: list[torch.Tensor] = []
     values: dict[str, float] = {"rollout/interactions": 0, "time/rollout_s": 0.0, "time/policy_s": 0.0,
@@ -205,7 +210,10 @@ def rl_step(env: VectorEnv, policy, reward: Reward, draw_starts: Callable[[int, 
                        "rollout/success": torch.nanmean(verdicts(rollouts, scores, reward)).item(),
                        "rollout/length": rollouts.lengths.float().mean().item()}
         grouped = scores.view(groups, size)  # (B, G)
-        keep = grpo.keep_groups(grouped, config.keep_low, config.keep_high) if binary else grpo.keep_varied_groups(grouped)
+        if reward.binary:
+            keep = grpo.keep_groups(grouped, config.keep_low, config.keep_high)
+        else:
+            keep = grpo.keep_varied_groups(grouped)
         for g in keep.nonzero().flatten().tolist()[: groups - len(kept)]:
             index = torch.arange(g * size, (g + 1) * size)
             kept.append(rollouts.select(index))
@@ -274,8 +282,8 @@ def write_summary(out: Path, run_spec: RLRun, config: RLConfig, state: dict) -> 
     video) and, when the run trained elsewhere, in the real world (``start_real_success``...).
     """
     first, last = state["curve"][0], state["curve"][-1]
-    where = {"": "own", "_real": "own" if run_spec.env == "real" else "real"}
-    summary = {"env": run_spec.env, "reward": run_spec.reward, "steps": config.steps, "policy": run_spec.policy,
+    where = {"": "own", "_real": "own" if run_spec.env.real_interactions else "real"}
+    summary = {"env": run_spec.env.name, "reward": str(run_spec.reward), "steps": config.steps, "policy": run_spec.policy,
                "wm": run_spec.wm}
     for suffix, env in where.items():
         for moment, point in (("start", first), ("end", last)):
@@ -291,17 +299,6 @@ def write_summary(out: Path, run_spec: RLRun, config: RLConfig, state: dict) -> 
     }
     write_json(out / "summary.json", summary)
     return summary
-
-
-def _check_combination(run_spec: RLRun, world_model) -> None:
-    kind = run_spec.reward.partition(":")[0]
-    if run_spec.env == "imagined" and world_model is None:
-        raise ValueError("--env imagined practises in a world model: give it with --wm RUN")
-    if kind in ("sim", "sim-dense") and run_spec.env == "imagined":
-        raise ValueError(f"--reward {run_spec.reward} reads the simulator's own verdict; a world model has none "
-                         "(use --env sim or real, or a judge / the verified reward)")
-    if kind == "verified" and run_spec.env != "imagined":
-        raise ValueError("--reward verified compares imagined videos: it needs --env imagined")
 
 
 def _policy_data(policy_run: str) -> str:
