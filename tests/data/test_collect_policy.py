@@ -14,12 +14,14 @@ from gymnast.config import EnvConfig
 from gymnast.data.collect import CollectConfig, EpisodeJob, plan_episodes, record_episode
 from gymnast.data.lerobot import EpisodeDataset
 from gymnast.data.schema import POLICY, EpisodeInfo, behaviour_kind, policy_behaviour
+from gymnast.envs.engine import run_batch
 from gymnast.envs.experts import make_behaviour
+from gymnast.envs.imagined import BatchedImaginedEnv
 from gymnast.envs.metaworld import MetaWorldEnv
 from gymnast.eval.actors import ImaginedPlanActor, PolicyActor
 from gymnast.eval.record import PolicyActors, policy_tag, record_policy
 from gymnast.policy.vla import load_policy
-from gymnast.world_model.base import load_world_model, rollout
+from gymnast.world_model.base import load_world_model
 
 RUN = Path(__file__).resolve().parents[2] / "results" / "sft" / "policy"
 ENV = EnvConfig(image_size=96, horizon=20)  # the committed policy sees 96x96 images
@@ -112,9 +114,12 @@ def test_a_plan_made_in_imagination_is_the_policys_closed_loop_imagined_rollout_
     policy, world_model = load_policy(RUN), load_world_model(WM)
     env = MetaWorldEnv("reach-v3", ENV)
     obs, _ = env.reset(seed=0)
-    imagined = rollout(world_model, torch.from_numpy(obs["image"])[None, None], horizon=ENV.horizon,
-                       policy=lambda frames: torch.from_numpy(_greedy_chunk(policy, frames[0].numpy(), env.instruction))[None])
-    np.testing.assert_array_equal(episode.actions, imagined.actions[0].numpy()[:episode.length])
+    imagination = BatchedImaginedEnv(world_model, 1, policy.chunk_size, ENV.horizon)
+    start = {"frames": obs["image"][None], "instructions": [env.instruction]}
+    with torch.inference_mode():
+        chunks = [result.actions[0, : result.frames.shape[1]] for result in run_batch(
+            imagination, lambda images, instructions: _greedy_chunk(policy, images[0], env.instruction)[None], start)]
+    np.testing.assert_array_equal(episode.actions, np.concatenate(chunks)[:episode.length])
     # ... and the real world executed them from the same scene (every step, open-loop).
     for action, state in zip(episode.actions, episode.states[1:]):
         obs, *_ = env.step(action)

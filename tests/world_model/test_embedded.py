@@ -2,10 +2,12 @@
 
 import dataclasses
 
+import numpy as np
 import pytest
 import torch
 
-from gymnast.policy.base import ActionSample
+from gymnast.envs.engine import run_batch
+from gymnast.envs.imagined import BatchedImaginedEnv
 from gymnast.utils.checkpoint import save_checkpoint
 from gymnast.world_model.base import load_world_model, rollout
 from gymnast.world_model.embedded import EmbeddedWorldModel, EmbeddedWorldModelConfig
@@ -109,29 +111,22 @@ def test_bad_actions_raise_value_errors_naming_the_shapes(bad):
         model.step(model.init_state(frames(2, 1)), bad)
 
 
-def test_rollout_under_a_policy_equals_rollout_under_its_actions():
+def test_a_closed_loop_rollout_stepped_by_the_engine_equals_the_open_loop_rollout_of_its_actions():
     model = make_model()
-    plan = actions(2, 7)
-    calls = []
+    plan = actions(2, 7).numpy()
+    chunks = iter([plan[:, 0:3], plan[:, 3:6], np.concatenate([plan[:, 6:], np.zeros((2, 2, 4), np.float32)], 1)])
+    seen = []
 
-    def policy(frame: torch.Tensor) -> ActionSample:
-        assert frame.shape == (2, 32, 32, 3)
-        done = sum(c.shape[1] for c in calls)
-        chunk = plan[:, done : done + 3]
-        calls.append(chunk)
-        return ActionSample(actions=chunk, tokens=torch.zeros(2, 12, dtype=torch.int64), logp=torch.zeros(2, 12))
+    def actor(images: np.ndarray, instructions: list[str]) -> np.ndarray:
+        seen.append(images.shape)
+        return next(chunks)
 
-    closed = rollout(model, frames(2, 1), policy=policy, horizon=7)
-    fixed = rollout(model, frames(2, 1), actions=plan)
-    assert torch.equal(closed.frames, fixed.frames) and torch.equal(closed.actions, plan)
-    assert len(closed.samples) == 3  # chunks of 3, 3 and the last one cut to 1
-
-
-def test_rollout_needs_exactly_one_source_of_actions():
-    with pytest.raises(ValueError, match="exactly one"):
-        rollout(make_model(), frames(1, 1))
-    with pytest.raises(ValueError, match="horizon"):
-        rollout(make_model(), frames(1, 1), policy=lambda frame: actions(1, 2))
+    start = {"frames": frames(2, 1).numpy(), "instructions": ["a", "b"]}
+    results = list(run_batch(BatchedImaginedEnv(model, 2, chunk_size=3, horizon=7), actor, start))
+    closed = np.concatenate([result.frames for result in results], axis=1)
+    fixed = rollout(model, frames(2, 1), actions=torch.from_numpy(plan))
+    assert np.array_equal(closed, fixed.frames.numpy()) and torch.equal(fixed.actions, torch.from_numpy(plan))
+    assert seen == [(2, 32, 32, 3)] * 3  # chunks of 3, 3 and the last one cut to 1 at the horizon
 
 
 def test_long_rollouts_re_anchor_on_their_own_frames_at_the_trained_horizon():

@@ -8,9 +8,9 @@ a rerun with more episodes per task extends it. Finished episodes are staged dur
 arrive (a crash loses at most the episodes in flight) and consolidated into the dataset files
 every `flush_every` episodes and at the end.
 
-Every episode is played by an `Actor`, which returns a chunk of K actions executed open-loop: a
-scripted behaviour (expert, noisy expert, failure) is a chunk of one action read from the
-simulator state. A learned policy's actor is built above this layer (data/ never imports the
+Every episode is played by the rollout engine (`gymnast.envs.engine.play_episode`) with an
+`Actor`, which returns a chunk of K actions executed open-loop: a scripted behaviour (expert,
+noisy expert, failure) is a chunk of one action read from the simulator state. A learned policy's actor is built above this layer (data/ never imports the
 policies) and passed in as an `ActorFactory`; see `gymnast.eval.record`.
 """
 
@@ -33,7 +33,8 @@ from gymnast.config import CommaFloats, EnvConfig
 from gymnast.data.lerobot import EpisodeDataset
 from gymnast.data.lerobot_writer import LeRobotWriter
 from gymnast.data.schema import Episode, EpisodeInfo, episode_key
-from gymnast.envs.experts import Behaviour, make_behaviour
+from gymnast.envs.engine import RECORDABLE, Actor, ScriptedActor, play_episode
+from gymnast.envs.experts import make_behaviour
 from gymnast.envs.gap import get_gap
 from gymnast.envs.metaworld import MetaWorldEnv
 from gymnast.envs.parallel import cached_env, parallel_map
@@ -103,15 +104,6 @@ class EpisodeJob:
         return episode_key(get_gap(self.gap).env_variant, self.task, self.behaviour, self.noise, self.seed)
 
 
-class Actor(Protocol):
-    """Plays one episode: called with the environment and its latest observation whenever the
-    previous chunk has run out."""
-
-    def __call__(self, env: MetaWorldEnv, obs: dict[str, np.ndarray]) -> np.ndarray:
-        """(K, A) the next K >= 1 actions, executed open-loop (stopping early if the episode ends)."""
-        ...
-
-
 class ActorFactory(Protocol):
     """Builds each episode's `Actor` in the process that records it.
 
@@ -123,16 +115,6 @@ class ActorFactory(Protocol):
     """The behaviour recorded with every episode (``policy-<tag>``, see `gymnast.data.schema.policy_behaviour`)."""
 
     def __call__(self, job: EpisodeJob) -> Actor: ...
-
-
-class _ScriptedActor:
-    """A scripted behaviour as an `Actor`: a chunk of one action, from the simulator state."""
-
-    def __init__(self, behaviour: Behaviour) -> None:
-        self._behaviour = behaviour
-
-    def __call__(self, env: MetaWorldEnv, obs: dict[str, np.ndarray]) -> np.ndarray:
-        return self._behaviour(env.env_state)[None]  # (1, A)
 
 
 def plan_episodes(config: CollectConfig, behaviour: str | None = None) -> list[EpisodeJob]:
@@ -168,39 +150,21 @@ def record_episode(job: EpisodeJob, make_actor: ActorFactory | None = None) -> E
     """
     env = cached_env(job.task, job.env, gap=job.gap)
     if make_actor is None:
-        actor: Actor = _ScriptedActor(make_behaviour(job.behaviour, job.task, job.noise, job.seed))
+        actor: Actor = ScriptedActor(make_behaviour(job.behaviour, job.task, job.noise, job.seed))
     else:
         actor = make_actor(job)
-    obs, info = env.reset(seed=job.seed)
-    frames, states, env_states = [obs["image"]], [obs["state"]], [info["env_state"]]
-    actions, rewards, successes = [], [], []
-    done = False
-    while not done:
-        chunk = np.asarray(actor(env, obs))  # (K, A)
-        if chunk.ndim != 2 or len(chunk) == 0:
-            raise ValueError(f"an actor must return a (K, A) chunk with K >= 1, got shape {chunk.shape}")
-        for action in chunk:  # executed open-loop, without looking at the new frames
-            obs, reward, terminated, truncated, info = env.step(action)
-            frames.append(obs["image"])
-            states.append(obs["state"])
-            env_states.append(info["env_state"])
-            actions.append(action)
-            rewards.append(reward)
-            successes.append(info["success"])
-            done = terminated or truncated
-            if done:
-                break
+    run = play_episode(env, actor, job.seed, record=RECORDABLE)
     return Episode(
-        frames=np.stack(frames),
-        states=np.stack(states),
-        env_states=np.stack(env_states),
-        actions=np.stack(actions).astype(np.float32),
-        rewards=np.asarray(rewards, dtype=np.float32),
-        successes=np.asarray(successes, dtype=bool),
+        frames=np.stack(run.frames),
+        states=np.stack(run.states),
+        env_states=np.stack(run.env_states).astype(np.float32),
+        actions=np.stack(run.actions).astype(np.float32),
+        rewards=np.asarray(run.rewards, dtype=np.float32),
+        successes=np.asarray(run.successes, dtype=bool),
         info=EpisodeInfo(
             task=job.task,
-            instruction=env.instruction,
-            success=bool(any(successes)),
+            instruction=run.instruction,
+            success=run.success,
             behaviour=job.behaviour,
             noise=job.noise,
             seed=job.seed,

@@ -4,7 +4,8 @@ For each (task, seed) the scripted expert runs closed-loop in the real world and
 the gapped simulator (its success drop says how much harder the simulator is for a controller
 that sees the true state). Then the real episode's actions are replayed open-loop in the gapped
 simulator from the same seed, and the hand and object trajectories are compared step by step:
-how far the same commands drift when the physics differ.
+how far the same commands drift when the physics differ. Every episode is played by the rollout
+engine (`gymnast.envs.engine.play_episode`).
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ import numpy as np
 from tqdm import tqdm
 
 from gymnast.config import EnvConfig
+from gymnast.envs.engine import Actor, EpisodeRun, ReplayActor, ScriptedActor, play_episode
 from gymnast.envs.experts import ScriptedExpert
 from gymnast.envs.gap import get_gap
 from gymnast.envs.metaworld import MetaWorldEnv
@@ -36,45 +38,32 @@ class GapJob:
     config: EnvConfig
 
 
-def _expert_rollout(env: MetaWorldEnv, seed: int, actions: np.ndarray | None = None):
-    """Runs the expert (or replays `actions`); returns (success, actions, states, first frame)."""
-    obs, _ = env.reset(seed=seed)
-    first_frame = obs["image"]
-    expert = ScriptedExpert(env.task)
-    states, taken, success = [env.env_state.copy()], [], False
-    steps = len(actions) if actions is not None else env.config.horizon
-    for t in range(steps):
-        action = actions[t] if actions is not None else expert(env.env_state)
-        _, _, terminated, truncated, info = env.step(action)
-        states.append(env.env_state.copy())
-        taken.append(action)
-        success = success or info["success"]
-        if actions is None and (terminated or truncated):
-            break
-    return success, np.array(taken), np.array(states), first_frame
+def _play(env: MetaWorldEnv, seed: int, actor: Actor) -> EpisodeRun:
+    return play_episode(env, actor, seed, record=("frames", "env_states"))
 
 
 def measure_one(job: GapJob) -> dict:
     """Figures for one (task, seed) under one gap level."""
     # Replays must run the full recorded length, so the episodes here never stop on success.
     config = dataclasses.replace(job.config, terminate_on_success=False)
-    real = cached_env(job.task, config)
-    sim = cached_env(job.task, config, gap=job.gap)
-    real_success, actions, real_states, real_frame = _expert_rollout(real, job.seed)
-    sim_success, _, _, sim_frame = _expert_rollout(sim, job.seed)
-    replay_success, _, replay_states, _ = _expert_rollout(sim, job.seed, actions)
+    real_env = cached_env(job.task, config)
+    sim_env = cached_env(job.task, config, gap=job.gap)
+    real = _play(real_env, job.seed, ScriptedActor(ScriptedExpert(job.task)))
+    sim = _play(sim_env, job.seed, ScriptedActor(ScriptedExpert(job.task)))
+    replay = _play(sim_env, job.seed, ReplayActor(np.array(real.actions)))
+    real_states, replay_states = np.array(real.env_states), np.array(replay.env_states)  # (T + 1, E)
     hand_gap = np.linalg.norm(real_states[:, _HAND] - replay_states[:, _HAND], axis=1)
     object_gap = np.linalg.norm(real_states[:, _OBJECT] - replay_states[:, _OBJECT], axis=1)
     return {
         "task": job.task,
         "seed": job.seed,
-        "real_expert_success": bool(real_success),
-        "sim_expert_success": bool(sim_success),
-        "replay_success": bool(replay_success),
+        "real_expert_success": real.success,
+        "sim_expert_success": sim.success,
+        "replay_success": replay.success,
         "hand_divergence_cm_mean": float(100 * hand_gap.mean()),
         "hand_divergence_cm_final": float(100 * hand_gap[-1]),
         "object_divergence_cm_final": float(100 * object_gap[-1]),
-        "first_frame_pixel_diff": float(np.abs(real_frame.astype(np.float32) - sim_frame).mean() / 255.0),
+        "first_frame_pixel_diff": float(np.abs(real.frames[0].astype(np.float32) - sim.frames[0]).mean() / 255.0),
     }
 
 

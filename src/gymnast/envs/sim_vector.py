@@ -11,6 +11,8 @@ in ``infos["frames"]``, no autoreset) so the RL loop drives either without knowi
 the imagined env it knows rewards and success, so each episode ends on its own and then stays
 frozen: never stepped again, its final frame repeated, NaN rewards, ``executed`` 0.
 
+Each episode is stepped by the rollout engine's `gymnast.envs.engine.play_chunk`, the code that
+plays `gymnast eval`'s and `gymnast collect`'s episodes, so success means the same in all of them.
 MuJoCo stepping and rendering are single-threaded, so ``workers > 1`` splits the B episodes into
 contiguous slices over ``spawn`` processes (see `gymnast.envs.parallel`); the episodes run the
 same code in either case, so the results are identical.
@@ -24,7 +26,6 @@ import multiprocessing
 import traceback
 from collections import Counter
 from collections.abc import Callable
-from dataclasses import dataclass
 from multiprocessing.connection import Connection
 from multiprocessing.process import BaseProcess
 from typing import Any, ClassVar, Self
@@ -35,21 +36,11 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from gymnast.config import EnvConfig
+from gymnast.envs.engine import EpisodeRun, play_chunk, start_episode
 from gymnast.envs.gap import get_gap
 from gymnast.envs.instructions import SPLITS
 from gymnast.envs.metaworld import ACTION_DIM, CONTROL_FPS, MetaWorldEnv
 from gymnast.envs.tasks import check_task
-
-
-@dataclass
-class _Episode:
-    env: MetaWorldEnv
-    frame: np.ndarray  # (H, W, 3) uint8, the latest
-    instruction: str
-    step: int = 0  # actions taken
-    success: bool = False  # at any step so far
-    terminated: bool = False
-    truncated: bool = False
 
 
 class _Episodes:
@@ -64,7 +55,7 @@ class _Episodes:
     def __init__(self, config: EnvConfig, gap: str, instruction_split: str) -> None:
         self._args = {"config": config, "gap": gap, "instruction_split": instruction_split}
         self._envs: dict[tuple[str, int], MetaWorldEnv] = {}
-        self._episodes: list[_Episode] = []
+        self._episodes: list[EpisodeRun] = []
 
     def reset(self, tasks: list[str], seeds: list[int], instructions: list[str | None]) -> dict[str, np.ndarray]:
         counts: Counter[str] = Counter()
@@ -74,13 +65,12 @@ class _Episodes:
             counts[task] += 1
             if key not in self._envs:
                 self._envs[key] = MetaWorldEnv(task, **self._args)
-            obs, info = self._envs[key].reset(seed=seed, options={"instruction": instruction})
-            self._episodes.append(_Episode(self._envs[key], obs["image"], info["instruction"]))
+            self._episodes.append(start_episode(self._envs[key], seed, instruction))
         if len(self._envs) > 2 * len(self._episodes):
             used = {id(e.env) for e in self._episodes}
             for key in [key for key, env in self._envs.items() if id(env) not in used]:
                 self._envs.pop(key).close()
-        frames = np.stack([e.frame for e in self._episodes])  # (b, H, W, 3)
+        frames = np.stack([e.obs["image"] for e in self._episodes])  # (b, H, W, 3)
         instructions = np.array([e.instruction for e in self._episodes], dtype=object)
         return {"image": frames, "instruction": instructions, **self._status()}
 
@@ -92,21 +82,16 @@ class _Episodes:
         rewards = np.full((b, k), np.nan)
         executed = np.zeros(b, np.int64)
         for i, episode in enumerate(self._episodes):
-            for j in range(k):
-                if episode.terminated or episode.truncated:
-                    break
-                obs, reward, episode.terminated, episode.truncated, info = episode.env.step(actions[i, j])
-                episode.frame, rewards[i, j] = obs["image"], reward
-                episode.success |= bool(info["success"])
-                episode.step += 1
-                frames[i, j] = episode.frame
+            for j, (obs, reward) in enumerate(play_chunk(episode, actions[i])):
+                frames[i, j], rewards[i, j] = obs["image"], reward
                 executed[i] += 1
-            frames[i, executed[i] :] = episode.frame  # an ended episode shows its final frame
+            frames[i, executed[i] :] = episode.obs["image"]  # an ended episode shows its final frame
         return {"frames": frames, "rewards": rewards, "executed": executed, **self._status()}
 
     def _status(self) -> dict[str, np.ndarray]:
-        names = {"step": np.int64, "success": bool, "terminated": bool, "truncated": bool}
-        return {name: np.array([getattr(e, name) for e in self._episodes], dtype) for name, dtype in names.items()}
+        names = {"step": ("steps", np.int64), "success": ("success", bool), "terminated": ("terminated", bool),
+                 "truncated": ("truncated", bool)}
+        return {name: np.array([getattr(e, field) for e in self._episodes], dtype) for name, (field, dtype) in names.items()}
 
     def close(self) -> None:
         for env in self._envs.values():

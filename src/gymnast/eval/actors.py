@@ -3,8 +3,8 @@
 Legend: K action-chunk length, A action dimensions (4 in Meta-World), H/W image height/width.
 
 The policy sees the current camera image and returns a chunk of K actions, executed open-loop as
-it would be on a robot (the episode loops that do so: `gymnast.eval.evaluate.run_episode` and
-`gymnast.data.collect.record_episode`).
+it would be on a robot: these are `gymnast.envs.engine.Actor`s, played by the rollout engine in
+`gymnast eval` and `gymnast collect`.
 """
 
 from __future__ import annotations
@@ -17,6 +17,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from gymnast.envs.engine import run_batch
+from gymnast.envs.imagined import BatchedImaginedEnv
 from gymnast.envs.metaworld import ACTION_DIM, MetaWorldEnv
 
 if TYPE_CHECKING:
@@ -55,6 +57,11 @@ class PolicyActor:
         self._generator = torch.Generator().manual_seed(seed)
         self._rng = np.random.default_rng(seed)
 
+    @property
+    def chunk_size(self) -> int:
+        """K, the actions of every chunk."""
+        return self._policy.chunk_size
+
     def __call__(self, env: MetaWorldEnv, obs: dict[str, np.ndarray]) -> np.ndarray:
         return self.chunk(obs["image"], env.instruction, env.task)
 
@@ -84,7 +91,8 @@ class ImaginedPlanActor:
     """The policy plans the whole episode in imagination; the real world then executes the plan.
 
     At the scene's first frame the policy acts closed loop in the world model (it sees the
-    imagined frames, as in world-model RL) for `horizon` actions; the real env executes those
+    imagined frames, as in world-model RL: the imagined env, driven by the rollout engine's
+    `gymnast.envs.engine.run_batch`) for `horizon` actions; the real env executes those
     actions open-loop. The real outcome of the plan is then the true label of an imagined
     rollout: re-imagining the episode's actions from its first frame (as `gymnast train-judge
     --wm` does) gives back the video the policy saw, so such episodes teach a judge what the
@@ -109,20 +117,19 @@ class ImaginedPlanActor:
     def __call__(self, env: MetaWorldEnv, obs: dict[str, np.ndarray]) -> np.ndarray:
         import torch
 
-        from gymnast.world_model.base import rollout
-
         if self._planned:
             raise ValueError(f"the imagined plan of {self._horizon} actions ran out before the episode on {env.task} "
                              "ended; plan at least the env's horizon")
         self._planned = True
+        imagination = BatchedImaginedEnv(self._world_model, 1, self._actor.chunk_size, self._horizon)
 
-        def act(frames: torch.Tensor) -> torch.Tensor:  # (1, H, W, 3) uint8 -> (1, K, A)
-            return torch.from_numpy(self._actor.chunk(frames[0].numpy(), env.instruction, env.task))[None]
+        def act(images: np.ndarray, instructions: list[str]) -> np.ndarray:  # (1, H, W, 3) imagined -> (1, K, A)
+            return self._actor.chunk(images[0], env.instruction, env.task)[None]
 
-        context = torch.from_numpy(obs["image"])[None, None]  # (1, 1, H, W, 3): the first frame only
+        start = {"frames": obs["image"][None], "instructions": [env.instruction]}  # the first frame only
         with torch.inference_mode():
-            imagined = rollout(self._world_model, context, policy=act, horizon=self._horizon)
-        return imagined.actions[0].numpy()  # (T, A)
+            plan = [result.actions[:, : result.frames.shape[1]] for result in run_batch(imagination, act, start)]
+        return np.concatenate(plan, axis=1)[0]  # (T, A): the last chunk is cut at the horizon
 
 
 @functools.lru_cache(maxsize=1)

@@ -7,7 +7,8 @@ dataset ever records, so a policy is never scored on an initial state it was tra
 learned policy sees the current camera image every K steps and its chunk of K actions is
 executed open-loop, as it would be on a robot; the scripted expert reads the simulator state
 every step and serves as the reference ceiling. The first few episodes of each task are also
-saved as browser-playable videos beside the JSON report.
+saved as browser-playable videos beside the JSON report. Episodes are played by the rollout
+engine (`gymnast.envs.engine.play_episode`), whose stepping the RL loop's envs share.
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ from tqdm import tqdm
 
 from gymnast.config import EnvConfig
 from gymnast.eval.actors import PolicyActor, load_run_policy
+from gymnast.envs.engine import ScriptedActor, play_episode
 from gymnast.envs.experts import ScriptedExpert
 from gymnast.envs.gap import get_gap
 from gymnast.envs.instructions import SPLITS
@@ -135,16 +137,6 @@ def plan_episodes(config: EvalConfig, policy: str, video_dir: Path) -> list[Eval
     return jobs
 
 
-class _ExpertActor:
-    """The scripted expert: one action per call, from the true simulator state."""
-
-    def __init__(self, task: str) -> None:
-        self._expert = ScriptedExpert(task)
-
-    def __call__(self, env: MetaWorldEnv, obs: dict[str, np.ndarray]) -> np.ndarray:
-        return self._expert(env.env_state)[None]  # (1, A)
-
-
 def run_episode(job: EvalJob, policy: Policy | None = None) -> dict:
     """Runs one evaluation episode in this process's cached environment.
 
@@ -161,26 +153,15 @@ def run_episode(job: EvalJob, policy: Policy | None = None) -> dict:
     if policy is not None:
         actor = PolicyActor(policy)
     elif job.policy == EXPERT:
-        actor = _ExpertActor(job.task)
+        actor = ScriptedActor(ScriptedExpert(job.task))
     else:
         actor = PolicyActor(load_run_policy(job.policy))
-    obs, _ = env.reset(seed=job.seed)
-    frames = [obs["image"]] if job.video_path else []
-    steps, success, done = 0, False, False
-    while not done:
-        for action in actor(env, obs):  # executed open-loop, without looking at the new frames
-            obs, _, terminated, truncated, info = env.step(action)
-            steps += 1
-            success = success or bool(info["success"])
-            if job.video_path:
-                frames.append(obs["image"])
-            done = terminated or truncated
-            if done:
-                break
+    run = play_episode(env, actor, job.seed, record=("frames",) if job.video_path else ())
     if job.video_path:
         with atomic_path(job.video_path) as tmp:
-            encode_video(tmp, np.stack(frames), fps=MetaWorldEnv.metadata["render_fps"], codec=BROWSER_CODEC)
-    return {"task": job.task, "seed": job.seed, "instruction": env.instruction, "success": success, "steps": steps}
+            encode_video(tmp, np.stack(run.frames), fps=MetaWorldEnv.metadata["render_fps"], codec=BROWSER_CODEC)
+    return {"task": job.task, "seed": job.seed, "instruction": run.instruction, "success": run.success,
+            "steps": run.steps}
 
 
 def evaluate(policy: str | Policy, config: EvalConfig, out: str | Path, progress: bool = True) -> dict:

@@ -5,10 +5,11 @@ actions per chunk, A action dimensions, T actions per rollout, C start frames, H
 
 The environment is anything with the contract both `gymnast.envs.imagined.BatchedImaginedEnv`
 and `gymnast.envs.sim_vector.SimVectorEnv` follow: a gymnasium `VectorEnv` without autoreset whose
-step takes one (R, K, A) action chunk and reports the chunk's frames in ``infos["frames"]``. The
-loop here never asks which one it drives. Simulators also report ``executed``, ``rewards`` and
-``success`` in their infos, and a rollout carries them when they are there (the simulator rewards
-read them); a world model reports none, and its rollouts are judged on their video alone.
+step takes one (R, K, A) action chunk and reports the chunk's frames in ``infos["frames"]``; the
+rollout engine's batched driver (`gymnast.envs.engine.run_batch`) steps it, and never asks which
+one it drives. Simulators also report ``executed``, ``rewards`` and ``success`` in their infos,
+and a rollout carries them when they are there (the simulator rewards read them); a world model
+reports none, and its rollouts are judged on their video alone.
 
 Rollouts start from real start states (`gymnast.envs.starts.Start`) and are scored by a `Reward`
 one group at a time (`score_groups`), with what the reward may read besides the video.
@@ -27,6 +28,7 @@ import torch
 from gymnasium.vector import VectorEnv
 
 from gymnast.data.lerobot import EpisodeDataset
+from gymnast.envs.engine import run_batch
 from gymnast.envs.starts import Start, start_options
 from gymnast.policy.base import ActionSample, Policy
 from gymnast.reward.base import Reward, RewardContext
@@ -102,34 +104,31 @@ def collect_rollouts(
     """
     if env.num_envs != len(starts):
         raise ValueError(f"the env runs {env.num_envs} rollouts but {len(starts)} starts were given")
-    obs, infos = env.reset(seed=seed, options=start_options(starts))
-    instructions = [str(i) for i in infos["instruction"]]
     count, (chunk, action_dim) = env.num_envs, env.single_action_space.shape
-    ended = np.zeros(count, dtype=bool)
-    frames = [torch.from_numpy(obs["image"])[:, None]]  # (R, 1, H, W, 3)
-    seen, tokens, logp, masks, actions, rewards, success = [], [], [], [], [], [], None
-    while not ended.all():
-        image = torch.from_numpy(obs["image"])  # (R, H, W, 3)
+    samples: list[ActionSample] = []
+
+    def act(images: np.ndarray, instructions: list[str]) -> np.ndarray:  # (R, H, W, 3) -> (R, K, A)
         began = time.perf_counter()
-        sample = _sample(policy, image, instructions, temperature, generator)
+        samples.append(_sample(policy, torch.from_numpy(images), instructions, temperature, generator))
         if timer is not None:
             timer["policy_s"] = timer.get("policy_s", 0.0) + time.perf_counter() - began
-        obs, _, terminated, truncated, infos = env.step(sample.actions.numpy())
-        new = torch.from_numpy(infos["frames"])  # (R, k, H, W, 3); k < K only at the horizon
-        executed = np.where(ended, 0, infos.get("executed", np.full(count, new.shape[1])))
-        done_before = torch.from_numpy(executed)[:, None]  # (R, 1)
-        valid = torch.arange(chunk)[None] < done_before  # (R, K) actions really executed
+        return samples[-1].actions.numpy()
+
+    seen, masks, frames, actions, rewards, success = [], [], [], [], [], None
+    for result in run_batch(env, act, start_options(starts), seed):
+        image, new = torch.from_numpy(result.observation), torch.from_numpy(result.frames)  # new: (R, k, H, W, 3)
+        if not frames:
+            frames.append(image[:, None])  # (R, 1, H, W, 3) the start frame
+        valid = torch.arange(chunk)[None] < torch.from_numpy(result.executed)[:, None]  # (R, K) actions really executed
         seen.append(image)
-        tokens.append(sample.tokens)
-        logp.append(sample.logp)
         masks.append(valid.repeat_interleave(action_dim, dim=1))  # (R, N), tokens are chunk-major
         frames.append(new)
-        actions.append(sample.actions[:, : new.shape[1]].float() * valid[:, : new.shape[1], None])
-        if "rewards" in infos:
-            rewards.append(torch.from_numpy(np.asarray(infos["rewards"], dtype=np.float32)))
-        if "success" in infos:
-            success = torch.from_numpy(np.asarray(infos["success"], dtype=bool))
-        ended |= np.asarray(terminated) | np.asarray(truncated)
+        actions.append(torch.from_numpy(result.actions)[:, : new.shape[1]].float() * valid[:, : new.shape[1], None])
+        if result.rewards is not None:
+            rewards.append(torch.from_numpy(result.rewards))
+        if result.success is not None:
+            success = torch.from_numpy(result.success)
+    tokens, logp = [sample.tokens for sample in samples], [sample.logp for sample in samples]
     for _ in range(len(tokens), calls or 0):  # nothing happens after the end: repeat, mask, NaN
         seen.append(seen[-1])
         tokens.append(torch.zeros_like(tokens[-1]))

@@ -10,13 +10,15 @@ A world model starts from real context frames and imagines one frame per action:
 
 The state is explicit and opaque (whatever the backend needs), so many rollouts can run side by
 side and a rollout can be branched. Frames are uint8 like the real camera's, so the policy, the
-reward and the videos never know where they came from. `rollout` drives a model either with
-fixed actions (open-loop fidelity evaluation) or with a policy callable (RL): one code path.
+reward and the videos never know where they came from. `rollout` imagines fixed actions
+open-loop (fidelity evaluation, verified rewards, judge training). Closed-loop rollouts, where a
+policy chooses each chunk from the imagined frames (RL, plans made in imagination), run in
+`gymnast.envs.imagined.BatchedImaginedEnv`, driven by the rollout engine like every other env
+(`gymnast.envs.engine.run_batch`).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
 from importlib import import_module
 from pathlib import Path
@@ -24,7 +26,6 @@ from typing import Any, Protocol
 
 import torch
 
-from gymnast.policy.base import ActionSample
 from gymnast.utils.checkpoint import load_model
 
 
@@ -85,56 +86,25 @@ class ImaginedRollout:
     Attributes:
         frames: (B, T, H, W, 3) uint8 imagined frames; frame t follows action t.
         actions: (B, T, A) float32 the actions applied.
-        samples: with a policy, the `ActionSample` (or action tensor) it returned at each call, in
-            order (RL needs their tokens and log-probabilities); empty with fixed actions.
     """
 
     frames: torch.Tensor
     actions: torch.Tensor
-    samples: tuple[ActionSample | torch.Tensor, ...] = ()
 
 
-PolicyFn = Callable[[torch.Tensor], "ActionSample | torch.Tensor"]
-"""Maps the latest (B, H, W, 3) uint8 frame to a (B, K, A) action chunk (or an ActionSample)."""
-
-
-def rollout(
-    model: WorldModel,
-    context: torch.Tensor,
-    actions: torch.Tensor | None = None,
-    policy: PolicyFn | None = None,
-    horizon: int | None = None,
-    generator: torch.Generator | None = None,
-) -> ImaginedRollout:
-    """Imagines a rollout from real context frames, under fixed actions or a policy.
+def rollout(model: WorldModel, context: torch.Tensor, actions: torch.Tensor,
+            generator: torch.Generator | None = None) -> ImaginedRollout:
+    """Imagines fixed actions open-loop from real context frames, in one model call.
 
     Args:
         model: the world model.
         context: (B, C', H, W, 3) uint8 real frames; the last one is where the rollout starts.
-        actions: (B, T, A) fixed actions (open loop). Give either this or `policy`.
-        policy: called with the latest frame before every chunk (closed loop).
-        horizon: with a policy, the number of actions T to imagine (the last chunk is cut to fit).
+        actions: (B, T, A) the actions.
         generator: passed to the model (stochastic backends draw from it).
     """
-    if (actions is None) == (policy is None):
-        raise ValueError("rollout needs exactly one of `actions` or `policy`")
     state = model.init_state(context, generator=generator)
-    if actions is not None:
-        state, frames = model.step(state, actions, generator=generator)
-        return ImaginedRollout(frames, actions.float())
-    if horizon is None or horizon < 1:
-        raise ValueError(f"a policy rollout needs horizon >= 1, got {horizon}")
-    frame, frames, applied, samples = context[:, -1], [], [], []
-    while sum(a.shape[1] for a in applied) < horizon:
-        sample = policy(frame)
-        chunk = sample.actions if isinstance(sample, ActionSample) else sample
-        chunk = chunk[:, : horizon - sum(a.shape[1] for a in applied)]
-        state, new = model.step(state, chunk, generator=generator)
-        frame = new[:, -1]
-        frames.append(new)
-        applied.append(chunk.float())
-        samples.append(sample)
-    return ImaginedRollout(torch.cat(frames, dim=1), torch.cat(applied, dim=1), tuple(samples))
+    _, frames = model.step(state, actions, generator=generator)
+    return ImaginedRollout(frames, actions.float())
 
 
 BACKENDS = {"embedded": "gymnast.world_model.embedded:EmbeddedWorldModel",

@@ -22,9 +22,10 @@ from tqdm import tqdm
 
 from gymnast.config import EnvConfig
 from gymnast.data.lerobot import EpisodeDataset
+from gymnast.envs.engine import ReplayActor, play_episode
 from gymnast.envs.gap import GAPS
 from gymnast.envs.metaworld import MetaWorldEnv
-from gymnast.world_model.base import WorldModel
+from gymnast.world_model.base import WorldModel, rollout
 from gymnast.world_model.metrics import psnr, to_unit_float
 
 
@@ -52,8 +53,7 @@ def random_sequences(count: int, horizon: int, hold: int, action_dim: int, rng: 
 
 def simulate(env: MetaWorldEnv, seed: int, actions: np.ndarray) -> np.ndarray:
     """(T, H, W, 3) frames the simulator renders for (T, A) actions from the scene of `seed`."""
-    env.reset(seed=seed)
-    return np.stack([env.step(a)[0]["image"] for a in actions])
+    return np.stack(play_episode(env, ReplayActor(actions), seed, record=("frames",)).frames[1:])
 
 
 def check_controllability(model: WorldModel, dataset: EpisodeDataset, heldout: list[int], config: ControllabilityConfig,
@@ -82,7 +82,7 @@ def check_controllability(model: WorldModel, dataset: EpisodeDataset, heldout: l
         real = torch.from_numpy(np.stack([simulate(env, info.seed, s) for s in sequences]))  # (S, T, H, W, 3)
         env.close()
         context = torch.from_numpy(start)[None, None].expand(len(sequences), 1, -1, -1, -1)
-        imagined = model.step(model.init_state(context), torch.from_numpy(sequences))[1]  # (S, T, H, W, 3)
+        imagined = rollout(model, context, actions=torch.from_numpy(sequences)).frames  # (S, T, H, W, 3)
         pred, target = to_unit_float(imagined), to_unit_float(real)
         # M[i, j]: imagined rollout i against real rollout j, mean PSNR over the T frames.
         matrices.append(torch.stack([psnr(pred, target[j : j + 1].expand_as(target)).mean(1) for j in range(len(target))], 1).numpy())

@@ -1,0 +1,32 @@
+"""`gymnast collect` through the rollout engine writes, byte for byte, the dataset it wrote before.
+
+collect_sha256_before_engine.json holds the SHA-256 of every file two collections wrote when
+collect still stepped its episodes by hand (commit af35195): scripted experts, noisy experts and
+failures in the real world, and experts in the mild simulator, all with one worker (with several,
+episodes are stored in completion order).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from pathlib import Path
+
+import pytest
+
+from gymnast.config import EnvConfig
+from gymnast.data.collect import CollectConfig, collect
+
+BEFORE = json.loads((Path(__file__).parent / "collect_sha256_before_engine.json").read_text())
+ENV = EnvConfig(image_size=32, horizon=30)
+
+
+@pytest.mark.slow
+def test_collect_writes_the_same_bytes_as_before_the_rollout_engine(tmp_path: Path):
+    collect(CollectConfig(tasks="reach-v3,drawer-open-v3", episodes_per_task=3, workers=1, env=ENV),
+            tmp_path / "data", progress=False)
+    collect(CollectConfig(tasks="push-v3", episodes_per_task=2, gap="mild", workers=1, env=ENV),
+            tmp_path / "data_mild", progress=False)
+    written = {str(path.relative_to(tmp_path)): hashlib.sha256(path.read_bytes()).hexdigest()
+               for path in sorted(tmp_path.rglob("*")) if path.is_file()}
+    assert written == BEFORE

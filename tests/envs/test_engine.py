@@ -1,0 +1,55 @@
+"""The rollout engine: what an episode records, replays, and one outcome for both drivers."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from gymnast.config import EnvConfig
+from gymnast.envs.engine import RECORDABLE, ReplayActor, ScriptedActor, play_episode, run_batch
+from gymnast.envs.experts import ScriptedExpert
+from gymnast.envs.metaworld import MetaWorldEnv
+from gymnast.envs.sim_vector import SimVectorEnv
+
+ENV = EnvConfig(image_size=32, horizon=20)
+
+
+@pytest.fixture(scope="module")
+def env():
+    env = MetaWorldEnv("reach-v3", ENV)
+    yield env
+    env.close()
+
+
+def test_an_episode_records_what_it_is_asked_for_start_first(env):
+    run = play_episode(env, ScriptedActor(ScriptedExpert("reach-v3")), seed=3, record=RECORDABLE)
+    assert run.done and run.steps == len(run.actions) <= ENV.horizon
+    assert len(run.frames) == len(run.states) == len(run.env_states) == run.steps + 1
+    assert len(run.rewards) == len(run.successes) == run.steps and run.success == any(run.successes)
+    bare = play_episode(env, ScriptedActor(ScriptedExpert("reach-v3")), seed=3)
+    assert bare.frames == bare.rewards == [] and np.array_equal(np.stack(bare.actions), np.stack(run.actions))
+
+
+def test_replayed_actions_reproduce_the_episode_and_running_out_is_an_error(env):
+    played = play_episode(env, ScriptedActor(ScriptedExpert("reach-v3")), seed=5, record=("frames",))
+    replayed = play_episode(env, ReplayActor(np.stack(played.actions)), seed=5, record=("frames",))
+    assert replayed.success == played.success and np.array_equal(np.stack(replayed.frames), np.stack(played.frames))
+    with pytest.raises(ValueError, match="replayed actions ran out"):
+        play_episode(env, ReplayActor(np.zeros((3, 4), np.float32)), seed=5)
+    with pytest.raises(ValueError, match="cannot record"):
+        play_episode(env, ReplayActor(np.zeros((3, 4), np.float32)), seed=5, record=("videos",))
+
+
+def test_a_vector_env_and_a_single_episode_reach_the_same_outcome_from_the_same_actions(env):
+    rng = np.random.default_rng(0)
+    plan = rng.uniform(-1, 1, (2, 4 * 5, 4)).astype(np.float32)  # (R, T, A), T = the horizon
+    chunks = iter(np.split(plan, 5, axis=1))
+    with SimVectorEnv(2, chunk_size=4, config=ENV) as vector:
+        results = list(run_batch(vector, lambda images, instructions: next(chunks),
+                                 {"tasks": ["reach-v3"] * 2, "seeds": [1, 2]}))
+    for i, seed in enumerate((1, 2)):
+        single = play_episode(env, ReplayActor(plan[i]), seed, record=("frames", "rewards"))
+        frames = np.concatenate([results[0].observation[i : i + 1]] + [r.frames[i] for r in results])
+        assert np.array_equal(frames[: single.steps + 1], np.stack(single.frames))
+        assert results[-1].success[i] == single.success
+        assert sum(r.executed[i] for r in results) == single.steps
