@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+
 import numpy as np
 import pytest
 
@@ -16,9 +18,8 @@ ENV = EnvConfig(image_size=32, horizon=20)
 
 @pytest.fixture(scope="module")
 def env():
-    env = MetaWorldEnv("reach-v3", ENV)
-    yield env
-    env.close()
+    with contextlib.closing(MetaWorldEnv("reach-v3", ENV)) as reach:
+        yield reach
 
 
 def test_an_episode_records_what_it_is_asked_for_start_first(env):
