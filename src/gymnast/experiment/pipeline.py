@@ -108,10 +108,11 @@ def _imagination(sft: Path, wm: Path, judge: Path, config: ExperimentConfig, out
     """The SFT policy's imagined rollouts, judged, against the same actions in the real world
     (`gymnast.experiment.imagination`): how far the arms that practise in imagination can trust it."""
     from gymnast.experiment.imagination import ImaginationConfig, imagination_brief, measure_imagination_runs
+    from gymnast.reward.spec import RewardSpec
 
     settings = ImaginationConfig(tasks=config.tasks, episodes=config.worldgym_episodes, horizon=config.rl.horizon,
                                  workers=config.workers, seed=config.seed)
-    report = measure_imagination_runs(sft, wm, f"judge:{judge}", settings, out / "imagination", progress)
+    report = measure_imagination_runs(sft, wm, RewardSpec.judge(judge), settings, out / "imagination", progress)
     return imagination_brief(report)
 
 
