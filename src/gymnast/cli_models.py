@@ -16,6 +16,7 @@ from gymnast.cli_settings import flags_of, resolve, saved_inputs
 from gymnast.config import CommaFloats
 from gymnast.experiment.worldgym import DEFAULT_NOISE
 from gymnast.envs.kinds import EnvName, env_kind
+from gymnast.reward.chat_server import ChatLimits
 from gymnast.reward.spec import RewardSpec
 from gymnast.rl.config import RL_PRESETS, RLConfig
 
@@ -168,19 +169,28 @@ def train_judge(
     print(f"judge: {out}")
 
 
-def serve_judge(judge: Path, port: int = 8000, host: str = "127.0.0.1") -> None:
+def serve_judge(
+    judge: Path,
+    port: int = 8000,
+    host: str = "127.0.0.1",
+    limits: Annotated[ChatLimits, tyro.conf.arg(name="")] = ChatLimits(),
+) -> None:
     """Serve the learned judge over the OpenAI chat-completions protocol (POST /v1/chat/completions).
+
+    A malformed request, one past the limits, or one that stalls past the read timeout gets a 4xx
+    JSON error in the OpenAI shape naming the field at fault; the server logs it and serves on.
 
     Args:
         judge: judge run (or checkpoint) directory, from `gymnast train-judge`.
         port: TCP port to listen on.
         host: address to bind (127.0.0.1: this machine only).
+        limits: the largest request body and `n`, and the read timeout.
     """
     import time
 
     from gymnast.reward.serve import judge_server
 
-    with judge_server(judge, host, port) as server:
+    with judge_server(judge, host, port, limits=limits) as server:
         print(f"judge: {judge} at {server.url} (model gymnast-judge); Ctrl-C stops", flush=True)
         try:
             while True:

@@ -4,15 +4,20 @@ It puts any `answer(text, frames) -> str` function behind `POST /v1/chat/complet
 VLM judge can be tested with the real `openai` client over real HTTP, and so that a local judge can
 be served to anything that speaks the protocol. `faults` injects the failures a real deployment
 shows (rate limits, server errors, slow or malformed answers), one per request, in order.
+
+Every request gets an answer: a malformed one (see `gymnast.reward.chat_request`), one past the
+`ChatLimits`, or one that stalls gets a 4xx JSON error in the OpenAI shape
+(``{"error": {"message", "type", "param", "code"}}``), is logged, and the server serves on.
 """
 
 from __future__ import annotations
 
-import base64
 import collections
-import io
+import dataclasses
 import json
 import logging
+import re
+import socket
 import threading
 import time
 import uuid
@@ -20,41 +25,97 @@ from collections.abc import Callable, Sequence
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 
 import numpy as np
-from PIL import Image
+
+from gymnast.reward.chat_request import InvalidRequest, parse_chat_request
 
 logger = logging.getLogger(__name__)
 
 Answer = Callable[[str, list[np.ndarray]], str]
 
-
-def decode_image(url: str) -> np.ndarray:
-    """(H, W, 3) uint8 pixels of a `data:image/...;base64,...` URL."""
-    header, _, payload = url.partition(",")
-    if not header.startswith("data:image/") or not header.endswith(";base64"):
-        raise ValueError(f"only base64 image data URLs are supported, got {url[:40]!r}")
-    return np.asarray(Image.open(io.BytesIO(base64.b64decode(payload))).convert("RGB"))
+# How long a kept-alive connection may wait for its next request. Longer than the keep-alive expiry
+# of common clients (httpx: 5 s), so that a client never reuses a connection the server is closing.
+IDLE_TIMEOUT_S = 60.0
+_MB = 1_000_000
+_BYTE_COUNT = re.compile(r"\s*[0-9]+\s*")  # a usable Content-Length value
 
 
-def read_messages(messages: list[dict]) -> tuple[str, list[np.ndarray]]:
-    """The text parts of all messages joined by newlines, and their images in order."""
-    texts, frames = [], []
-    for message in messages:
-        content = message.get("content")
-        parts = [{"type": "text", "text": content}] if isinstance(content, str) else content or []
-        for part in parts:
-            if part.get("type") == "text":
-                texts.append(part["text"])
-            elif part.get("type") == "image_url":
-                frames.append(decode_image(part["image_url"]["url"]))
-    return "\n".join(texts), frames
+@dataclasses.dataclass(frozen=True)
+class ChatLimits:
+    """What the chat server accepts; a request past a limit gets a 4xx JSON error that names it."""
+
+    max_body_mb: float = 16.0
+    """Largest request body, in MB (10^6 bytes); a longer one is answered 413 as soon as its
+    Content-Length shows it, and never stored."""
+    read_timeout_s: float = 5.0
+    """Seconds a request may take to arrive once it has begun (a stalled request, or a body shorter
+    than its Content-Length, is answered 408 when they are up)."""
+    max_choices: int = 16
+    """Largest `n` (answers per request)."""
+
+    def __post_init__(self) -> None:
+        if not (self.max_body_mb > 0 and self.read_timeout_s > 0 and self.max_choices >= 1):
+            raise ValueError(f"chat server limits must be positive, got {self}")
+
+    @property
+    def max_body_bytes(self) -> int:
+        return int(self.max_body_mb * _MB)
 
 
 class _Handler(BaseHTTPRequestHandler):
     server: _Server
     protocol_version = "HTTP/1.1"  # keep-alive, as the openai client expects
+    # What a request line that cannot be parsed is taken for: an HTTP/0.9 answer has no status line,
+    # and an HTTP/1.1 one tells the client what went wrong.
+    default_request_version = "HTTP/1.1"
 
     def log_message(self, format: str, *args: object) -> None:
         logger.debug("%s %s", self.address_string(), format % args)
+
+    def handle_one_request(self) -> None:
+        """http.server's loop step, with every way a request can fail answered in JSON (408 if it stalls)."""
+        # Idle time between requests on a kept-alive connection is not a stalled request: wait longer.
+        self.connection.settimeout(IDLE_TIMEOUT_S)
+        try:
+            started = self.rfile.peek(1)
+        except OSError:  # timed out idle, or the client hung up: no request, nothing to answer
+            started = b""
+        if not started:
+            self.close_connection = True
+            return
+        self.connection.settimeout(self.server.chat.limits.read_timeout_s)
+        self.command, self.requestline, self.request_version = "", "", ""  # what send_error reads if the line stalls
+        try:
+            self.raw_requestline = self.rfile.readline(65537)
+            if len(self.raw_requestline) > 65536:
+                return self.send_error(414, "the request line is longer than 64 KiB")
+            if not self.parse_request():
+                return  # parse_request has answered (through send_error)
+            method = getattr(self, f"do_{self.command}", None)
+            if method is None:
+                return self.send_error(405, f"method {self.command} is not supported; use GET or POST")
+            method()
+            self.wfile.flush()
+        except TimeoutError:
+            self._reject(InvalidRequest(
+                f"the request line and headers did not arrive within {self._timeout_text()}; send the whole request",
+                code="request_timeout", status=408), unread_body=True)
+        except ConnectionError:
+            logger.info("chat server: %s hung up mid-request", self.address_string())
+            self.close_connection = True
+
+    def handle_expect_100(self) -> bool:
+        # Invite the body only when it will be read, so that a client with a body past the limit
+        # gets the 413 before it sends anything.
+        length = self.headers.get("Content-Length", "")
+        if _BYTE_COUNT.fullmatch(length) and int(length) <= self.server.chat.limits.max_body_bytes:
+            return super().handle_expect_100()
+        return True
+
+    def send_error(self, code: int, message: str | None = None, explain: str | None = None) -> None:
+        """http.server's own rejections (bad request line or headers, unknown method) in the OpenAI shape."""
+        text = message or self.responses.get(code, ("error",))[0]
+        self._reject(InvalidRequest(f"{text}{f' ({explain})' if explain else ''}", code="bad_http", status=code),
+                     unread_body=True)
 
     def _send(self, status: int, body: bytes, headers: dict[str, str] | None = None) -> None:
         self.send_response(status)
@@ -68,24 +129,99 @@ class _Handler(BaseHTTPRequestHandler):
     def _json(self, status: int, payload: dict, headers: dict[str, str] | None = None) -> None:
         self._send(status, json.dumps(payload).encode(), headers)
 
-    def _error(self, status: int, message: str, kind: str, headers: dict[str, str] | None = None) -> None:
-        self._json(status, {"error": {"message": message, "type": kind, "code": status}}, headers)
+    def _error(self, status: int, message: str, kind: str, code: str | None = None, param: str | None = None,
+               headers: dict[str, str] | None = None) -> None:
+        logger.warning("chat server: %s %s %s -> %d %s", self.address_string(), self.command or "-",
+                       self.path if self.command else "-", status, message)
+        self._json(status, {"error": {"message": message, "type": kind, "param": param, "code": code}}, headers)
+
+    def _reject(self, error: InvalidRequest, unread_body: bool = False) -> None:
+        """Answer `error`; with `unread_body` the connection closes, after a lingering read of what the
+        client still sends: closing on unread bytes resets the connection, and the reset can destroy the
+        answer before the client reads it."""
+        kind = "not_found_error" if error.status == 404 else "invalid_request_error"
+        try:
+            self._error(error.status, error.message, kind, error.code, error.param,
+                        {"Connection": "close"} if unread_body else None)
+            self.wfile.flush()
+        except OSError:  # the client is gone, or stopped reading: nobody is left to answer
+            unread_body = True
+        if unread_body:
+            self.close_connection = True
+            self._discard_input()
+
+    def _discard_input(self) -> None:
+        """Read and drop what the client sends until it stops or the read timeout is spent."""
+        deadline = time.monotonic() + self.server.chat.limits.read_timeout_s
+        try:
+            self.connection.shutdown(socket.SHUT_WR)  # the answer is complete: the client may close now
+            while (left := deadline - time.monotonic()) > 0:
+                self.connection.settimeout(left)
+                if not self.connection.recv(1 << 16):
+                    break
+        except OSError:  # timed out or reset: either way the connection is done
+            pass
+
+    def _timeout_text(self) -> str:
+        return f"{self.server.chat.limits.read_timeout_s:g} s (the server's read timeout, --read-timeout-s)"
+
+    def _read_body(self) -> bytes:
+        """The request body, read within the read timeout.
+
+        Raises:
+            InvalidRequest: no usable Content-Length (411/400), a body past the limit (413, left
+                unread), or fewer bytes than declared within the read timeout (408).
+        """
+        limits = self.server.chat.limits
+        if self.headers.get("Transfer-Encoding"):
+            raise InvalidRequest("chunked request bodies are not supported; send the body with a Content-Length",
+                                 code="length_required", status=411)
+        declared = self.headers.get_all("Content-Length") or []
+        if not declared:
+            raise InvalidRequest("a Content-Length header is required", code="length_required", status=411)
+        if len(set(declared)) > 1 or not _BYTE_COUNT.fullmatch(declared[0]):
+            raise InvalidRequest(f"Content-Length must be one byte count, got {', '.join(map(repr, declared))}",
+                                 code="invalid_content_length")
+        length = int(declared[0])
+        if length > limits.max_body_bytes:
+            raise InvalidRequest(
+                f"the request body is {length / _MB:.1f} MB, over this server's limit of {limits.max_body_mb:g} MB "
+                "(--max-body-mb); send fewer or smaller images", code="body_too_large", status=413)
+        deadline, chunks, received = time.monotonic() + limits.read_timeout_s, [], 0
+        while received < length:
+            try:
+                self.connection.settimeout(max(deadline - time.monotonic(), 1e-3))
+                chunk = self.rfile.read1(length - received)
+            except TimeoutError:
+                chunk = b""
+            if not chunk:
+                raise InvalidRequest(
+                    f"the body ended after {received} of the {length} bytes its Content-Length declares (waited "
+                    f"{self._timeout_text()}); send the whole body, or a Content-Length that matches it",
+                    code="incomplete_body", status=408)
+            chunks.append(chunk)
+            received += len(chunk)
+        return b"".join(chunks)
 
     def do_GET(self) -> None:
         if self.path.rstrip("/") != "/v1/models":
-            return self._error(404, f"no route GET {self.path}", "not_found_error")
+            return self._reject(InvalidRequest(f"no route GET {self.path}; GET /v1/models lists the model",
+                                               code="not_found", status=404))
         model = {"id": self.server.chat.model, "object": "model", "created": 0, "owned_by": "gymnast"}
         self._json(200, {"object": "list", "data": [model]})
 
     def do_POST(self) -> None:
-        # Read the body first, whatever the path, so that the connection stays usable.
-        body = self.rfile.read(int(self.headers.get("Content-Length") or 0))
+        try:
+            body = self._read_body()  # read whatever the path, so that the connection stays usable
+        except InvalidRequest as error:
+            return self._reject(error, unread_body=True)
         if self.path.rstrip("/") != "/v1/chat/completions":
-            return self._error(404, f"no route POST {self.path}", "not_found_error")
+            return self._reject(InvalidRequest(f"no route POST {self.path}; POST /v1/chat/completions answers",
+                                               code="not_found", status=404))
         chat = self.server.chat
         fault = chat.next_fault()
         if fault == "429":
-            return self._error(429, "rate limited (injected fault)", "rate_limit_error", {"Retry-After": "0"})
+            return self._error(429, "rate limited (injected fault)", "rate_limit_error", headers={"Retry-After": "0"})
         if fault == "500":
             return self._error(500, "server error (injected fault)", "server_error")
         if fault == "invalid_json":
@@ -93,19 +229,23 @@ class _Handler(BaseHTTPRequestHandler):
         if fault.startswith("slow:"):
             time.sleep(float(fault.removeprefix("slow:")))
         try:
-            request = json.loads(body)
-            text, frames = read_messages(request["messages"])
-            n = int(request.get("n") or 1)
-        except (ValueError, KeyError, TypeError, AttributeError) as error:
-            return self._error(400, f"invalid request: {error}", "invalid_request_error")
-        contents = ["the robot looks nice" if fault == "garbage" else chat.answer(text, frames) for _ in range(n)]
+            request = parse_chat_request(body, chat.limits.max_choices)
+            contents = ["the robot looks nice" if fault == "garbage" else chat.answer(request.text, request.frames)
+                        for _ in range(request.choices)]
+        except InvalidRequest as error:
+            return self._reject(error)
+        except Exception as error:  # a bug in the answer function: say so, and keep serving
+            logger.exception("chat server: the answer function failed")
+            return self._error(500, f"the model failed on this request ({error!r}); see the server's log",
+                               "server_error")
+        text, frames = request.text, request.frames
         prompt_tokens = len(text) // 4 + 85 * len(frames)  # rough: ~4 characters a token, 85 a small image
         completion_tokens = sum(len(content) // 4 + 1 for content in contents)
         self._json(200, {
             "id": f"chatcmpl-{uuid.uuid4().hex}",
             "object": "chat.completion",
             "created": int(time.time()),
-            "model": request.get("model") or chat.model,
+            "model": request.model or chat.model,
             "choices": [{"index": i, "message": {"role": "assistant", "content": content}, "finish_reason": "stop"}
                         for i, content in enumerate(contents)],
             "usage": {"prompt_tokens": prompt_tokens, "completion_tokens": completion_tokens,
@@ -135,14 +275,15 @@ class ChatServer:
             "slow:SECONDS" (delay, then answer), "garbage" (a reply with no ANSWER line),
             "invalid_json" (a 200 whose body is not JSON).
         model: the model name that `GET /v1/models` lists.
+        limits: the largest body and `n`, and the read timeout.
 
     Attributes:
         requests_served: chat-completion requests received so far, faulted ones included.
     """
 
     def __init__(self, answer: Answer, host: str = "127.0.0.1", port: int = 0, faults: Sequence[str] = (),
-                 model: str = "gymnast-judge") -> None:
-        self.answer, self.host, self.model = answer, host, model
+                 model: str = "gymnast-judge", limits: ChatLimits = ChatLimits()) -> None:
+        self.answer, self.host, self.model, self.limits = answer, host, model, limits
         self.faults = collections.deque(faults)
         self.requests_served = 0
         self._lock = threading.Lock()
