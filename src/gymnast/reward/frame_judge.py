@@ -17,7 +17,6 @@ validation scenes that neither training nor the reported figures use.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import asdict
 
 import torch
 import torch.nn.functional as F
@@ -25,8 +24,7 @@ from torch import nn
 
 from gymnast.policy.text import EMBEDDING_DIM, InstructionEncoder
 from gymnast.policy.vision import to_float_image
-from gymnast.reward.base import RewardContext, RewardNeeds
-from gymnast.reward.judge import JudgeConfig, check_videos
+from gymnast.reward.judge import JudgeConfig, ThresholdJudge, check_videos
 
 FRAMES_PER_PASS = 512  # frames through the CNN at once: bounds memory on long batches of videos
 
@@ -45,12 +43,10 @@ def _pair_encoder(width: int) -> nn.Sequential:
     return nn.Sequential(*layers, nn.Flatten(), nn.LazyLinear(width), nn.GELU())
 
 
-class FrameJudge(nn.Module):
+class FrameJudge(ThresholdJudge, nn.Module):
     """`Reward` whose score is 1.0 when some frame after the first shows success (P >= threshold)."""
 
     backend = "frame-judge"
-    binary = True
-    needs = RewardNeeds()  # the video and the instructions only
 
     def __init__(self, config: JudgeConfig = JudgeConfig()) -> None:
         super().__init__()
@@ -90,19 +86,6 @@ class FrameJudge(nn.Module):
         """(B,) P(success) of each video: that of its most convincing frame."""
         return self.frame_probabilities(videos, instructions).max(dim=1).values
 
-    def metrics(self) -> dict[str, float]:
-        return {}  # counts nothing
-
-    def score(self, frames: torch.Tensor, instructions: Sequence[str], context: RewardContext | None = None) -> torch.Tensor:
-        """1.0 where some frame shows success (P >= the chosen threshold), else 0.0."""
-        return (self.probability(frames, instructions) >= self.config.threshold).float()
-
-    def spec(self) -> dict:
-        return {"backend": self.backend, **asdict(self.config)}
-
-    @classmethod
-    def from_spec(cls, spec: dict) -> FrameJudge:
-        return cls(JudgeConfig(**{k: v for k, v in spec.items() if k != "backend"}))
 
 
 def frame_loss(judge: FrameJudge, first: torch.Tensor, frames: torch.Tensor, text: torch.Tensor, labels: torch.Tensor):

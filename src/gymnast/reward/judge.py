@@ -50,12 +50,36 @@ class JudgeConfig:
     validation scenes)."""
 
 
-class LearnedJudge(nn.Module):
+class ThresholdJudge:
+    """What the learned judges share as a `Reward`: a 0/1 verdict from their P(success)
+    (`probability`) and the threshold in their settings, and a spec that rebuilds them."""
+
+    backend: str
+    config: JudgeConfig
+    binary = True
+    needs = RewardNeeds()  # the video and the instructions only
+
+    def probability(self, videos: torch.Tensor, instructions: Sequence[str]) -> torch.Tensor: ...
+
+    def metrics(self) -> dict[str, float]:
+        return {}  # counts nothing
+
+    def score(self, frames: torch.Tensor, instructions: Sequence[str], context: RewardContext | None = None) -> torch.Tensor:
+        """1.0 where the judge says success (P >= the threshold), else 0.0."""
+        return (self.probability(frames, instructions) >= self.config.threshold).float()
+
+    def spec(self) -> dict:
+        return {"backend": self.backend, **asdict(self.config)}
+
+    @classmethod
+    def from_spec(cls, spec: dict):
+        return cls(JudgeConfig(**{k: v for k, v in spec.items() if k != "backend"}))
+
+
+class LearnedJudge(ThresholdJudge, nn.Module):
     """`Reward` whose score is 1.0 when P(success) >= the threshold (see `probability` for the raw value)."""
 
     backend = "embedded-judge"
-    binary = True
-    needs = RewardNeeds()  # the video and the instructions only
 
     def __init__(self, config: JudgeConfig = JudgeConfig()) -> None:
         super().__init__()
@@ -79,21 +103,6 @@ class LearnedJudge(nn.Module):
         check_videos(videos, instructions)
         picked = videos[:, judged_frame_indices(videos.shape[1])]  # (B, F, H, W, 3)
         return torch.sigmoid(self(picked, self.encoder(instructions)))
-
-    def metrics(self) -> dict[str, float]:
-        return {}  # counts nothing
-
-    def score(self, frames: torch.Tensor, instructions: Sequence[str], context: RewardContext | None = None) -> torch.Tensor:
-        """1.0 where the judge says success (P >= the threshold), else 0.0."""
-        return (self.probability(frames, instructions) >= self.config.threshold).float()
-
-    def spec(self) -> dict:
-        return {"backend": self.backend, **asdict(self.config)}
-
-    @classmethod
-    def from_spec(cls, spec: dict) -> LearnedJudge:
-        return cls(JudgeConfig(**{k: v for k, v in spec.items() if k != "backend"}))
-
 
 def check_videos(videos: torch.Tensor, instructions: Sequence[str]) -> None:
     """Raises ValueError unless `videos` is (B, T, H, W, 3) uint8 with B instructions."""
