@@ -142,6 +142,7 @@ def train_judge(
     steps: int | None = None,
     kind: Literal["frames", "video"] | None = None,
     extra_data: tuple[Path, ...] = (),
+    init: Path | None = None,
 ) -> None:
     """Train the embedded success judge on real episodes (and their re-imaginings with --wm), choose
     its threshold on validation scenes, then report its TPR and FPR on held-out real and imagined videos.
@@ -156,13 +157,14 @@ def train_judge(
         steps: override the preset's optimizer steps.
         kind: frames (judge every frame; the default) or video (four frames of the whole video).
         extra_data: more datasets to train and measure on (e.g. a policy's recorded rollouts).
+        init: a judge run (or checkpoint) to fine-tune instead of starting from random weights.
     """
     from gymnast.reward.train_judge import JUDGE_PRESETS, saved_judge_config
     from gymnast.reward.train_judge import train_judge as train
 
     config, inputs = resolve(
         "train-judge", out, resume, JUDGE_PRESETS[preset], inputs={"data": data, "wm": wm}, required=("data",),
-        overrides={"steps": steps, "kind": kind, "extra_data": extra_data or None},
+        overrides={"steps": steps, "kind": kind, "extra_data": extra_data or None, "init": init},
         saved=lambda: (saved_judge_config(out), saved_inputs(out, "data", "wm")))
     report = train(inputs["data"], out, config, wm=inputs["wm"], resume=resume)
     print(json.dumps({k: v for k, v in report.items() if k.startswith(("real", "imagined"))}, indent=2))

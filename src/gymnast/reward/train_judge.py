@@ -74,6 +74,10 @@ class JudgeTrainConfig:
     """More datasets besides DATA (e.g. a policy's own recorded rollouts), with the same image
     size; each is split by the same scene hashes, and every part (train, validation, held-out)
     takes its share of each."""
+    init: Path | None = None
+    """Start from the weights of this judge run or checkpoint (fine-tuning, e.g. on a policy's newly
+    recorded rollouts) instead of a random initialisation; its kind and architecture must be this
+    run's. The optimizer, the schedule and the threshold start afresh."""
     checkpoint_every: int = 500
     """Steps between checkpoints."""
     log_every: int = 25
@@ -239,12 +243,12 @@ def train_judge(data: Path, out: Path, config: JudgeTrainConfig, wm: Path | None
         return [video for dataset, ids in zip(datasets, chosen) for video in load_videos(dataset, ids, wm, show)]
 
     train_videos = videos(train_ids, progress)
-    torch.manual_seed(config.seed)
-    judge = JUDGES[config.kind](config.judge)
+    judge = build_judge(config if not resume else dataclasses.replace(config, init=None))
     optimizer = torch.optim.AdamW(judge.parameters(), lr=config.lr, weight_decay=0.01)
     schedule = torch.optim.lr_scheduler.LambdaLR(optimizer, warmup_cosine(config.warmup_steps, config.steps))
     sampler = torch.Generator().manual_seed(config.seed)
-    settings = {**dataclasses.asdict(config), "extra_data": [str(path) for path in config.extra_data]}
+    settings = {**dataclasses.asdict(config), "extra_data": [str(path) for path in config.extra_data],
+                "init": None if config.init is None else str(config.init)}
     resolved = {"train": settings, "model": judge.spec(), "data": str(data), "wm": str(wm) if wm else None}
     start = resume_training(out, judge, optimizer, schedule, sampler) if resume else 0
     write_run_config(out, resolved)
@@ -281,6 +285,28 @@ def train_judge(data: Path, out: Path, config: JudgeTrainConfig, wm: Path | None
                "seconds": round(time.perf_counter() - started, 1)}
     write_json(out / "metrics.json", report)
     return report
+
+
+def build_judge(config: JudgeTrainConfig) -> LearnedJudge | FrameJudge:
+    """The judge training starts from: seeded by `config.seed`, with `config.init`'s weights when given.
+
+    Raises:
+        FileNotFoundError: `config.init` has no checkpoint.
+        ValueError: `config.init` is another kind of judge or has another architecture (the
+            threshold aside, which training chooses again).
+    """
+    torch.manual_seed(config.seed)
+    judge = JUDGES[config.kind](config.judge)
+    if config.init is None:
+        return judge
+    source = load_judge(config.init)
+    unthresholded = [dataclasses.replace(model.config, threshold=0.5) for model in (source, judge)]
+    if source.backend != judge.backend or unthresholded[0] != unthresholded[1]:
+        raise ValueError(f"--init {config.init}: a {source.backend} judge with {unthresholded[0]}, but this run trains "
+                         f"a {judge.backend} judge with {unthresholded[1]}")
+    judge.load_state_dict(source.state_dict())
+    logger.info("starting from the weights of %s", config.init)
+    return judge
 
 
 def choose_threshold(judge: Reward, videos: list[Video]) -> dict:
