@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import sys
 from pathlib import Path
@@ -204,6 +205,57 @@ def doctor() -> None:
         raise SystemExit(1)
 
 
+def dyna(
+    out: Path,
+    policy: Path | None = None,
+    wm: Path | None = None,
+    judge: Path | None = None,
+    data: Path | None = None,
+    preset: Preset = "full",
+    resume: bool = False,
+    rounds: int | None = None,
+    rollouts_per_task: int | None = None,
+    steps: int | None = None,
+    tasks: str | None = None,
+    workers: int | None = None,
+    real_rl: bool | None = None,
+) -> None:
+    """World-Gymnast's loop: RL in imagination, a few counted real rollouts of the new policy, the
+    world model and the judge fine-tuned on them, a real evaluation; repeated. Writes OUT/round_k/,
+    OUT/summary.json, OUT/dyna.md (table) and OUT/dyna.png (real success against real interactions),
+    beside RL in the real world with the same settings. Rerunning skips what finished.
+
+    Args:
+        out: run directory.
+        policy: the SFT (or RL) run to start from (required unless --resume).
+        wm: the world-model run imagined RL starts in; fine-tuned every round.
+        judge: the judge run that rewards imagined RL; fine-tuned every round.
+        data: dataset whose scenes imagined RL starts from (default: the one the policy was trained on).
+        preset: debug (seconds; tests), demo (minutes) or full.
+        resume: continue the run in OUT with the settings and inputs saved there.
+        rounds: rounds of the loop (default: the preset's).
+        rollouts_per_task: real episodes recorded per task and round (default: the preset's).
+        steps: RL steps in imagination per round (default: the preset's).
+        tasks: tasks trained and evaluated on (default: the preset's).
+        workers: simulator processes (default: the preset's).
+        real_rl: also run RL in the real world for comparison (default: the preset's, on).
+    """
+    from gymnast.experiment.dyna import DYNA_PRESETS, DynaInputs, run_dyna, saved_dyna_settings
+    from gymnast.experiment.dyna_report import dyna_table
+
+    def saved():
+        config, inputs = saved_dyna_settings(out)
+        return config, dataclasses.asdict(inputs)
+
+    config, inputs = resolve(
+        "dyna", out, resume, DYNA_PRESETS[preset], inputs={"policy": policy, "wm": wm, "judge": judge, "data": data},
+        overrides={"rounds": rounds, "rollouts_per_task": rollouts_per_task, "rl.steps": steps, "rl.tasks": tasks,
+                   "workers": workers, "real_rl": real_rl}, saved=saved, required=("policy", "wm", "judge"))
+    summary = run_dyna(config, DynaInputs(**inputs), out)
+    print(dyna_table(summary))
+    print(f"summary: {out / 'summary.json'}, plot: {out / summary['plot']}")
+
+
 COMMANDS = {
     "collect": collect,
     "inspect": inspect,
@@ -218,6 +270,7 @@ COMMANDS = {
     "eval-judge": eval_judge,
     "rl": rl,
     "experiment": experiment,
+    "dyna": dyna,
     "imagination": imagination,
     "worldgym": worldgym,
     "contact-sheet": contact_sheet,

@@ -1,0 +1,317 @@
+"""`gymnast dyna`: World-Gymnast's iterative loop of practice in imagination and a little reality.
+
+Each round k (1..rounds), from the policy, world model and judge that round k-1 left:
+
+1. RL in imagination: `rl.steps` GRPO steps in the world model, rewarded by the judge
+   (`gymnast.rl.train.train_rl`), from the original dataset's scenes.
+2. Real rollouts: `rollouts_per_task` episodes per task of the new policy in the real world
+   (`gymnast.eval.record.record_policy`), from data seeds only. These are the only real
+   interactions Dyna spends on training, and they are counted from the recorded dataset.
+3. Fine-tuning: the world model and the judge each continue from their last weights on their own
+   original data plus every round's recorded rollouts (``init`` and ``extra_data`` of
+   `train_world_model` and `train_judge`). The rollouts carry Meta-World's per-step success flags,
+   so the judge's false positives (failures it passed) become labelled negatives.
+4. Evaluation: `gymnast eval` in the real world on the evaluation seeds; these episodes measure
+   and are counted apart from the training interactions.
+
+Round 0 is the starting policy's evaluation. Every part of a round is a stage
+(`gymnast.experiment.stages.Stages`, records in OUT/round_k/stages/), so a rerun skips what
+finished, and the trainers under a part cut short continue from their last checkpoint.
+
+The comparison arm (``real_rl``) is RL in the real world with the same `RLConfig` for as many
+steps as all rounds together, evaluated at every round's boundary the same way.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from gymnast.config import EnvConfig
+from gymnast.experiment.stages import Stages
+from gymnast.rl.config import RL_PRESETS, RLConfig
+from gymnast.utils.atomic import write_json
+from gymnast.utils.settings import from_json, saved_settings
+
+logger = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class DynaConfig:
+    """Settings of the Dyna loop; `rl` holds the GRPO settings shared with the real-world arm."""
+
+    rounds: int = 4
+    """Rounds of imagined RL, real rollouts and fine-tuning."""
+    real_rl: bool = True
+    """Also run the comparison arm: RL in the real world, same settings, rounds x rl.steps steps."""
+    real_reward: str = "sim"
+    """Reward of the real-world arm (sim: Meta-World's success; sim-dense: its shaped reward)."""
+    rollouts_per_task: int = 8
+    """Real episodes of the current policy recorded per task and round (the training interactions)."""
+    rollout_temperature: float = 1.0
+    """Temperature of the recorded rollouts' action tokens: sampled, as in RL, so they hold the
+    failures the judge should learn to refuse as well as successes."""
+    first_rollout_seed: int = 0
+    """Data seed of every task's first recorded rollout. Every round records the same scenes, by
+    default the dataset's first ones, where imagined RL starts: their real outcome under the new
+    policy is what the world model and the judge got wrong there."""
+    wm_steps: int = 300
+    """Fine-tuning steps of the world model per round."""
+    judge_steps: int = 200
+    """Fine-tuning steps of the judge per round."""
+    eval_episodes: int = 20
+    """Real evaluation episodes per task after each round, from the evaluation seeds."""
+    workers: int = 2
+    """Simulator processes (recording, evaluation, real-world RL)."""
+    rl: RLConfig = field(default_factory=RLConfig)
+    """GRPO settings of every round's imagined RL and of the real-world arm."""
+
+    def __post_init__(self) -> None:
+        for name in ("rounds", "rollouts_per_task", "wm_steps", "judge_steps", "eval_episodes", "workers"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"DynaConfig.{name} must be at least 1, got {getattr(self, name)}")
+        if self.rollout_temperature < 0:
+            raise ValueError(f"DynaConfig.rollout_temperature must be >= 0, got {self.rollout_temperature}")
+        if self.real_reward not in ("sim", "sim-dense"):
+            raise ValueError(f"DynaConfig.real_reward must be sim or sim-dense, got {self.real_reward!r}")
+
+    @property
+    def real_rl_config(self) -> RLConfig:
+        """The real-world arm's settings: Dyna's, for all rounds' steps, evaluated at each round's end."""
+        return dataclasses.replace(self.rl, steps=self.rounds * self.rl.steps, eval_every=self.rl.steps,
+                                   eval_episodes=self.eval_episodes, watch_every=0, workers=self.workers)
+
+
+def _imagined_rl(**changes) -> RLConfig:
+    # The round's `gymnast eval` measures the policy in the real world; RL's own real evaluation
+    # would spend the same interactions again.
+    return dataclasses.replace(RL_PRESETS["full"], real_eval=False, eval_every=0, **changes)
+
+
+DYNA_PRESETS: dict[str, DynaConfig] = {
+    "debug": DynaConfig(rounds=2, rollouts_per_task=1, wm_steps=2, judge_steps=2, eval_episodes=1, workers=1,
+                        rl=dataclasses.replace(RL_PRESETS["debug"], real_eval=False, eval_every=0, watch_every=0,
+                                               tensorboard=False)),
+    "demo": DynaConfig(rounds=3, rollouts_per_task=4, wm_steps=100, judge_steps=100, eval_episodes=10,
+                       rl=_imagined_rl(steps=5, tasks="reach-v3", starts_per_step=8, lr=3e-5, watch_every=5)),
+    "full": DynaConfig(rounds=5, rl=_imagined_rl(steps=10, tasks="reach-v3,push-v3,pick-place-v3,peg-insert-side-v3",
+                                                starts_per_step=8, lr=3e-5)),
+}
+
+
+@dataclass(frozen=True)
+class DynaInputs:
+    """What the loop starts from: runs of the policy, world model and judge, and the dataset whose
+    scenes imagined RL starts from (None: the one the policy was trained on)."""
+
+    policy: Path
+    wm: Path
+    judge: Path
+    data: Path | None = None
+
+    def check(self) -> None:
+        """Raises FileNotFoundError or ValueError, naming the input, before anything runs."""
+        for name in ("policy", "wm", "judge"):
+            run = getattr(self, name)
+            if not (Path(run) / "config.json").is_file():
+                raise FileNotFoundError(f"--{name} {run}: no run there (no config.json); dyna fine-tunes a single "
+                                        f"{'world-model' if name == 'wm' else name} run")
+        for name in ("wm", "judge"):
+            if not saved_settings(getattr(self, name)).get("data"):
+                raise ValueError(f"--{name} {getattr(self, name)} does not say which dataset it was trained on")
+        if self.data is not None and not Path(self.data).is_dir():
+            raise FileNotFoundError(f"--data {self.data}: no such directory")
+
+    def to_json(self) -> dict:
+        return {name: None if value is None else str(value) for name, value in dataclasses.asdict(self).items()}
+
+
+def saved_dyna_settings(out: Path) -> tuple[DynaConfig, DynaInputs]:
+    """The settings and inputs a Dyna run in `out` was started with, for ``--resume``."""
+    saved = saved_settings(out)
+    return from_json(DynaConfig, saved["dyna"]), from_json(DynaInputs, saved["inputs"])
+
+
+def run_dyna(config: DynaConfig, inputs: DynaInputs, out: Path, progress: bool = True) -> dict:
+    """Runs (or continues) the Dyna loop in `out`; returns the summary (also OUT/summary.json).
+
+    Raises:
+        ValueError: `out` holds a Dyna run started with other settings or inputs.
+    """
+    from gymnast.experiment.dyna_report import write_report
+    from gymnast.utils.checkpoint import write_run_config
+
+    inputs.check()
+    resolved = {"dyna": dataclasses.asdict(config), "inputs": inputs.to_json()}
+    if (out / "config.json").exists() and saved_settings(out) != _json_round_trip(resolved):
+        raise ValueError(f"{out} holds a Dyna run with other settings or inputs; continue it with "
+                         f"`gymnast dyna --out {out} --resume`, or start a new run in another --out")
+    write_run_config(out, resolved)
+    began = time.perf_counter()
+    stages = Stages(out)
+    rounds = [stages.run("round_0_eval", lambda: _evaluate(inputs.policy, config, out / "round_0" / "eval.json"))]
+    policy, wm, judge, recorded = inputs.policy, inputs.wm, inputs.judge, []
+    for k in range(1, config.rounds + 1):
+        policy, wm, judge, row = run_round(k, config, inputs, policy, wm, judge, recorded, out, progress)
+        rounds.append(row)
+    real_rl = stages.run("real_rl", lambda: run_real_rl(config, inputs, out / "real_rl", progress),
+                         out / "real_rl") if config.real_rl else None
+    summary = summarise(config, rounds, real_rl)
+    summary["wall_s"] = time.perf_counter() - began
+    return write_report(summary, out)
+
+
+def run_round(k: int, config: DynaConfig, inputs: DynaInputs, policy: Path, wm: Path, judge: Path,
+              recorded: list[Path], out: Path, progress: bool) -> tuple[Path, Path, Path, dict]:
+    """One round in OUT/round_k/: the new policy, world model and judge, and the round's figures.
+    `recorded` (every round's rollout dataset so far) gains this round's."""
+    from gymnast.envs.kinds import IMAGINED
+    from gymnast.reward.spec import RewardSpec
+    from gymnast.rl.config import RLRun
+    from gymnast.rl.train import train_rl
+
+    here = out / f"round_{k}"
+    stages = Stages(here)
+    rl_run, rollouts, new_wm, new_judge = here / "rl", here / "rollouts", here / "world_model", here / "judge"
+    spec = RLRun(str(policy), IMAGINED, RewardSpec.judge(str(judge)), wm=str(wm), data=_str(inputs.data))
+    trained = stages.run("rl", lambda: _rl_record(train_rl(spec, rl_run, config.rl, resume=_started(rl_run),
+                                                           progress=progress)), rl_run)
+    collected = stages.run("rollouts", lambda: record_rollouts(rl_run, judge, config, rollouts, progress), rollouts)
+    recorded.append(rollouts)
+    stages.run("world_model", lambda: fine_tune_world_model(inputs.wm, wm, recorded, config, new_wm, progress), new_wm)
+    judged = stages.run("judge", lambda: fine_tune_judge(inputs.judge, judge, new_wm, recorded, config, new_judge,
+                                                         progress), new_judge)
+    evaluated = stages.run("eval", lambda: _evaluate(rl_run, config, here / "eval.json"))
+    row = {**evaluated, "round": k, "rl_steps": k * config.rl.steps, "rollouts": collected, "judge": judged,
+           "rl": trained}
+    return rl_run, new_wm, new_judge, row
+
+
+def record_rollouts(policy: Path, judge: Path, config: DynaConfig, out: Path, progress: bool) -> dict:
+    """Records the round's real rollouts; returns their count, success, real interactions (actions
+    taken, from the dataset itself) and how the judge that guided the round's RL scores them."""
+    from gymnast.data.collect import CollectConfig
+    from gymnast.data.lerobot import EpisodeDataset
+    from gymnast.eval.actors import load_run_policy
+    from gymnast.eval.record import record_policy
+    from gymnast.reward.train_judge import evaluate_judge, load_judge, load_videos
+
+    env = EnvConfig(image_size=load_run_policy(str(policy.resolve())).config.image_size, horizon=config.rl.horizon)
+    collect = CollectConfig(tasks=config.rl.tasks, episodes_per_task=config.rollouts_per_task, noise=(0.0,),
+                            first_seed=config.first_rollout_seed, workers=config.workers, env=env)
+    record_policy(policy, collect, out, temperature=config.rollout_temperature, progress=progress)
+    dataset = EpisodeDataset(out)
+    # Before fine-tuning: how often the judge passed a failure (the errors this round teaches it).
+    judge_report = evaluate_judge(load_judge(judge), load_videos(dataset, list(range(len(dataset))), None, False))
+    return {"episodes": len(dataset), "successes": sum(info.success for info in dataset.episodes),
+            "real_interactions": sum(dataset.lengths), "judge_before": judge_report}
+
+
+def fine_tune_world_model(original: Path, current: Path, recorded: list[Path], config: DynaConfig, out: Path,
+                          progress: bool) -> dict:
+    """The world model `current`, fine-tuned on `original`'s data plus every recorded rollout."""
+    from gymnast.world_model.train import saved_train_config, train_world_model
+
+    base = saved_train_config(original)
+    steps = config.wm_steps
+    settings = dataclasses.replace(
+        base, steps=steps, warmup_steps=min(base.warmup_steps, steps // 10), checkpoint_every=min(base.checkpoint_every, steps),
+        validate_every=steps, video_every=steps, log_every=min(base.log_every, steps), init=current,
+        extra_data=(*base.extra_data, *recorded))
+    checkpoint = train_world_model(Path(saved_settings(original)["data"]), out, settings, resume=_started(out),
+                                   progress=progress)
+    return {"checkpoint": str(checkpoint)}
+
+
+def fine_tune_judge(original: Path, current: Path, wm: Path, recorded: list[Path], config: DynaConfig, out: Path,
+                    progress: bool) -> dict:
+    """The judge `current`, fine-tuned on `original`'s data plus every recorded rollout (re-imagined
+    by the round's world model when the original judge learned from imagined video too)."""
+    from gymnast.reward.train_judge import saved_judge_config, train_judge
+
+    base, saved = saved_judge_config(original), saved_settings(original)
+    steps = config.judge_steps
+    settings = dataclasses.replace(
+        base, steps=steps, warmup_steps=min(base.warmup_steps, steps // 10), checkpoint_every=min(base.checkpoint_every, steps),
+        log_every=min(base.log_every, steps), init=current, extra_data=(*base.extra_data, *recorded))
+    return train_judge(Path(saved["data"]), out, settings, wm=wm if saved.get("wm") else None, resume=_started(out),
+                       progress=progress)
+
+
+def run_real_rl(config: DynaConfig, inputs: DynaInputs, out: Path, progress: bool) -> dict:
+    """The comparison arm: its real success and training interactions at every round's boundary."""
+    from gymnast.envs.kinds import REAL
+    from gymnast.reward.spec import RewardSpec
+    from gymnast.rl.config import RLRun
+    from gymnast.rl.train import train_rl
+    from gymnast.utils.metrics import read_metrics
+
+    spec = RLRun(str(inputs.policy), REAL, RewardSpec.parse(config.real_reward), data=_str(inputs.data))
+    summary = train_rl(spec, out, config.real_rl_config, resume=_started(out), progress=progress)
+    spent = {row["step"]: row["rollout/real_interactions"] for row in read_metrics(out)
+             if "rollout/real_interactions" in row}
+    points = [{"step": point["step"], "success": point["eval/own_success"], "ci_low": point["eval/own_ci_low"],
+               "ci_high": point["eval/own_ci_high"], "episodes": point["eval/own_episodes"],
+               "real_interactions": spent.get(point["step"], 0)} for point in summary["curve"]]
+    return {"curve": points, "real_interactions": summary["real_interactions"],
+            "eval_real_interactions": summary["eval_real_interactions"], "wall_s": summary["wall_s"]}
+
+
+def summarise(config: DynaConfig, rounds: list[dict], real_rl: dict | None) -> dict:
+    """summary.json: per round the real success (95% CI) and the real interactions, cumulative,
+    by kind (training rollouts; evaluation and RL's checks, which measure rather than train)."""
+    rows, spent, measured = [], 0, 0
+    for row in rounds:
+        collected, trained = row.get("rollouts", {}), row.get("rl", {})
+        spent += collected.get("real_interactions", 0)
+        measured += row["eval_real_interactions"] + trained.get("check_real_interactions", 0)
+        judge_before = collected.get("judge_before", {})
+        rows.append({
+            "round": row.get("round", 0), "rl_steps": row.get("rl_steps", 0),
+            **{key: row[key] for key in ("success", "ci_low", "ci_high", "episodes", "per_task")},
+            "rollout_episodes": collected.get("episodes", 0), "rollout_successes": collected.get("successes", 0),
+            "judge_fpr_on_rollouts": judge_before.get("real_fpr_whole_failures"),
+            "judge_tpr_on_rollouts": judge_before.get("real_tpr"),
+            "judge_heldout_real_fpr": row.get("judge", {}).get("real_fpr"),
+            "real_interactions": spent, "measurement_real_interactions": measured})
+    return {"rounds": rows, "real_rl": real_rl, "dyna_real_interactions": spent,
+            "real_rl_real_interactions": None if real_rl is None else real_rl["real_interactions"],
+            "tasks": config.rl.tasks, "eval_episodes_per_task": config.eval_episodes,
+            "settings": dataclasses.asdict(config)}
+
+
+def _evaluate(policy: Path, config: DynaConfig, report: Path) -> dict:
+    """`gymnast eval` of `policy` in the real world; the record keeps its figures, not its episodes."""
+    from gymnast.eval.actors import load_run_policy
+    from gymnast.eval.evaluate import EvalConfig, evaluate
+
+    size = load_run_policy(str(Path(policy).resolve())).config.image_size
+    settings = EvalConfig(tasks=config.rl.tasks, episodes=config.eval_episodes, workers=config.workers,
+                          env=EnvConfig(image_size=size, horizon=config.rl.horizon))
+    result = evaluate(str(policy), settings, report, progress=False)
+    return {**{key: result[key] for key in ("success", "ci_low", "ci_high", "episodes", "successes", "per_task")},
+            "eval_real_interactions": result["real_interactions"]}
+
+
+def _rl_record(summary: dict) -> dict:
+    return {"imagined_start": summary.get("start_success"), "imagined_end": summary.get("end_success"),
+            "check_real_interactions": summary["eval_real_interactions"] + summary["watch_real_interactions"],
+            "wall_s": summary["wall_s"]}
+
+
+def _started(run: Path) -> bool:
+    """Whether a trainer was cut short in `run` after a checkpoint, and should resume from it."""
+    return (run / "checkpoints" / "last").exists()
+
+
+def _str(path: Path | None) -> str | None:
+    return None if path is None else str(path)
+
+
+def _json_round_trip(value: dict) -> dict:
+    import json
+
+    return json.loads(json.dumps(value))

@@ -1,0 +1,113 @@
+"""`gymnast dyna --preset debug`: two rounds end to end on tiny models, resumed without redoing a
+round, with the real interactions counted exactly."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import pytest
+
+from gymnast.cli import main
+from gymnast.config import EnvConfig
+from gymnast.data.collect import CollectConfig, collect
+from gymnast.data.lerobot import EpisodeDataset
+from gymnast.experiment.dyna import DYNA_PRESETS, DynaInputs, run_dyna
+from gymnast.reward.train_judge import JUDGE_PRESETS, build_judge, train_judge
+from gymnast.world_model.train import WM_PRESETS, train_world_model
+
+pytestmark = pytest.mark.slow
+
+POLICY = Path(__file__).resolve().parents[2] / "results" / "sft" / "policy"  # small, at 96 px
+
+
+@pytest.fixture(scope="module")
+def models(tmp_path_factory) -> dict[str, Path]:
+    """A tiny world model and judge trained on a few reach-v3 episodes at the policy's 96 px."""
+    root = tmp_path_factory.mktemp("dyna_models")
+    data = root / "data"
+    collect(CollectConfig(tasks="reach-v3", episodes_per_task=4, noise=(0.0,), failure_fraction=0.5, workers=1,
+                          env=EnvConfig(image_size=96, horizon=100)), data, progress=False)
+    train_world_model(data, root / "wm", WM_PRESETS["debug"], progress=False)
+    train_judge(data, root / "judge", dataclasses.replace(JUDGE_PRESETS["debug"], heldout_fraction=0.0,
+                                                          validation_fraction=0.0), progress=False)
+    return {"data": data, "wm": root / "wm", "judge": root / "judge"}
+
+
+@pytest.fixture(scope="module")
+def dyna_run(models, tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("dyna") / "run"
+    main(["dyna", "--preset", "debug", "--out", str(out), "--policy", str(POLICY), "--wm", str(models["wm"]),
+          "--judge", str(models["judge"]), "--data", str(models["data"])])
+    return out
+
+
+def test_two_rounds_report_real_success_against_counted_real_interactions(dyna_run: Path):
+    summary = json.loads((dyna_run / "summary.json").read_text())
+    assert [row["round"] for row in summary["rounds"]] == [0, 1, 2]
+    spent = 0
+    for row in summary["rounds"]:
+        assert 0 <= row["ci_low"] <= row["success"] <= row["ci_high"] <= 1 and row["episodes"] == 1
+        if row["round"]:
+            # Exactly the actions of the round's recorded episodes, and nothing measured on the side.
+            dataset = EpisodeDataset(dyna_run / f"round_{row['round']}" / "rollouts")
+            assert len(dataset) == row["rollout_episodes"] == 1
+            spent += sum(len(dataset.load(i).actions) for i in range(len(dataset)))
+        assert row["real_interactions"] == spent
+    assert summary["dyna_real_interactions"] == spent > 0
+    curve = summary["real_rl"]["curve"]
+    assert [point["step"] for point in curve] == [0, 2, 4]  # evaluated at every round's boundary
+    assert curve[-1]["real_interactions"] == summary["real_rl_real_interactions"] > 0
+    assert (dyna_run / "dyna.png").stat().st_size > 0
+    assert (dyna_run / "dyna.md").read_text().count("| Dyna |") == 3
+
+
+def test_each_round_fine_tunes_from_the_last_and_learns_from_every_recorded_rollout(dyna_run: Path, models):
+    second = json.loads((dyna_run / "round_2" / "world_model" / "config.json").read_text())["train"]
+    assert second["extra_data"] == [str(dyna_run / f"round_{k}" / "rollouts") for k in (1, 2)]
+    assert Path(second["init"]).parent.parent == dyna_run / "round_1" / "world_model"
+    judge = json.loads((dyna_run / "round_2" / "judge" / "config.json").read_text())
+    assert judge["train"]["init"] == str(dyna_run / "round_1" / "judge")
+    assert judge["train"]["extra_data"] == second["extra_data"]
+    rl = json.loads((dyna_run / "round_2" / "rl" / "config.json").read_text())["run"]
+    assert rl["policy"] == str(dyna_run / "round_1" / "rl") and rl["reward"] == f"judge:{dyna_run / 'round_1' / 'judge'}"
+
+
+def test_a_rerun_skips_finished_rounds_and_a_changed_setting_is_refused(dyna_run: Path, models, monkeypatch):
+    import gymnast.rl.train
+
+    def fail(*args, **kwargs):
+        raise AssertionError("a finished round ran again")
+
+    monkeypatch.setattr(gymnast.rl.train, "train_rl", fail)
+    before = json.loads((dyna_run / "summary.json").read_text())
+    main(["dyna", "--out", str(dyna_run), "--resume"])
+    after = json.loads((dyna_run / "summary.json").read_text())
+    assert after["rounds"] == before["rounds"] and after["real_rl"] == before["real_rl"]
+    inputs = DynaInputs(POLICY, models["wm"], models["judge"], models["data"])
+    with pytest.raises(ValueError, match="other settings"):
+        run_dyna(dataclasses.replace(DYNA_PRESETS["debug"], rounds=3), inputs, dyna_run, progress=False)
+
+
+def test_bad_inputs_are_refused_before_anything_runs(models, tmp_path):
+    with pytest.raises(SystemExit):
+        main(["dyna", "--preset", "debug", "--out", str(tmp_path / "a"), "--policy", str(POLICY),
+              "--wm", str(models["wm"])])  # no judge
+    with pytest.raises(FileNotFoundError, match="--wm .*no run there"):
+        run_dyna(DYNA_PRESETS["debug"], DynaInputs(POLICY, tmp_path, models["judge"]), tmp_path / "b")
+    with pytest.raises(ValueError, match="rounds must be at least 1"):
+        dataclasses.replace(DYNA_PRESETS["debug"], rounds=0)
+
+
+def test_a_judge_fine_tunes_from_the_given_judge_and_only_one_of_its_own_kind(models):
+    import torch
+
+    from gymnast.reward.train_judge import load_judge, saved_judge_config
+
+    source = load_judge(models["judge"])
+    config = dataclasses.replace(saved_judge_config(models["judge"]), init=models["judge"], seed=7)
+    for key, value in build_judge(config).state_dict().items():
+        torch.testing.assert_close(value, source.state_dict()[key], msg=key)
+    with pytest.raises(ValueError, match="--init .*frame"):
+        build_judge(dataclasses.replace(config, kind="video"))
