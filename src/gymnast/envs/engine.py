@@ -187,6 +187,8 @@ class ChunkResult:
         rewards: (R, k) float32 a simulator's per-action rewards (NaN where none was executed), or
             None (a world model has none).
         success: (R,) bool a simulator's success at any step so far, or None.
+        disagreement: (R, k) float32 a world-model ensemble's disagreement on each frame, or None
+            (simulators and single world models report none).
     """
 
     observation: np.ndarray
@@ -195,6 +197,7 @@ class ChunkResult:
     executed: np.ndarray
     rewards: np.ndarray | None
     success: np.ndarray | None
+    disagreement: np.ndarray | None = None
 
 
 def run_batch(env: VectorEnv, actor: BatchActor, options: dict[str, Any], seed: int = 0,
@@ -203,7 +206,9 @@ def run_batch(env: VectorEnv, actor: BatchActor, options: dict[str, Any], seed: 
 
     The env is anything with the contract of `SimVectorEnv` and `BatchedImaginedEnv`: a gymnasium
     `VectorEnv` without autoreset whose step takes one (R, K, A) chunk and reports its frames in
-    ``infos["frames"]`` (simulators also report ``executed``, ``rewards`` and ``success``).
+    ``infos["frames"]`` (simulators also report ``executed``, ``rewards`` and ``success``; an
+    imagined env ``disagreement`` when its world model is an ensemble, and ``executed`` when it
+    stops rollouts there).
 
     Args:
         env: the vector env.
@@ -227,7 +232,8 @@ def run_batch(env: VectorEnv, actor: BatchActor, options: dict[str, Any], seed: 
         executed = np.where(ended, 0, infos.get("executed", np.full(env.num_envs, frames.shape[1])))
         rewards = np.asarray(infos["rewards"], dtype=np.float32) if "rewards" in infos else None
         success = np.asarray(infos["success"], dtype=bool) if "success" in infos else None
+        disagreement = np.asarray(infos["disagreement"], dtype=np.float32) if "disagreement" in infos else None
         ended |= np.asarray(terminated) | np.asarray(truncated)
         calls += 1
-        yield ChunkResult(image, actions, frames, executed, rewards, success)
+        yield ChunkResult(image, actions, frames, executed, rewards, success, disagreement)
 

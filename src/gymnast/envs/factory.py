@@ -28,11 +28,14 @@ class EnvFactory:
         gap: the software simulator's gap (the real world has none).
         workers: simulator processes per env.
         world_model: what the imagined env imagines with.
+        stop_above: the imagined env stops a rollout before its first frame whose ensemble
+            disagreement exceeds this (`BatchedImaginedEnv`); None never stops.
     """
 
-    def __init__(self, kind: EnvKind, chunk_size: int, config: EnvConfig, gap: str, workers: int, world_model=None) -> None:
+    def __init__(self, kind: EnvKind, chunk_size: int, config: EnvConfig, gap: str, workers: int, world_model=None,
+                 stop_above: float | None = None) -> None:
         self.kind, self.chunk_size, self.config, self.gap, self.workers = kind, chunk_size, config, gap, workers
-        self.world_model = world_model
+        self.world_model, self.stop_above = world_model, stop_above
         self.batch = 1
         self._envs: dict[tuple[str, int], VectorEnv] = {}
 
@@ -45,7 +48,8 @@ class EnvFactory:
         key = (kind.name, num_envs)
         if key not in self._envs:
             if kind.imagined:
-                self._envs[key] = BatchedImaginedEnv(self.world_model, num_envs, self.chunk_size, self.config.horizon)
+                self._envs[key] = BatchedImaginedEnv(self.world_model, num_envs, self.chunk_size, self.config.horizon,
+                                                     self.stop_above)
             else:
                 gap = "none" if kind.real_interactions else self.gap
                 self._envs[key] = SimVectorEnv(num_envs, self.chunk_size, self.config, gap=gap, workers=self.workers)

@@ -18,6 +18,10 @@ where the frames come from. What differs, and why:
 - `BatchedImaginedEnv` steps B rollouts in one world-model call (where the speed is). It never
   autoresets: after truncation `step` raises until `reset`, because new rollouts need new real
   start frames, which only the RL loop has.
+- A world model that says how much to trust each frame (an ensemble's `disagreement`, (B, k) per
+  step) has it reported in ``info["disagreement"]``; a single model reports none. The batched env
+  can stop a rollout where it exceeds a threshold (``stop_above``): the rollout is truncated
+  before the first such frame, which it never shows (see `BatchedImaginedEnv`).
 
 Observations and infos are fresh arrays on every call (check_env insists, and users keep them).
 """
@@ -94,6 +98,7 @@ class _Imagination:
         self.device = next(parameters(), torch.zeros(0)).device if parameters else torch.device("cpu")
         self.steps, self.state = 0, None
         self.chunks: list[np.ndarray] = []  # (B, k, H, W, 3) each; the first is the start frame
+        self.disagreement: np.ndarray | None = None  # (B, k) of the last step, when the model says
 
     def start(self, context: np.ndarray, seed: int) -> np.ndarray:
         """Starts from (B, C, H, W, 3) real frames; returns the (B, H, W, 3) start frame."""
@@ -112,6 +117,8 @@ class _Imagination:
         tensor = torch.from_numpy(actions).to(self.device)
         self.state, frames = self.model.step(self.state, tensor, generator=self.generator)
         frames = frames.cpu().numpy()  # (B, k, H, W, 3) uint8
+        disagreement = getattr(self.state, "disagreement", None)  # only ensembles know how far to trust a frame
+        self.disagreement = None if disagreement is None else disagreement.float().cpu().numpy()  # (B, k)
         self.steps += actions.shape[1]
         self.chunks.append(frames)
         return frames, self.steps >= self.horizon
@@ -127,7 +134,8 @@ class ImaginedEnv(gym.Env):
 
     Observation: ``{"image": (H, W, 3) uint8}``. Action: (K, A) float32 in [-1, 1], one chunk.
     ``info``: ``instruction``, ``step`` (actions taken) and, after `step`, ``frames`` (k, H, W, 3)
-    uint8, every frame imagined in that step.
+    uint8, every frame imagined in that step, and ``disagreement`` (k,) float32 when the world model
+    reports one (an ensemble).
 
     Args:
         model: any `WorldModel`.
@@ -185,6 +193,8 @@ class ImaginedEnv(gym.Env):
         frames, truncated = self._sim.step(actions[None])
         frames = frames[0]  # (k, H, W, 3)
         info = {"instruction": self._instruction, "step": self._sim.steps, "frames": frames.copy()}
+        if self._sim.disagreement is not None:
+            info["disagreement"] = self._sim.disagreement[0].copy()
         return {"image": frames[-1].copy()}, 0.0, False, truncated, info
 
     def render(self) -> np.ndarray | None:
@@ -204,15 +214,26 @@ class BatchedImaginedEnv(VectorEnv):
 
     Observation: ``{"image": (B, H, W, 3) uint8}``. Action: (B, K, A) float32 in [-1, 1].
     ``infos``: ``instruction`` (B,) str, ``step`` (B,) int and, after `step`, ``frames``
-    (B, k, H, W, 3) uint8. All rollouts start, and are truncated, together.
-    The arguments are `ImaginedEnv`'s, with ``num_envs`` B instead of starts (reset takes them).
+    (B, k, H, W, 3) uint8 and, when the world model reports one, ``disagreement`` (B, k) float32.
+    All rollouts start together, and are truncated together at the horizon.
+    The arguments are `ImaginedEnv`'s, with ``num_envs`` B instead of starts (reset takes them), and:
+
+    Args:
+        stop_above: if given, a rollout ends (truncated) before its first frame whose disagreement
+            exceeds it: that frame is not trusted, so the rollout executes only the actions before
+            it and shows its last trusted frame from then on (in observations, ``frames`` and
+            `video`), as a finished simulator episode does. ``infos`` then also hold ``executed``
+            (B,) actions each rollout executed in the step and ``stopped`` (B,) bool so far.
+            Needs a world model that reports disagreement (RuntimeError at `step` otherwise).
     """
 
     metadata = {"autoreset_mode": AutoresetMode.DISABLED, "render_modes": [], "render_fps": CONTROL_FPS}
 
-    def __init__(self, model: WorldModel, num_envs: int, chunk_size: int = 5, horizon: int = 150) -> None:
+    def __init__(self, model: WorldModel, num_envs: int, chunk_size: int = 5, horizon: int = 150,
+                 stop_above: float | None = None) -> None:
         self._sim = _Imagination(model, chunk_size, horizon)
-        self.num_envs = num_envs
+        self.num_envs, self.stop_above = num_envs, stop_above
+        self._stopped = np.zeros(num_envs, dtype=bool)
         self.single_observation_space, self.single_action_space = _spaces(model, chunk_size)
         self.observation_space = batch_space(self.single_observation_space, num_envs)
         self.action_space = batch_space(self.single_action_space, num_envs)
@@ -231,6 +252,7 @@ class BatchedImaginedEnv(VectorEnv):
         if len(instructions) != self.num_envs or not all(isinstance(i, str) for i in instructions):
             raise ValueError(f"instructions must be {self.num_envs} strings, got {instructions!r}")
         self._instructions = np.array(instructions, dtype=object)
+        self._stopped = np.zeros(self.num_envs, dtype=bool)
         frames = self._sim.start(context, seed=int(self.np_random.integers(2**63)))
         return {"image": frames}, self._info()
 
@@ -238,9 +260,34 @@ class BatchedImaginedEnv(VectorEnv):
         """Imagines one chunk per rollout; rewards 0 and terminations False (a judge scores videos)."""
         actions = _check_actions(actions, self.action_space.shape, "(num_envs, chunk_size, action_dim)")
         frames, truncated = self._sim.step(actions)
-        infos = {**self._info(), "frames": frames.copy()}
+        ended, extra = np.full(self.num_envs, truncated), {}
+        if self._sim.disagreement is not None:
+            extra["disagreement"] = self._sim.disagreement.copy()
+        if self.stop_above is not None:
+            frames, executed = self._stop(frames)
+            extra |= {"executed": executed, "stopped": self._stopped.copy()}
+            ended |= self._stopped
+        infos = {**self._info(), "frames": frames.copy(), **extra}
         zeros = np.zeros(self.num_envs)
-        return {"image": frames[:, -1].copy()}, zeros, zeros.astype(bool), np.full(self.num_envs, truncated), infos
+        return {"image": frames[:, -1].copy()}, zeros, zeros.astype(bool), ended, infos
+
+    def _stop(self, frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Stops rollouts before their first frame over `stop_above`; returns the step's (B, k, H, W, 3)
+        frames with a stopped rollout's last trusted frame repeating (the stored video too, so it
+        agrees), and (B,) actions executed."""
+        if self._sim.disagreement is None:
+            raise RuntimeError("stop_above needs a world model that reports disagreement (an ensemble)")
+        count = frames.shape[1]
+        over = self._sim.disagreement > self.stop_above  # (B, k)
+        trusted = np.where(over.any(axis=1), over.argmax(axis=1), count)  # (B,) frames before the first over
+        executed = np.where(self._stopped, 0, trusted)
+        before = self._sim.chunks[-2][:, -1]  # (B, H, W, 3) the last frame of the previous step
+        frames = frames.copy()  # the model's own frames may share memory with its state
+        for b in np.flatnonzero(executed < count):
+            frames[b, executed[b]:] = frames[b, executed[b] - 1] if executed[b] else before[b]
+        self._sim.chunks[-1] = frames
+        self._stopped |= executed < count
+        return frames, executed
 
     def video(self) -> np.ndarray:
         """(B, T + 1, H, W, 3) uint8: the real start frames, then every imagined frame so far."""

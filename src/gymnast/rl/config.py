@@ -40,7 +40,15 @@ class RLConfig:
     clip_high: float = 0.28
     """PPO ratio clip above 1 (clip-higher)."""
     kl_coef: float = 0.0
-    """Weight of the k3 KL to the starting policy (0: no reference model is kept)."""
+    """Weight of the k3 KL to the starting policy (0: no reference model is kept). In imagination it
+    is the third lever against exploiting the world model: it anchors the policy to the SFT policy
+    whose behaviour the world model was trained on."""
+    disagreement_stop: float = 0.0
+    """Imagined env with a world-model ensemble: end a rollout before its first frame whose
+    ensemble disagreement exceeds this; it is judged on its video up to there (0: never stop)."""
+    disagreement_penalty: float = 0.0
+    """Imagined env with a world-model ensemble: subtract this times the rollout's mean ensemble
+    disagreement from its reward before group normalisation, as MOPO does (0: no penalty)."""
     entropy_coef: float = 0.0
     """Weight of the entropy bonus."""
     normalize_std: bool = True
@@ -93,6 +101,9 @@ class RLConfig:
             raise ValueError(f"RLConfig.group_size must be at least 2 (advantages compare a group), got {self.group_size}")
         if self.temperature <= 0:
             raise ValueError(f"RLConfig.temperature must be positive, got {self.temperature}")
+        for name in ("kl_coef", "disagreement_stop", "disagreement_penalty"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"RLConfig.{name} must be at least 0, got {getattr(self, name)}")
         if not 0 <= self.keep_low <= self.keep_high <= 1:
             raise ValueError(f"need 0 <= keep_low <= keep_high <= 1, got {self.keep_low}, {self.keep_high}")
 

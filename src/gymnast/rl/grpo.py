@@ -29,6 +29,10 @@ Where this departs from them:
   tokens are categorical), unlike VLA-RFT, whose flow-matching head gets its log-prob from the
   Gaussian noise of its integration steps.
 - An optional k3 KL penalty to a frozen reference policy, off by default as in both papers.
+- An optional MOPO-style penalty on the world-model ensemble's disagreement, subtracted from each
+  rollout's reward before group normalisation (`penalise_disagreement`), off by default: neither
+  paper has one; MOPO (Yu et al., 2020) penalises each imagined step's reward by the ensemble's
+  uncertainty, and our reward is one per rollout, so the per-step penalties are averaged.
 
 With one gradient step per iteration old_logp equals logp at that step, so the ratio is 1 and the
 clip acts only once a batch is reused for several steps. Both log-probs of the ratio (and the
@@ -83,6 +87,29 @@ def group_advantages(rewards: Tensor, normalize_std: bool = True, eps: float = 1
     metrics = {"train/zero_variance_groups": (~signal).sum().item() / groups,
                "reward/nan_fraction": (~finite).sum().item() / (groups * rewards.shape[1])}
     return advantages, metrics
+
+
+def penalise_disagreement(rewards: Tensor, disagreement: Tensor, coef: float) -> Tensor:
+    """MOPO's pessimism for one reward per rollout: r - coef * the rollout's mean disagreement.
+
+    The mean over the frames a rollout showed, not the max: MOPO subtracts the uncertainty at every
+    step, whose sum over a rollout is its length times the mean; dividing by the length keeps the
+    penalty on the reward's scale whatever the rollout's length (a stopped rollout is shorter), and
+    the mean is steadier than one worst frame, which a single blurry frame decides.
+
+    Args:
+        rewards: (R,) one reward per rollout, NaN where unscored (stays NaN).
+        disagreement: (R, T) per imagined frame, NaN after the rollout's end.
+        coef: lambda, the penalty's weight.
+
+    Returns:
+        (R,) penalised rewards in at least float32; a rollout that showed no frame is not penalised.
+    """
+    if disagreement.ndim != 2 or disagreement.shape[0] != rewards.shape[0]:
+        raise ValueError(f"need rewards (R,) and disagreement (R, T), got {tuple(rewards.shape)}, {tuple(disagreement.shape)}")
+    shown = disagreement.isfinite()  # (R, T)
+    mean = torch.where(shown, disagreement, 0.0).sum(dim=1) / shown.sum(dim=1).clamp_min(1)  # (R,)
+    return _at_least_float32(rewards) - coef * mean
 
 
 def keep_groups(success: Tensor, low: float, high: float) -> Tensor:

@@ -52,6 +52,8 @@ class Rollouts:
         lengths: (R,) int64 actions each rollout executed.
         success: (R,) bool the simulator's verdict, or None (a world model has none).
         env_rewards: (R, T) float32 the simulator's per-action rewards (NaN after the end), or None.
+        disagreement: (R, T) float32 a world-model ensemble's disagreement on each imagined frame
+            (NaN after the end), or None (simulators and single world models report none).
     """
 
     starts: tuple[Start, ...]
@@ -64,6 +66,7 @@ class Rollouts:
     lengths: torch.Tensor
     success: torch.Tensor | None
     env_rewards: torch.Tensor | None
+    disagreement: torch.Tensor | None = None
 
     @property
     def instructions(self) -> list[str]:
@@ -73,7 +76,7 @@ class Rollouts:
         """The rollouts at `index` (R',) int64, in that order."""
         pick = index.tolist()
         optional = {name: None if getattr(self, name) is None else getattr(self, name)[index]
-                    for name in ("success", "env_rewards")}
+                    for name in ("success", "env_rewards", "disagreement")}
         return Rollouts(tuple(self.starts[i] for i in pick), self.observations[index], self.tokens[index],
                         self.logp[index], self.token_mask[index], self.frames[index], self.actions[index],
                         self.lengths[index], **optional)
@@ -114,7 +117,7 @@ def collect_rollouts(
             timer["policy_s"] = timer.get("policy_s", 0.0) + time.perf_counter() - began
         return samples[-1].actions.numpy()
 
-    seen, masks, frames, actions, rewards, success = [], [], [], [], [], None
+    seen, masks, frames, actions, rewards, disagreement, success = [], [], [], [], [], [], None
     for result in run_batch(env, act, start_options(starts), seed):
         image, new = torch.from_numpy(result.observation), torch.from_numpy(result.frames)  # new: (R, k, H, W, 3)
         if not frames:
@@ -126,6 +129,9 @@ def collect_rollouts(
         actions.append(torch.from_numpy(result.actions)[:, : new.shape[1]].float() * valid[:, : new.shape[1], None])
         if result.rewards is not None:
             rewards.append(torch.from_numpy(result.rewards))
+        if result.disagreement is not None:  # only where an action was executed: NaN after the end
+            trusted = valid[:, : new.shape[1]]
+            disagreement.append(torch.from_numpy(result.disagreement).masked_fill(~trusted, float("nan")))
         if result.success is not None:
             success = torch.from_numpy(result.success)
     tokens, logp = [sample.tokens for sample in samples], [sample.logp for sample in samples]
@@ -136,8 +142,9 @@ def collect_rollouts(
         masks.append(torch.zeros_like(masks[-1]))
         frames.append(frames[-1][:, -1:].expand(-1, chunk, -1, -1, -1))
         actions.append(torch.zeros(count, chunk, action_dim))
-        if rewards:
-            rewards.append(torch.full((count, chunk), float("nan")))
+        for padded in (rewards, disagreement):
+            if padded:
+                padded.append(torch.full((count, chunk), float("nan")))
     mask = torch.stack(masks, dim=1)  # (R, S, N)
     return Rollouts(
         starts=tuple(starts),
@@ -150,6 +157,7 @@ def collect_rollouts(
         lengths=mask[:, :, ::action_dim].sum(dim=(1, 2)),
         success=success,
         env_rewards=torch.cat(rewards, dim=1) if rewards else None,
+        disagreement=torch.cat(disagreement, dim=1) if disagreement else None,
     )
 
 

@@ -58,21 +58,30 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
     from gymnast.policy.vla import load_policy
     from gymnast.reward.select import make_reward
     from gymnast.world_model.base import load_world_model
+    from gymnast.world_model.ensemble import EnsembleWorldModel
 
     env = run_spec.env
     if env.imagined and run_spec.wm is None:
         raise ValueError(f"--env {env} practises in a world model: give it with --wm RUN")
     if config.fresh_scenes and env.imagined:
         raise ValueError(f"fresh scenes need a simulator: --env {env} starts only from the dataset's real frames")
+    levers = ["--" + name.replace("_", "-") for name in ("disagreement_stop", "disagreement_penalty")
+              if getattr(config, name) > 0]
+    if levers and not env.imagined:
+        raise ValueError(f"{levers[0]} acts on imagined rollouts; --env {env} imagines none")
     policy = load_policy(run_spec.policy)
     world_model = load_world_model(run_spec.wm) if run_spec.wm else None
+    if levers and not isinstance(world_model, EnsembleWorldModel):
+        raise ValueError(f"{levers[0]} needs a world-model ensemble to disagree (gymnast "
+                         f"make-ensemble); {run_spec.wm} is a single world model")
     reward = make_reward(run_spec.reward, world_model)
     check_fits(reward, str(run_spec.reward), env, demonstrations=not config.fresh_scenes)
     data = None if config.fresh_scenes else Path(run_spec.data or _policy_data(run_spec.policy))
     tasks = resolve_tasks(config.tasks)
     env_config = EnvConfig(image_size=policy.config.image_size, horizon=config.horizon)
     draw_starts = start_sampler(tasks, None if config.fresh_scenes else dataset_starts(data, tasks), env_config)
-    envs = EnvFactory(env, policy.chunk_size, env_config, config.gap, config.workers, world_model)
+    envs = EnvFactory(env, policy.chunk_size, env_config, config.gap, config.workers, world_model,
+                      stop_above=config.disagreement_stop or None)
     resolved = {"rl": dataclasses.asdict(config), "run": run_spec.to_json(), "model": policy.spec(),
                 "data": str(data) if data else None}
 
@@ -209,6 +218,8 @@ def rl_step(env: VectorEnv, policy, reward: Reward, draw_starts: Callable[[int, 
                        "reward/std": finite.std().item() if len(finite) > 1 else float("nan"),
                        "rollout/success": torch.nanmean(verdicts(rollouts, scores, reward)).item(),
                        "rollout/length": rollouts.lengths.float().mean().item()}
+            if rollouts.disagreement is not None:
+                values |= disagreement_metrics(rollouts, config)
         grouped = scores.view(groups, size)  # (B, G)
         if reward.binary:
             keep = grpo.keep_groups(grouped, config.keep_low, config.keep_high)
@@ -225,11 +236,37 @@ def rl_step(env: VectorEnv, policy, reward: Reward, draw_starts: Callable[[int, 
     batch, scores = (concat_rollouts(kept), torch.cat(kept_scores)) if kept else (None, None)
     updated = time.perf_counter()
     if batch is not None:
-        advantages, advantage_metrics = grpo.group_advantages(scores.view(-1, size), config.normalize_std)
+        rewards = scores  # the verdicts above (dynamic sampling, the watch) stay the reward's own
+        if config.disagreement_penalty > 0:
+            if batch.disagreement is None:
+                raise ValueError("disagreement_penalty needs rollouts from a world-model ensemble, which report disagreement")
+            rewards = grpo.penalise_disagreement(scores, batch.disagreement, config.disagreement_penalty)
+        advantages, advantage_metrics = grpo.group_advantages(rewards.view(-1, size), config.normalize_std)
         values |= advantage_metrics | update_policy(policy, optimizer, batch, advantages.reshape(-1), config, reference)
     schedule.step()
     values["time/update_s"] = time.perf_counter() - updated
     return batch, scores, values
+
+
+def disagreement_metrics(rollouts: Rollouts, config: RLConfig) -> dict[str, float]:
+    """How far the world-model ensemble's members disagreed on the frames the rollouts showed.
+
+    ``rollout/disagreement_mean`` over all shown frames, ``rollout/disagreement_max`` the mean over
+    rollouts of each one's worst frame, ``rollout/stopped`` the share of rollouts the
+    disagreement stop ended (an imagined rollout otherwise always reaches the horizon) and
+    ``rollout/disagreement_penalty`` the mean penalty subtracted from the rewards.
+    """
+    shown = rollouts.disagreement.isfinite()  # (R, T)
+    values = {"rollout/disagreement_mean": rollouts.disagreement[shown].mean().item() if shown.any() else float("nan")}
+    worst = torch.where(shown, rollouts.disagreement, float("-inf")).amax(dim=1)[shown.any(dim=1)]  # (R',)
+    values["rollout/disagreement_max"] = worst.mean().item() if len(worst) else float("nan")
+    if config.disagreement_stop > 0:
+        values["rollout/stopped"] = (rollouts.lengths < config.horizon).float().mean().item()
+    if config.disagreement_penalty > 0:
+        zeros = torch.zeros(len(rollouts.starts))
+        penalty = -grpo.penalise_disagreement(zeros, rollouts.disagreement, config.disagreement_penalty)
+        values["rollout/disagreement_penalty"] = penalty.mean().item()
+    return values
 
 
 def update_policy(policy, optimizer: torch.optim.Optimizer, batch: Rollouts, advantages: torch.Tensor,
