@@ -25,6 +25,7 @@ steps as all rounds together, evaluated at every round's boundary the same way.
 from __future__ import annotations
 
 import dataclasses
+import json
 import logging
 import time
 from dataclasses import dataclass, field
@@ -33,7 +34,6 @@ from pathlib import Path
 from gymnast.config import EnvConfig
 from gymnast.experiment.stages import Stages
 from gymnast.rl.config import RL_PRESETS, RLConfig
-from gymnast.utils.atomic import write_json
 from gymnast.utils.settings import from_json, saved_settings
 
 logger = logging.getLogger(__name__)
@@ -95,8 +95,9 @@ DYNA_PRESETS: dict[str, DynaConfig] = {
     "debug": DynaConfig(rounds=2, rollouts_per_task=1, wm_steps=2, judge_steps=2, eval_episodes=1, workers=1,
                         rl=dataclasses.replace(RL_PRESETS["debug"], real_eval=False, eval_every=0, watch_every=0,
                                                tensorboard=False)),
-    "demo": DynaConfig(rounds=3, rollouts_per_task=4, wm_steps=100, judge_steps=100, eval_episodes=10,
-                       rl=_imagined_rl(steps=5, tasks="reach-v3", starts_per_step=8, lr=3e-5, watch_every=5)),
+    # Minutes on 2 cores: one refill-free round of 32 rollouts per step.
+    "demo": DynaConfig(rounds=3, rollouts_per_task=8, wm_steps=100, judge_steps=100, eval_episodes=10,
+                       rl=_imagined_rl(steps=4, tasks="reach-v3", lr=3e-5, max_rounds=1, watch_every=4)),
     "full": DynaConfig(rounds=5, rl=_imagined_rl(steps=10, tasks="reach-v3,push-v3,pick-place-v3,peg-insert-side-v3",
                                                 starts_per_step=8, lr=3e-5)),
 }
@@ -146,7 +147,7 @@ def run_dyna(config: DynaConfig, inputs: DynaInputs, out: Path, progress: bool =
 
     inputs.check()
     resolved = {"dyna": dataclasses.asdict(config), "inputs": inputs.to_json()}
-    if (out / "config.json").exists() and saved_settings(out) != _json_round_trip(resolved):
+    if (out / "config.json").exists() and saved_settings(out) != json.loads(json.dumps(resolved)):
         raise ValueError(f"{out} holds a Dyna run with other settings or inputs; continue it with "
                          f"`gymnast dyna --out {out} --resume`, or start a new run in another --out")
     write_run_config(out, resolved)
@@ -157,6 +158,9 @@ def run_dyna(config: DynaConfig, inputs: DynaInputs, out: Path, progress: bool =
     for k in range(1, config.rounds + 1):
         policy, wm, judge, row = run_round(k, config, inputs, policy, wm, judge, recorded, out, progress)
         rounds.append(row)
+        logger.info("dyna round %d: real success %.1f%% [%.1f, %.1f]; its rollouts took %d real actions", k,
+                    100 * row["success"], 100 * row["ci_low"], 100 * row["ci_high"],
+                    row["rollouts"]["real_interactions"])
     real_rl = stages.run("real_rl", lambda: run_real_rl(config, inputs, out / "real_rl", progress),
                          out / "real_rl") if config.real_rl else None
     summary = summarise(config, rounds, real_rl)
@@ -309,9 +313,3 @@ def _started(run: Path) -> bool:
 
 def _str(path: Path | None) -> str | None:
     return None if path is None else str(path)
-
-
-def _json_round_trip(value: dict) -> dict:
-    import json
-
-    return json.loads(json.dumps(value))
