@@ -23,6 +23,7 @@ from __future__ import annotations
 import contextlib
 import itertools
 import multiprocessing
+import os
 import traceback
 from collections import Counter
 from collections.abc import Callable
@@ -40,6 +41,7 @@ from gymnast.envs.engine import EpisodeRun, play_chunk, start_episode
 from gymnast.envs.gap import get_gap
 from gymnast.envs.instructions import SPLITS
 from gymnast.envs.metaworld import ACTION_DIM, CONTROL_FPS, MetaWorldEnv
+from gymnast.envs.parallel import exit_with_parent
 from gymnast.envs.tasks import check_task
 
 
@@ -99,8 +101,9 @@ class _Episodes:
         self._envs.clear()
 
 
-def _work(conn: Connection, config: EnvConfig, gap: str, instruction_split: str) -> None:
+def _work(conn: Connection, config: EnvConfig, gap: str, instruction_split: str, parent: int) -> None:
     """A worker's loop: answers ``(method, args)`` with ``("ok", result)`` or ``("error", text)``."""
+    exit_with_parent(parent)
     episodes = _Episodes(config, gap, instruction_split)
     try:
         while True:
@@ -167,7 +170,8 @@ class SimVectorEnv(VectorEnv):
         context = multiprocessing.get_context("spawn")  # forking a process holding GL is unsafe
         for _ in self._slices:
             conn, child = context.Pipe()
-            process = context.Process(target=_work, args=(child, self.config, gap, instruction_split), daemon=True)
+            process = context.Process(target=_work, args=(child, self.config, gap, instruction_split, os.getpid()),
+                                      daemon=True)
             process.start()
             child.close()
             self._workers.append((process, conn))
