@@ -114,6 +114,26 @@ def test_a_policy_that_never_moves_never_succeeds_and_acts_once_per_chunk(tmp_pa
     assert "ZeroPolicy (in-process)" in report["policy"]
 
 
+def test_a_users_own_instruction_reaches_the_policy_in_every_episode(tmp_path: Path, capsys):
+    policy = ZeroPolicy(chunk_size=10)
+    sentence = "nudge the little red dot with the gripper"
+    config = EvalConfig(tasks="reach-v3", episodes=2, workers=1, videos_per_task=0, env=SHORT, instruction=sentence)
+    report = evaluate(policy, config, tmp_path / "own.json", progress=False)
+    assert [r["instruction"] for r in report["records"]] == [sentence] * 2
+    assert {text for _, _, texts in policy.calls for text in texts} == {sentence}
+    main(["eval", "--policy", "expert", "--tasks", "reach-v3", "--episodes", "1", "--workers", "1",
+          "--videos-per-task", "0", "--instruction", sentence, "--out", str(tmp_path / "cli.json")])
+    assert json.loads((tmp_path / "cli.json").read_text())["records"][0]["instruction"] == sentence
+    capsys.readouterr()
+
+
+def test_an_own_instruction_is_one_non_empty_sentence_for_one_task():
+    with pytest.raises(ValueError, match="one sentence for one task.*names 2"):
+        EvalConfig(tasks="reach-v3,push-v3", instruction="push it")
+    with pytest.raises(ValueError, match="instruction is empty"):
+        EvalConfig(tasks="reach-v3", instruction="  ")
+
+
 def test_a_saved_vla_run_is_loaded_once_per_process_and_evaluated(tmp_path: Path):
     torch.manual_seed(0)
     model = EmbeddedVLA(VLAConfig(width=32, layers=1, heads=2, chunk_size=8, image_size=32))

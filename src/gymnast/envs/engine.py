@@ -155,13 +155,15 @@ def play_chunk(run: EpisodeRun, chunk: np.ndarray) -> list[tuple[dict[str, np.nd
     return steps
 
 
-def play_episode(env: MetaWorldEnv, actor: Actor, seed: int, record: Collection[str] = ()) -> EpisodeRun:
-    """Plays one episode of `env` from the scene of `seed` to its end (success or horizon).
+def play_episode(env: MetaWorldEnv, actor: Actor, seed: int, record: Collection[str] = (),
+                 instruction: str | None = None) -> EpisodeRun:
+    """Plays one episode of `env` from the scene of `seed` to its end (success or horizon), with
+    `instruction` (a user's own wording) or the env's own.
 
     Raises:
         ValueError: the actor returned something other than a non-empty (K, A) chunk.
     """
-    run = start_episode(env, seed, record=record)
+    run = start_episode(env, seed, instruction, record=record)
     while not run.done:
         chunk = np.asarray(actor(env, run.obs))  # (K, A)
         if chunk.ndim != 2 or len(chunk) == 0:

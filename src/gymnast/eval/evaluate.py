@@ -66,6 +66,9 @@ class EvalConfig:
     """Evaluate in the real world (none) or a software simulator (mild, strong)."""
     instruction_split: str = "train"
     """Instruction paraphrases to give the policy: train or heldout."""
+    instruction: str | None = None
+    """Give the policy this sentence in every episode instead of the task's paraphrases (your own
+    wording of the task); one task only."""
     workers: int = 2
     """Processes that run episodes in parallel (one per core is best)."""
     videos_per_task: int = 1
@@ -90,6 +93,12 @@ class EvalConfig:
                 f"{self.env.image_size} (pick an even size or videos_per_task=0)"
             )
         # Fail here, in the calling process, rather than in every worker.
+        if self.instruction is not None:
+            if not self.instruction.strip():
+                raise ValueError("EvalConfig.instruction is empty; give a sentence or leave it out")
+            if len(resolve_tasks(self.tasks)) != 1:
+                raise ValueError(f"EvalConfig.instruction is one sentence for one task, but tasks={self.tasks!r} names "
+                                 f"{len(resolve_tasks(self.tasks))}; evaluate one task at a time")
         resolve_tasks(self.tasks)
         get_perturbation(self.perturb)
         get_gap(self.gap)
@@ -124,6 +133,7 @@ class EvalJob:
     perturb: str
     instruction_split: str
     video_path: str | None = None
+    instruction: str | None = None
 
 
 def plan_episodes(config: EvalConfig, policy: str, video_dir: Path) -> list[EvalJob]:
@@ -133,7 +143,7 @@ def plan_episodes(config: EvalConfig, policy: str, video_dir: Path) -> list[Eval
         for i, seed in enumerate(config.seeds):
             video = str(video_dir / f"{task}_{seed}.mp4") if i < config.videos_per_task else None
             jobs.append(EvalJob(task, seed, policy, config.env, config.gap, config.perturb,
-                                config.instruction_split, video))
+                                config.instruction_split, video, config.instruction))
     return jobs
 
 
@@ -156,7 +166,7 @@ def run_episode(job: EvalJob, policy: Policy | None = None) -> dict:
         actor = ScriptedActor(ScriptedExpert(job.task))
     else:
         actor = PolicyActor(load_run_policy(job.policy))
-    run = play_episode(env, actor, job.seed, record=("frames",) if job.video_path else ())
+    run = play_episode(env, actor, job.seed, record=("frames",) if job.video_path else (), instruction=job.instruction)
     if job.video_path:
         with atomic_path(job.video_path) as tmp:
             encode_video(tmp, np.stack(run.frames), fps=MetaWorldEnv.metadata["render_fps"], codec=BROWSER_CODEC)
