@@ -6,6 +6,7 @@ import io
 import json
 import re
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
@@ -14,7 +15,8 @@ import pytest
 from data_helpers import make_episode, smooth_frames
 from PIL import Image
 
-from gymnast.data.lerobot import EpisodeDataset, LeRobotWriter
+from gymnast.data.lerobot import DatasetError, EpisodeDataset, LeRobotWriter
+from gymnast.data.lerobot_format import EpisodeRef, match_frames_to_rows
 from gymnast.data.schema import EpisodeInfo
 from gymnast.utils.video import encode_video, psnr
 
@@ -171,3 +173,31 @@ def test_images_stored_in_the_rows_are_read_when_there_is_no_video(tmp_path):
     shutil.rmtree(tmp_path / "videos")
 
     np.testing.assert_array_equal(EpisodeDataset(tmp_path).load(0).frames, frames)  # PNG is lossless
+
+
+
+def test_a_video_one_frame_short_of_its_rows_reuses_its_last_frame_with_a_warning(tmp_path, caplog):
+    columns, frames = write_v21(tmp_path, lengths=(6,))[0]
+    video = tmp_path / "videos/chunk-000/observation.images.top/episode_000000.mp4"
+    encode_video(video, frames[:-1], FPS)
+    with caplog.at_level("WARNING"):
+        episode = EpisodeDataset(tmp_path).load(0)
+    assert "has 5 frames for 6 data rows" in caplog.text and str(video) in caplog.text
+    assert episode.frames.shape == (6, 32, 32, 3)  # one frame per row, the last row's its neighbour's
+    assert psnr(frames[:5], episode.frames[:5]).per_frame.min() >= 40.0
+    np.testing.assert_array_equal(episode.frames[5], episode.frames[4])
+    np.testing.assert_array_equal(episode.actions, columns["action"][:5])
+
+
+def test_a_video_one_frame_longer_than_its_rows_reads_the_rows_frames():
+    frames = smooth_frames(7, 32, seed=0)
+    ref = EpisodeRef(0, 6, TASK, Path("data.parquet"), None, Path("v.mp4"), (0.0, 0.6), {}, Path("meta.jsonl"))
+    np.testing.assert_array_equal(match_frames_to_rows(frames, 6, ref), frames[:6])
+
+
+def test_a_video_two_frames_short_is_an_error_naming_the_file(tmp_path):
+    written = write_v21(tmp_path, lengths=(6,))
+    video = tmp_path / "videos/chunk-000/observation.images.top/episode_000000.mp4"
+    encode_video(video, written[0][1][:-2], FPS)
+    with pytest.raises(DatasetError, match=re.escape(f"{video}: expected 6 frames")):
+        EpisodeDataset(tmp_path).load(0)

@@ -114,7 +114,9 @@ class EpisodeDataset:
             frames = decode_images(rows, self.image_key, ref.data_path)
         else:
             try:
-                frames = decode_video(ref.video_path, *ref.video_span)
+                # One frame of tolerance, as LeRobot's timestamp matching has; `assemble_episode`
+                # pairs the frames with the rows and warns.
+                frames = decode_video(ref.video_path, *ref.video_span, may_lack=1)
             except ValueError as e:
                 raise DatasetError(f"episode {ref.index}, field {self.image_key!r}: {e}") from e
         return assemble_episode(ref, rows, frames)

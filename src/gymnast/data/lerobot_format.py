@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import io
+import logging
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -22,6 +23,8 @@ import pyarrow.parquet as pq
 from PIL import Image
 
 from gymnast.data.schema import Episode, EpisodeInfo
+
+logger = logging.getLogger(__name__)
 
 GYMNAST_PREFIX = "gymnast/"
 KEY_COLUMN = "gymnast/key"
@@ -318,6 +321,27 @@ def decode_images(table: pa.Table, name: str, path: Path) -> np.ndarray:
     return np.stack(images)
 
 
+def match_frames_to_rows(frames: np.ndarray, n_rows: int, ref: EpisodeRef) -> np.ndarray:
+    """The L frames of an episode's L data rows, allowing a video one frame short or long.
+
+    Some recorders write one video frame fewer (or more) than data rows. LeRobot matches each row
+    to the video frame nearest its timestamp within a tolerance of one frame period; with frames
+    and rows both at the dataset's fps, that pairs every row with its own frame and the odd one at
+    the end with its neighbour: the last frame is repeated, or the extra one dropped, with a
+    warning. A larger mismatch is an error naming the file.
+    """
+    source = ref.video_path or ref.data_path
+    if abs(len(frames) - n_rows) > 1 or not len(frames):
+        raise DatasetError(f"{source}: episode {ref.index} has {len(frames)} frames for {n_rows} data rows "
+                           "(more than the one frame of tolerance)")
+    if len(frames) != n_rows:
+        logger.warning("%s: episode %d has %d frames for %d data rows; matched by timestamp within one frame "
+                       "(the last row %s)", source, ref.index, len(frames), n_rows,
+                       "reuses the last frame" if len(frames) < n_rows else "drops the extra frame")
+        frames = np.concatenate([frames, frames[-1:]]) if len(frames) < n_rows else frames[:n_rows]
+    return frames
+
+
 def assemble_episode(ref: EpisodeRef, rows: pa.Table, frames: np.ndarray) -> Episode:
     """Build an `Episode` from its L data rows and L frames.
 
@@ -329,9 +353,7 @@ def assemble_episode(ref: EpisodeRef, rows: pa.Table, frames: np.ndarray) -> Epi
     path, n_rows = ref.data_path, rows.num_rows
     if n_rows < 2:
         raise DatasetError(f"{path}: episode {ref.index} has {n_rows} rows, at least 2 are needed")
-    if len(frames) != n_rows:
-        source = ref.video_path or path
-        raise DatasetError(f"{source}: episode {ref.index} has {len(frames)} frames for {n_rows} data rows")
+    frames = match_frames_to_rows(frames, n_rows, ref)
     n_steps, names = n_rows - 1, rows.column_names
     if "action_is_pad" in names:
         pad = column_vector(rows, "action_is_pad", path, bool)

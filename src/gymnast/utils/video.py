@@ -138,7 +138,7 @@ def encode_video(
         container.mux(stream.encode())  # flush the encoder's delayed frames
 
 
-def decode_video(path: str | Path, start: float = 0.0, end: float | None = None) -> np.ndarray:
+def decode_video(path: str | Path, start: float = 0.0, end: float | None = None, may_lack: int = 0) -> np.ndarray:
     """Decode the frames of an mp4 whose timestamps lie in ``[start, end)``.
 
     Timestamps are matched to the frame grid of the stream (half a frame of tolerance), so
@@ -148,6 +148,8 @@ def decode_video(path: str | Path, start: float = 0.0, end: float | None = None)
         path: the video file.
         start: time of the first frame wanted, in seconds.
         end: time just after the last frame wanted, in seconds; None decodes to the end.
+        may_lack: how many frames the range may lack at its end without it being an error (a
+            recorder that wrote a frame fewer than it logged); 0 is strict.
 
     Returns:
         (N, H, W, 3) uint8 RGB frames.
@@ -175,7 +177,7 @@ def decode_video(path: str | Path, start: float = 0.0, end: float | None = None)
     except av.error.FFmpegError as e:
         raise ValueError(f"{path}: cannot decode video: {e}") from e
     wanted = expected if stop is None else stop - first
-    if wanted is not None and len(frames) != wanted:
+    if wanted is not None and not wanted - may_lack <= len(frames) <= wanted:
         raise ValueError(
             f"{path}: expected {wanted} frames from t={start:.4f}s to "
             f"{'the end' if end is None else f't={end:.4f}s'}, decoded {len(frames)} (truncated file?)"
