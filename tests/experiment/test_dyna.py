@@ -56,6 +56,10 @@ def test_two_rounds_report_real_success_against_counted_real_interactions(dyna_r
             spent += sum(len(dataset.load(i).actions) for i in range(len(dataset)))
         assert row["real_interactions"] == spent
     assert summary["dyna_real_interactions"] == spent > 0
+    # Each round records new scenes, from data seeds no dataset of the test used.
+    scenes = [[info.seed for info in EpisodeDataset(dyna_run / f"round_{k}" / "rollouts").episodes] for k in (1, 2)]
+    first = DYNA_PRESETS["debug"].first_rollout_seed
+    assert scenes == [[first], [first + 1]]
     curve = summary["real_rl"]["curve"]
     assert [point["step"] for point in curve] == [0, 2, 4]  # evaluated at every round's boundary
     assert curve[-1]["real_interactions"] == summary["real_rl_real_interactions"] > 0

@@ -54,10 +54,11 @@ class DynaConfig:
     rollout_temperature: float = 1.0
     """Temperature of the recorded rollouts' action tokens: sampled, as in RL, so they hold the
     failures the judge should learn to refuse as well as successes."""
-    first_rollout_seed: int = 0
-    """Data seed of every task's first recorded rollout. Every round records the same scenes, by
-    default the dataset's first ones, where imagined RL starts: their real outcome under the new
-    policy is what the world model and the judge got wrong there."""
+    first_rollout_seed: int = 100_000
+    """Data seed of every task's first recorded rollout in round 1; each round records new scenes
+    after the last round's. Fresh scenes, not the dataset's: the SFT policy already solves most of
+    its own demonstrations' scenes (docs/rl.md), so rollouts there hold few of the failures the
+    judge must learn to refuse."""
     wm_steps: int = 300
     """Fine-tuning steps of the world model per round."""
     judge_steps: int = 200
@@ -183,7 +184,7 @@ def run_round(k: int, config: DynaConfig, inputs: DynaInputs, policy: Path, wm: 
     spec = RLRun(str(policy), IMAGINED, RewardSpec.judge(str(judge)), wm=str(wm), data=_str(inputs.data))
     trained = stages.run("rl", lambda: _rl_record(train_rl(spec, rl_run, config.rl, resume=_started(rl_run),
                                                            progress=progress)), rl_run)
-    collected = stages.run("rollouts", lambda: record_rollouts(rl_run, judge, config, rollouts, progress), rollouts)
+    collected = stages.run("rollouts", lambda: record_rollouts(k, rl_run, judge, config, rollouts, progress), rollouts)
     recorded.append(rollouts)
     stages.run("world_model", lambda: fine_tune_world_model(inputs.wm, wm, recorded, config, new_wm, progress), new_wm)
     judged = stages.run("judge", lambda: fine_tune_judge(inputs.judge, judge, new_wm, recorded, config, new_judge,
@@ -194,8 +195,8 @@ def run_round(k: int, config: DynaConfig, inputs: DynaInputs, policy: Path, wm: 
     return rl_run, new_wm, new_judge, row
 
 
-def record_rollouts(policy: Path, judge: Path, config: DynaConfig, out: Path, progress: bool) -> dict:
-    """Records the round's real rollouts; returns their count, success, real interactions (actions
+def record_rollouts(k: int, policy: Path, judge: Path, config: DynaConfig, out: Path, progress: bool) -> dict:
+    """Records round `k`'s real rollouts; returns their count, success, real interactions (actions
     taken, from the dataset itself) and how the judge that guided the round's RL scores them."""
     from gymnast.data.collect import CollectConfig
     from gymnast.data.lerobot import EpisodeDataset
@@ -205,7 +206,8 @@ def record_rollouts(policy: Path, judge: Path, config: DynaConfig, out: Path, pr
 
     env = EnvConfig(image_size=load_run_policy(str(policy.resolve())).config.image_size, horizon=config.rl.horizon)
     collect = CollectConfig(tasks=config.rl.tasks, episodes_per_task=config.rollouts_per_task, noise=(0.0,),
-                            first_seed=config.first_rollout_seed, workers=config.workers, env=env)
+                            first_seed=config.first_rollout_seed + (k - 1) * config.rollouts_per_task,
+                            workers=config.workers, env=env)
     record_policy(policy, collect, out, temperature=config.rollout_temperature, progress=progress)
     dataset = EpisodeDataset(out)
     # Before fine-tuning: how often the judge passed a failure (the errors this round teaches it).
