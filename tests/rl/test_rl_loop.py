@@ -13,6 +13,7 @@ import torch
 
 from gymnast.cli import main
 from gymnast.policy.vla import load_policy
+from gymnast.envs.starts import start_options
 from gymnast.rl.rollout import collect_rollouts, dataset_starts
 from gymnast.rl.config import RL_PRESETS
 from gymnast.rl.train import update_policy
@@ -71,6 +72,26 @@ def test_rl_in_a_simulator_can_start_from_fresh_scenes_without_a_dataset(tmp_pat
     saved = json.loads((out / "config.json").read_text())
     assert saved["rl"]["fresh_scenes"] and saved["data"] is None
     assert [m["step"] for m in read_metrics(out) if "reward/mean" in m] == [1, 2]
+
+
+def test_rl_practises_and_evaluates_on_a_users_own_instruction(rl_dataset, tmp_path, monkeypatch, capsys):
+    from gymnast.rl import rollout
+
+    seen = []
+
+    def recording(starts):
+        seen.extend(start.instruction for start in starts)
+        return start_options(starts)
+
+    monkeypatch.setattr(rollout, "start_options", recording)
+    sentence = "touch the red dot with the gripper"
+    main(_rl_args("sim", "sim-dense", tmp_path / "run", rl_dataset, "--instruction", sentence))
+    assert seen and set(seen) == {sentence}  # every training and evaluation rollout
+    assert json.loads((tmp_path / "run" / "config.json").read_text())["rl"]["instruction"] == sentence
+    with pytest.raises(SystemExit):
+        main(_rl_args("sim", "sim-dense", tmp_path / "two", rl_dataset, "--tasks", "reach-v3,push-v3",
+                      "--instruction", sentence))
+    assert "--instruction is one sentence for one task" in capsys.readouterr().err
 
 
 def test_rl_rejects_a_reward_the_env_cannot_give(rl_dataset, tmp_path, capsys):

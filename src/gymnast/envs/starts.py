@@ -11,7 +11,7 @@ dataset's scenes, or fresh ones in a simulator); evaluation takes them from the 
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import torch
@@ -69,16 +69,23 @@ def evaluation_starts(tasks: Sequence[str], episodes: int, config: EnvConfig) ->
     return scene_starts([(task, eval_seed(i)) for task in tasks for i in range(episodes)], config)
 
 
-def start_sampler(tasks: Sequence[str], dataset: list[Start] | None, config: EnvConfig
+def start_sampler(tasks: Sequence[str], dataset: list[Start] | None, config: EnvConfig, instruction: str | None = None
                   ) -> Callable[[int, torch.Generator], list[Start]]:
     """`draw(count, generator)`: start states drawn from the dataset's scenes, or (`dataset` None)
-    fresh scenes of `tasks` from random data seeds, rendered by a reset."""
+    fresh scenes of `tasks` from random data seeds, rendered by a reset; with `instruction` in
+    place of their own (see `own_instruction`)."""
 
     def draw(count: int, generator: torch.Generator) -> list[Start]:
         if dataset is not None:
-            return [dataset[i] for i in torch.randint(len(dataset), (count,), generator=generator).tolist()]
+            return own_instruction([dataset[i] for i in torch.randint(len(dataset), (count,), generator=generator).tolist()],
+                                   instruction)
         picks = torch.randint(len(tasks), (count,), generator=generator).tolist()
         seeds = torch.randint(DATA_SEEDS.start, DATA_SEEDS.stop, (count,), generator=generator).tolist()
-        return scene_starts([(tasks[t], seed) for t, seed in zip(picks, seeds)], config)
+        return own_instruction(scene_starts([(tasks[t], seed) for t, seed in zip(picks, seeds)], config), instruction)
 
     return draw
+
+
+def own_instruction(starts: Sequence[Start], instruction: str | None) -> list[Start]:
+    """The starts with a user's own `instruction` in place of theirs (None: as they are)."""
+    return list(starts) if instruction is None else [replace(start, instruction=instruction) for start in starts]

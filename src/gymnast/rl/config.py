@@ -26,6 +26,9 @@ class RLConfig:
     fresh_scenes: bool = False
     """Simulators only: start each group from a new scene (a random data seed) instead of the
     dataset's scenes; a simulator can set up any scene, a world model only continues real frames."""
+    instruction: str | None = None
+    """Give the policy (and the judge) this sentence in every rollout and evaluation instead of the
+    task's paraphrases: practise on your own wording. One task only."""
     starts_per_step: int = 4
     """Start states B per step (groups)."""
     group_size: int = 8
@@ -104,6 +107,8 @@ class RLConfig:
         for name in ("kl_coef", "disagreement_stop", "disagreement_penalty"):
             if getattr(self, name) < 0:
                 raise ValueError(f"RLConfig.{name} must be at least 0, got {getattr(self, name)}")
+        if self.instruction is not None and not self.instruction.strip():
+            raise ValueError("RLConfig.instruction is empty; give a sentence or leave it out")
         if not 0 <= self.keep_low <= self.keep_high <= 1:
             raise ValueError(f"need 0 <= keep_low <= keep_high <= 1, got {self.keep_low}, {self.keep_high}")
 

@@ -37,7 +37,7 @@ from tqdm import tqdm
 from gymnast.config import EnvConfig
 from gymnast.envs.factory import EnvFactory
 from gymnast.envs.kinds import REAL
-from gymnast.envs.starts import Start, evaluation_starts, start_sampler
+from gymnast.envs.starts import Start, evaluation_starts, own_instruction, start_sampler
 from gymnast.envs.tasks import resolve_tasks
 from gymnast.reward.base import Reward, check_fits
 from gymnast.rl import grpo
@@ -78,8 +78,12 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
     check_fits(reward, str(run_spec.reward), env, demonstrations=not config.fresh_scenes)
     data = None if config.fresh_scenes else Path(run_spec.data or _policy_data(run_spec.policy))
     tasks = resolve_tasks(config.tasks)
+    if config.instruction is not None and len(tasks) != 1:
+        raise ValueError(f"--instruction is one sentence for one task, but --tasks {config.tasks} names {len(tasks)}; "
+                         "practise one task at a time")
     env_config = EnvConfig(image_size=policy.config.image_size, horizon=config.horizon)
-    draw_starts = start_sampler(tasks, None if config.fresh_scenes else dataset_starts(data, tasks), env_config)
+    draw_starts = start_sampler(tasks, None if config.fresh_scenes else dataset_starts(data, tasks), env_config,
+                                config.instruction)
     envs = EnvFactory(env, policy.chunk_size, env_config, config.gap, config.workers, world_model,
                       stop_above=config.disagreement_stop or None)
     resolved = {"rl": dataclasses.asdict(config), "run": run_spec.to_json(), "model": policy.spec(),
@@ -104,7 +108,7 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
     write_run_config(out, resolved)
     metrics = MetricsLog(out, resume_step=start_step if resume else None)
     board = _tensorboard(out, start_step) if config.tensorboard else None
-    eval_starts = evaluation_starts(tasks, config.eval_episodes, env_config)
+    eval_starts = own_instruction(evaluation_starts(tasks, config.eval_episodes, env_config), config.instruction)
 
     def log(step: int, values: dict[str, float]) -> None:
         values = {key: value for key, value in values.items() if np.isfinite(value)}  # NaN: nothing to report
