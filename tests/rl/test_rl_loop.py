@@ -94,6 +94,22 @@ def test_rl_practises_and_evaluates_on_a_users_own_instruction(rl_dataset, tmp_p
     assert "--instruction is one sentence for one task" in capsys.readouterr().err
 
 
+def test_without_tasks_a_preset_trains_on_the_tasks_the_data_has(tmp_path):
+    from gymnast.config import EnvConfig
+    from gymnast.data.collect import CollectConfig, collect
+    from gymnast.rl.rollout import tasks_with_starts
+
+    data = tmp_path / "drawers"  # no reach-v3, the debug preset's task
+    collect(CollectConfig(tasks="drawer-close-v3", episodes_per_task=1, noise=(0.0,), failure_fraction=0.0, workers=1,
+                          env=EnvConfig(image_size=96, horizon=100)), data, progress=False)
+    main(["rl", "--policy", str(POLICY), "--env", "sim", "--reward", "sim-dense", "--out", str(tmp_path / "run"),
+          "--data", str(data), "--preset", "debug"])
+    assert json.loads((tmp_path / "run" / "config.json").read_text())["rl"]["tasks"] == "drawer-close-v3"
+    # The preset's own tasks where the data has them; otherwise as many of the data's.
+    assert tasks_with_starts(data, ("drawer-close-v3", "reach-v3")) == ("drawer-close-v3",)
+    assert tasks_with_starts(data, ("reach-v3", "push-v3")) == ("drawer-close-v3",)
+
+
 def test_rl_rejects_a_reward_the_env_cannot_give(rl_dataset, tmp_path, capsys):
     with pytest.raises(SystemExit):
         main(_rl_args("imagined", "sim", tmp_path / "run", rl_dataset))

@@ -22,7 +22,9 @@ class RLConfig:
     steps: int = 100
     """RL steps (one policy update each)."""
     tasks: str = "mt10"
-    """Tasks whose start states are trained on (task names or sets, comma-separated)."""
+    """Tasks whose start states are trained on (task names or sets, comma-separated). Left out of
+    `gymnast rl`'s command line: the preset's tasks that the dataset has start states for, or else
+    as many of the dataset's own."""
     fresh_scenes: bool = False
     """Simulators only: start each group from a new scene (a random data seed) instead of the
     dataset's scenes; a simulator can set up any scene, a world model only continues real frames."""

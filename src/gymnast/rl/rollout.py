@@ -202,6 +202,20 @@ def concat_rollouts(parts: list[Rollouts]) -> Rollouts:
     return Rollouts(starts=tuple(start for part in parts for start in part.starts), **tensors)
 
 
+def tasks_with_starts(data: Path, wanted: Sequence[str]) -> tuple[str, ...]:
+    """The tasks a run should train on when none were named: those of `wanted` (a preset's) that
+    the dataset has start states for; if it has none of them, as many of its own (in order).
+
+    Raises:
+        ValueError: the dataset has no start state of any task.
+    """
+    dataset = EpisodeDataset(data)
+    have = sorted({info.task for info in dataset.episodes if info.behaviour in EXPERTS and info.success})
+    if not have:
+        raise ValueError(f"{data} has no successful expert episode of any task to start from")
+    return tuple(task for task in wanted if task in have) or tuple(have[: len(wanted)])
+
+
 def dataset_starts(data: Path, tasks: Sequence[str] | None = None) -> list[Start]:
     """One start per (task, seed) scene of a dataset: its first frame, instruction and reference.
 

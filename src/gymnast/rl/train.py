@@ -76,7 +76,7 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
                          f"make-ensemble); {run_spec.wm} is a single world model")
     reward = make_reward(run_spec.reward, world_model)
     check_fits(reward, str(run_spec.reward), env, demonstrations=not config.fresh_scenes)
-    data = None if config.fresh_scenes else Path(run_spec.data or _policy_data(run_spec.policy))
+    data = None if config.fresh_scenes else Path(run_spec.data or policy_dataset(run_spec.policy))
     tasks = resolve_tasks(config.tasks)
     if config.instruction is not None and len(tasks) != 1:
         raise ValueError(f"--instruction is one sentence for one task, but --tasks {config.tasks} names {len(tasks)}; "
@@ -342,8 +342,12 @@ def write_summary(out: Path, run_spec: RLRun, config: RLConfig, state: dict) -> 
     return summary
 
 
-def _policy_data(policy_run: str) -> str:
-    """The dataset the policy was trained on (recorded in its config.json)."""
+def policy_dataset(policy_run: str | Path) -> str:
+    """The dataset the policy was trained on (recorded in its config.json).
+
+    Raises:
+        ValueError: the run does not say.
+    """
     checkpoint = resolve_checkpoint(Path(policy_run))
     for path in (Path(policy_run) / "config.json", checkpoint / "config.json"):
         if path.exists() and "data" in (saved := json.loads(path.read_text())):
