@@ -86,6 +86,7 @@ def sft(
     vision: Literal["cnn", "efficientnet"] | None = None,
     tasks: str | None = None,
     seed: int | None = None,
+    camera: str | None = None,
 ) -> None:
     """Behaviour-clone the embedded VLA on N successful expert demonstrations per task.
 
@@ -99,13 +100,14 @@ def sft(
         vision: override the image encoder.
         tasks: restrict to these tasks (comma-separated).
         seed: override the seed.
+        camera: the dataset camera to read (e.g. front); default: its first video (else image) feature.
     """
     from gymnast.policy.sft import SFT_PRESETS, saved_sft_config, train_sft
 
     config, inputs = resolve(
         "sft", out, resume, SFT_PRESETS[preset], inputs={"data": data}, required=("data",),
         overrides={"demos_per_task": demos_per_task, "steps": steps, "tasks": tasks, "seed": seed,
-                   "vla.vision": vision},
+                   "vla.vision": vision, "camera": camera},
         saved=lambda: (saved_sft_config(out), saved_inputs(out, "data")))
     checkpoint = train_sft(inputs["data"], out, config, resume=resume)
     print(f"policy: {checkpoint}")

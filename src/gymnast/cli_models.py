@@ -34,6 +34,7 @@ def train_wm(
     moving_weight: float | None = None,
     init: Path | None = None,
     extra_data: tuple[Path, ...] = (),
+    camera: str | None = None,
 ) -> None:
     """Train the embedded world model on every episode of a dataset (held-out scenes excepted).
 
@@ -47,13 +48,14 @@ def train_wm(
         moving_weight: extra loss weight of moving pixels, normalised (0 = plain mean squared error).
         init: fine-tune: start from the weights of this world-model run or checkpoint (same model spec).
         extra_data: more dataset directories to train on (same image size), split by the same scene hash.
+        camera: the dataset camera to read (e.g. front); default: its first video (else image) feature.
     """
     from gymnast.world_model.train import WM_PRESETS, saved_train_config, train_world_model
 
     config, inputs = resolve(
         "train-wm", out, resume, WM_PRESETS[preset], inputs={"data": data}, required=("data",),
         overrides={"steps": steps, "seed": seed, "moving_weight": moving_weight, "init": init,
-                   "extra_data": extra_data or None},
+                   "extra_data": extra_data or None, "camera": camera},
         saved=lambda: (saved_train_config(out), saved_inputs(out, "data")))
     checkpoint = train_world_model(inputs["data"], out, config, resume=resume)
     print(f"world model: {checkpoint}")
@@ -68,6 +70,7 @@ def eval_wm(
     gifs: int = 0,
     control_scenes: int = 10,
     reanchor_every: int | None = None,
+    camera: str | None = None,
 ) -> None:
     """Measure a world model's open-loop fidelity and controllability on held-out episodes.
 
@@ -80,12 +83,14 @@ def eval_wm(
         gifs: also write the first GIFS of them as small looping GIFs.
         control_scenes: held-out scenes for the controllability check (0 skips it).
         reanchor_every: override how often a long rollout re-encodes its own frames (0 = never).
+        camera: the dataset camera to read (e.g. front); default: its first video (else image) feature.
     """
     from gymnast.world_model.controllability import ControllabilityConfig
     from gymnast.world_model.evaluate import WorldModelEvalConfig, evaluate_world_model, format_report
 
     config = WorldModelEvalConfig(max_episodes=max_episodes, videos=videos, gifs=gifs,
-                                  controllability=ControllabilityConfig(scenes=control_scenes), reanchor_every=reanchor_every)
+                                  controllability=ControllabilityConfig(scenes=control_scenes), reanchor_every=reanchor_every,
+                                  camera=camera)
     report = evaluate_world_model(wm, data, out, config)
     print(format_report(report))
     print(f"report: {out}")
@@ -143,6 +148,7 @@ def train_judge(
     kind: Literal["frames", "video"] | None = None,
     extra_data: tuple[Path, ...] = (),
     init: Path | None = None,
+    camera: str | None = None,
 ) -> None:
     """Train the embedded success judge on real episodes (and their re-imaginings with --wm), choose
     its threshold on validation scenes, then report its TPR and FPR on held-out real and imagined videos.
@@ -158,13 +164,14 @@ def train_judge(
         kind: frames (judge every frame; the default) or video (four frames of the whole video).
         extra_data: more datasets to train and measure on (e.g. a policy's recorded rollouts).
         init: a judge run (or checkpoint) to fine-tune instead of starting from random weights.
+        camera: the dataset camera to read (e.g. front); default: its first video (else image) feature.
     """
     from gymnast.reward.train_judge import JUDGE_PRESETS, saved_judge_config
     from gymnast.reward.train_judge import train_judge as train
 
     config, inputs = resolve(
         "train-judge", out, resume, JUDGE_PRESETS[preset], inputs={"data": data, "wm": wm}, required=("data",),
-        overrides={"steps": steps, "kind": kind, "extra_data": extra_data or None, "init": init},
+        overrides={"steps": steps, "kind": kind, "extra_data": extra_data or None, "init": init, "camera": camera},
         saved=lambda: (saved_judge_config(out), saved_inputs(out, "data", "wm")))
     report = train(inputs["data"], out, config, wm=inputs["wm"], resume=resume)
     print(json.dumps({k: v for k, v in report.items() if k.startswith(("real", "imagined"))}, indent=2))

@@ -39,6 +39,8 @@ class SFTConfig:
 
     demos_per_task: int = 10
     """Successful expert episodes per task to imitate (few-shot keeps SFT imperfect)."""
+    camera: str | None = None
+    """Camera to read from the dataset (e.g. ``front``); default: its first video (else image) feature."""
     steps: int = 2400
     """Optimizer steps (about 8 minutes on 2 CPU cores at the default size)."""
     batch_size: int = 64
@@ -164,7 +166,7 @@ def train_sft(data: Path, out: Path, config: SFTConfig, resume: bool = False, pr
         extra: more samples (say, a policy's own successful rollouts), drawn 1:1 with the
             demonstrations: half of every batch comes from each.
     """
-    dataset = EpisodeDataset(data)
+    dataset = EpisodeDataset(data, config.camera)
     if init is not None:
         from gymnast.policy.vla import load_policy
 

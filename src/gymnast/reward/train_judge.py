@@ -74,6 +74,8 @@ class JudgeTrainConfig:
     """More datasets besides DATA (e.g. a policy's own recorded rollouts), with the same image
     size; each is split by the same scene hashes, and every part (train, validation, held-out)
     takes its share of each."""
+    camera: str | None = None
+    """Camera to read from the datasets (e.g. ``front``); default: their first video (else image) feature."""
     init: Path | None = None
     """Start from the weights of this judge run or checkpoint (fine-tuning, e.g. on a policy's newly
     recorded rollouts) instead of a random initialisation; its kind and architecture must be this
@@ -228,7 +230,7 @@ def train_judge(data: Path, out: Path, config: JudgeTrainConfig, wm: Path | None
     """Trains the judge in `out`, chooses its threshold on the validation scenes, writes
     `out/metrics.json` (held-out TPR/FPR) and returns it."""
     started = time.perf_counter()
-    datasets = [EpisodeDataset(path) for path in (data, *config.extra_data)]
+    datasets = [EpisodeDataset(path, config.camera) for path in (data, *config.extra_data)]
     for other in datasets[1:]:
         if other.image_shape != datasets[0].image_shape:
             raise ValueError(f"{other.root}: frames are {other.image_shape}, but {data} has {datasets[0].image_shape}")

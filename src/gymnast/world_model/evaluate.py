@@ -62,6 +62,8 @@ class WorldModelEvalConfig:
     """The check that different actions give the simulator's different futures."""
     reanchor_every: int | None = None
     """Override the embedded model's re-anchoring period (0 = never; None = as trained)."""
+    camera: str | None = None
+    """Camera to read from the dataset (e.g. ``front``); default: its first video (else image) feature."""
 
 
 def evaluate_world_model(wm: Path, data: Path, out: Path, config: WorldModelEvalConfig = WorldModelEvalConfig(),
@@ -71,7 +73,7 @@ def evaluate_world_model(wm: Path, data: Path, out: Path, config: WorldModelEval
     model = load_world_model(wm, **({} if config.reanchor_every is None else {"reanchor_every": config.reanchor_every}))
     fraction = heldout_fraction(Path(wm))
     ensemble = isinstance(model, EnsembleWorldModel)
-    dataset = EpisodeDataset(data)
+    dataset = EpisodeDataset(data, config.camera)
     if dataset.image_shape[:2] != (model.image_size, model.image_size):
         raise ValueError(f"{data}: frames are {dataset.image_shape}, the world model makes {model.image_size}x{model.image_size}")
     _, heldout = split_episodes(dataset.episodes, fraction)

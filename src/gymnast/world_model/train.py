@@ -82,6 +82,8 @@ class WorldModelTrainConfig:
     extra_data: tuple[Path, ...] = ()
     """More datasets to train on besides DATA, with the same image size. Each is split by the same
     scene hash, so a scene held out of one is held out of all of them."""
+    camera: str | None = None
+    """Camera to read from the dataset (e.g. ``front``); default: its first video (else image) feature."""
     model: EmbeddedWorldModelConfig = field(default_factory=EmbeddedWorldModelConfig)
     """Architecture."""
 
@@ -105,7 +107,7 @@ def train_world_model(data: Path, out: Path, config: WorldModelTrainConfig, resu
         ValueError: the datasets' image sizes differ, or `config.init`'s model spec differs from this run's.
         FileNotFoundError: `config.init` has no checkpoint.
     """
-    datasets = [EpisodeDataset(path) for path in (data, *config.extra_data)]
+    datasets = [EpisodeDataset(path, config.camera) for path in (data, *config.extra_data)]
     dataset = datasets[0]
     if dataset.image_shape[0] != config.model.image_size:
         config = dataclasses.replace(config, model=dataclasses.replace(config.model, image_size=dataset.image_shape[0]))
