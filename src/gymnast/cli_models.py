@@ -256,10 +256,8 @@ def rl(
             reward, world model and data saved there.
         config: the GRPO settings; each one left out keeps the preset's value.
     """
-    from gymnast.envs.tasks import resolve_tasks
     from gymnast.rl.config import RLRun, saved_rl_settings
-    from gymnast.rl.rollout import tasks_with_starts
-    from gymnast.rl.train import policy_dataset, train_rl
+    from gymnast.rl.train import train_rl, with_tasks_from_data
 
     def saved() -> tuple[RLConfig, dict]:
         run_spec, settings = saved_rl_settings(out)
@@ -272,10 +270,8 @@ def rl(
                 "reward": None if reward is None else RewardSpec.parse(reward), "wm": wm, "data": data},
         required=("policy", "env", "reward"))
     run_spec = RLRun(**{name: str(value) if isinstance(value, Path) else value for name, value in inputs.items()})
-    if not resume and config.tasks is None and not settings.fresh_scenes:
-        # The preset's tasks may not be in the data: train on those that are, or on the data's own.
-        data_path = Path(run_spec.data or policy_dataset(run_spec.policy))
-        settings = dataclasses.replace(settings, tasks=",".join(tasks_with_starts(data_path, resolve_tasks(settings.tasks))))
+    if not resume and config.tasks is None:  # the preset's tasks may not be in the data
+        settings = with_tasks_from_data(run_spec, settings)
     summary = train_rl(run_spec, out, settings, resume=resume)
     summary.pop("curve")
     print(json.dumps(summary, indent=2))

@@ -28,6 +28,7 @@ import torch
 from gymnasium.vector import VectorEnv
 
 from gymnast.data.lerobot import EpisodeDataset
+from gymnast.data.schema import EpisodeInfo
 from gymnast.envs.engine import run_batch
 from gymnast.envs.starts import Start, start_options
 from gymnast.policy.base import ActionSample, Policy
@@ -204,13 +205,12 @@ def concat_rollouts(parts: list[Rollouts]) -> Rollouts:
 
 def tasks_with_starts(data: Path, wanted: Sequence[str]) -> tuple[str, ...]:
     """The tasks a run should train on when none were named: those of `wanted` (a preset's) that
-    the dataset has start states for; if it has none of them, as many of its own (in order).
+    the dataset has start states for; if it has none of them, as many of its own (alphabetically).
 
     Raises:
         ValueError: the dataset has no start state of any task.
     """
-    dataset = EpisodeDataset(data)
-    have = sorted({info.task for info in dataset.episodes if info.behaviour in EXPERTS and info.success})
+    have = sorted({info.task for info in EpisodeDataset(data).episodes if _expert_solved(info)})
     if not have:
         raise ValueError(f"{data} has no successful expert episode of any task to start from")
     return tuple(task for task in wanted if task in have) or tuple(have[: len(wanted)])
@@ -229,7 +229,7 @@ def dataset_starts(data: Path, tasks: Sequence[str] | None = None) -> list[Start
     dataset = EpisodeDataset(data)
     best: dict[tuple[str, int], int] = {}
     for i, info in enumerate(dataset.episodes):
-        if info.behaviour not in EXPERTS or not info.success or (tasks and info.task not in tasks):
+        if not _expert_solved(info) or (tasks and info.task not in tasks):
             continue
         key = (info.task, info.seed)
         if key not in best or info.noise < dataset.episodes[best[key]].noise:
@@ -242,3 +242,8 @@ def dataset_starts(data: Path, tasks: Sequence[str] | None = None) -> list[Start
         starts.append(Start(episode.info.task, episode.info.seed, episode.info.instruction,
                             episode.frames[:1].copy(), episode.actions.astype(np.float32)))
     return starts
+
+
+def _expert_solved(info: EpisodeInfo) -> bool:
+    """A scripted expert (with or without noise) solved this episode's scene: a start with a reference."""
+    return info.behaviour in EXPERTS and info.success

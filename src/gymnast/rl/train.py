@@ -43,7 +43,8 @@ from gymnast.reward.base import Reward, check_fits
 from gymnast.rl import grpo
 from gymnast.rl.config import RLConfig, RLRun
 from gymnast.rl.evaluate import evaluate_in_env, verdicts, watch_hacking
-from gymnast.rl.rollout import Rollouts, collect_rollouts, concat_rollouts, dataset_starts, score_groups
+from gymnast.rl.rollout import (Rollouts, collect_rollouts, concat_rollouts, dataset_starts, score_groups,
+                                tasks_with_starts)
 from gymnast.rl.videos import write_group_video
 from gymnast.utils.atomic import write_json
 from gymnast.utils.checkpoint import load_checkpoint, resolve_checkpoint, save_checkpoint, write_run_config
@@ -340,6 +341,16 @@ def write_summary(out: Path, run_spec: RLRun, config: RLConfig, state: dict) -> 
     }
     write_json(out / "summary.json", summary)
     return summary
+
+
+def with_tasks_from_data(run_spec: RLRun, config: RLConfig) -> RLConfig:
+    """`config` for a run whose tasks were not named: the preset's tasks that its start-state
+    dataset has, or else as many of the dataset's own (`tasks_with_starts`); fresh scenes need no
+    dataset and keep the preset's."""
+    if config.fresh_scenes:
+        return config
+    data = Path(run_spec.data or policy_dataset(run_spec.policy))
+    return dataclasses.replace(config, tasks=",".join(tasks_with_starts(data, resolve_tasks(config.tasks))))
 
 
 def policy_dataset(policy_run: str | Path) -> str:
