@@ -221,12 +221,9 @@ def fine_tune_world_model(original: Path, current: Path, recorded: list[Path], c
     """The world model `current`, fine-tuned on `original`'s data plus every recorded rollout."""
     from gymnast.world_model.train import saved_train_config, train_world_model
 
-    base = saved_train_config(original)
     steps = config.wm_steps
-    settings = dataclasses.replace(
-        base, steps=steps, warmup_steps=min(base.warmup_steps, steps // 10), checkpoint_every=min(base.checkpoint_every, steps),
-        validate_every=steps, video_every=steps, log_every=min(base.log_every, steps), init=current,
-        extra_data=(*base.extra_data, *recorded))
+    settings = _fine_tuning(saved_train_config(original), steps, current, recorded, validate_every=steps,
+                            video_every=steps)
     checkpoint = train_world_model(Path(saved_settings(original)["data"]), out, settings, resume=_started(out),
                                    progress=progress)
     return {"checkpoint": str(checkpoint)}
@@ -238,13 +235,18 @@ def fine_tune_judge(original: Path, current: Path, wm: Path, recorded: list[Path
     by the round's world model when the original judge learned from imagined video too)."""
     from gymnast.reward.train_judge import saved_judge_config, train_judge
 
-    base, saved = saved_judge_config(original), saved_settings(original)
-    steps = config.judge_steps
-    settings = dataclasses.replace(
-        base, steps=steps, warmup_steps=min(base.warmup_steps, steps // 10), checkpoint_every=min(base.checkpoint_every, steps),
-        log_every=min(base.log_every, steps), init=current, extra_data=(*base.extra_data, *recorded))
+    saved = saved_settings(original)
+    settings = _fine_tuning(saved_judge_config(original), config.judge_steps, current, recorded)
     return train_judge(Path(saved["data"]), out, settings, wm=wm if saved.get("wm") else None, resume=_started(out),
                        progress=progress)
+
+
+def _fine_tuning(base, steps: int, current: Path, recorded: list[Path], **more):
+    """A trainer's saved settings `base` turned into a short fine-tuning of `current` on its data plus
+    the `recorded` rollouts: `steps` steps, the warm-up, checkpoints and logs scaled to fit them."""
+    return dataclasses.replace(
+        base, steps=steps, warmup_steps=min(base.warmup_steps, steps // 10), checkpoint_every=min(base.checkpoint_every, steps),
+        log_every=min(base.log_every, steps), init=current, extra_data=(*base.extra_data, *recorded), **more)
 
 
 def run_real_rl(config: DynaConfig, inputs: DynaInputs, out: Path, progress: bool) -> dict:
