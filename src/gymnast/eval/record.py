@@ -15,8 +15,9 @@ imagination from the scene's first frame, and the real world executes the plan
 its actions really do, at the cost of one real episode.
 
 Each episode's behaviour is ``policy-<tag>`` (`gymnast.data.schema.policy_behaviour`), the tag a
-digest of the checkpoint's weights and the temperature (and of the world model that planned), so the rollouts of several policies, or
-of one policy at several temperatures, can share a dataset and a rerun skips exactly its own.
+digest of the checkpoint's weights and the temperature (and of the world model that planned), so
+the rollouts of several policies, or of one policy at several temperatures, can share a dataset and
+a rerun skips exactly its own.
 """
 
 from __future__ import annotations
