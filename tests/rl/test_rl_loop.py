@@ -74,19 +74,54 @@ def test_rl_in_a_simulator_can_start_from_fresh_scenes_without_a_dataset(tmp_pat
     assert [m["step"] for m in read_metrics(out) if "reward/mean" in m] == [1, 2]
 
 
-def test_rl_practises_and_evaluates_on_a_users_own_instruction(rl_dataset, tmp_path, monkeypatch, capsys):
+def test_rl_in_imagination_can_start_from_fresh_scenes_whose_first_frames_are_counted(tmp_path):
+    out = tmp_path / "run"
+    main(["rl", "--policy", str(POLICY), "--env", "imagined", "--wm", str(WORLD_MODEL), "--reward", f"judge:{JUDGE}",
+          "--out", str(out), "--preset", "debug", "--fresh-scenes", "--watch-every", "0"])
+    summary = json.loads((out / "summary.json").read_text())
+    debug = RL_PRESETS["debug"]  # one round a step: each step renders the first frames of its start states
+    assert summary["reset_frames"] == debug.steps * debug.starts_per_step * debug.max_rounds
+    assert summary["real_interactions"] == 0  # a reset takes no action
+    assert [m["rollout/reset_frames"] for m in read_metrics(out) if "rollout/reset_frames" in m] == [2, 4]
+
+
+def _recorded_starts(monkeypatch):
     from gymnast.rl import rollout
 
     seen = []
 
     def recording(starts):
-        seen.extend(start.instruction for start in starts)
+        seen.extend(starts)
         return start_options(starts)
 
     monkeypatch.setattr(rollout, "start_options", recording)
+    return seen
+
+
+def test_test_time_practice_trains_and_evaluates_on_the_named_scene_only(tmp_path, monkeypatch):
+    seen = _recorded_starts(monkeypatch)
+    out = tmp_path / "run"
+    main(["rl", "--policy", str(POLICY), "--env", "imagined", "--wm", str(WORLD_MODEL), "--reward", f"judge:{JUDGE}",
+          "--out", str(out), "--preset", "debug", "--scenes", "push-v3:1000007", "--watch-every", "0"])
+    assert seen and {(start.task, start.seed) for start in seen} == {("push-v3", 1000007)}
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["eval_episodes"] == 1 and summary["reset_frames"] == 1
+    assert json.loads((out / "config.json").read_text())["rl"]["scenes"] == "push-v3:1000007"
+
+
+def test_scenes_that_are_not_task_and_seed_are_named(tmp_path, capsys):
+    for scenes, message in (("reach-v3", "is not task:seed"), ("rech-v3:5", "unknown task 'rech-v3'")):
+        with pytest.raises(SystemExit):
+            main(["rl", "--policy", str(POLICY), "--env", "sim", "--reward", "sim-dense", "--out", str(tmp_path / "run"),
+                  "--preset", "debug", "--scenes", scenes])
+        assert message in capsys.readouterr().err
+
+
+def test_rl_practises_and_evaluates_on_a_users_own_instruction(rl_dataset, tmp_path, monkeypatch, capsys):
+    starts = _recorded_starts(monkeypatch)
     sentence = "touch the red dot with the gripper"
     main(_rl_args("sim", "sim-dense", tmp_path / "run", rl_dataset, "--instruction", sentence))
-    assert seen and set(seen) == {sentence}  # every training and evaluation rollout
+    assert starts and {start.instruction for start in starts} == {sentence}  # every training and evaluation rollout
     assert json.loads((tmp_path / "run" / "config.json").read_text())["rl"]["instruction"] == sentence
     with pytest.raises(SystemExit):
         main(_rl_args("sim", "sim-dense", tmp_path / "two", rl_dataset, "--tasks", "reach-v3,push-v3",

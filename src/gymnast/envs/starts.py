@@ -10,7 +10,7 @@ dataset's scenes, or fresh ones in a simulator); evaluation takes them from the 
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -69,21 +69,31 @@ def evaluation_starts(tasks: Sequence[str], episodes: int, config: EnvConfig) ->
     return scene_starts([(task, eval_seed(i)) for task in tasks for i in range(episodes)], config)
 
 
-def start_sampler(tasks: Sequence[str], dataset: list[Start] | None, config: EnvConfig, instruction: str | None = None
-                  ) -> Callable[[int, torch.Generator], list[Start]]:
-    """`draw(count, generator)`: start states drawn from the dataset's scenes, or (`dataset` None)
-    fresh scenes of `tasks` from random data seeds, rendered by a reset; with `instruction` in
-    place of their own (see `own_instruction`)."""
+class StartSampler:
+    """`sampler(count, generator)`: start states drawn uniformly from a pool (a dataset's scenes, or
+    the scenes a run practises on), or (`pool` None) fresh scenes of `tasks` from random data
+    seeds; with `instruction` in place of their own (see `own_instruction`).
 
-    def draw(count: int, generator: torch.Generator) -> list[Start]:
-        if dataset is not None:
-            return own_instruction([dataset[i] for i in torch.randint(len(dataset), (count,), generator=generator).tolist()],
-                                   instruction)
-        picks = torch.randint(len(tasks), (count,), generator=generator).tolist()
+    A fresh scene's first frame is rendered by a reset of the real world: no action is taken, so it
+    costs no real interaction, but it is a look at the real world, and `rendered` counts them.
+    """
+
+    def __init__(self, tasks: Sequence[str], pool: Sequence[Start] | None, config: EnvConfig,
+                 instruction: str | None = None) -> None:
+        if pool is not None and not pool:
+            raise ValueError("no start states to draw from")
+        self.tasks, self.pool, self.config, self.instruction = list(tasks), pool, config, instruction
+        self.rendered = 0
+
+    def __call__(self, count: int, generator: torch.Generator) -> list[Start]:
+        if self.pool is not None:
+            picks = torch.randint(len(self.pool), (count,), generator=generator).tolist()
+            return own_instruction([self.pool[i] for i in picks], self.instruction)
+        picks = torch.randint(len(self.tasks), (count,), generator=generator).tolist()
         seeds = torch.randint(DATA_SEEDS.start, DATA_SEEDS.stop, (count,), generator=generator).tolist()
-        return own_instruction(scene_starts([(tasks[t], seed) for t, seed in zip(picks, seeds)], config), instruction)
-
-    return draw
+        self.rendered += count
+        return own_instruction(scene_starts([(self.tasks[t], seed) for t, seed in zip(picks, seeds)], self.config),
+                               self.instruction)
 
 
 def own_instruction(starts: Sequence[Start], instruction: str | None) -> list[Start]:

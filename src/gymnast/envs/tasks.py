@@ -64,3 +64,20 @@ def eval_seed(index: int) -> int:
     if not 0 <= index < len(EVAL_SEEDS):
         raise ValueError(f"evaluation seed index must be in [0, {len(EVAL_SEEDS)}), got {index}")
     return EVAL_SEEDS[index]
+
+
+def parse_scenes(text: str) -> tuple[tuple[str, int], ...]:
+    """Scenes named as ``task:seed``, comma-separated: ``"reach-v3:1000000,push-v3:1000001"``.
+
+    Raises:
+        ValueError: an entry is not ``task:seed`` with an integer seed, or its task is unknown.
+    """
+    scenes = []
+    for entry in (part.strip() for part in text.split(",") if part.strip()):
+        task, _, seed = entry.rpartition(":")
+        if not task or not seed.isdigit():
+            raise ValueError(f"scene {entry!r} is not task:seed (for example reach-v3:{EVAL_SEEDS.start})")
+        scenes.append((check_task(task), int(seed)))
+    if not scenes:
+        raise ValueError(f"no scenes given in {text!r}")
+    return tuple(scenes)

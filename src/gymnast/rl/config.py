@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from gymnast.envs.kinds import EnvKind, env_kind
+from gymnast.envs.tasks import parse_scenes
 from gymnast.reward.spec import RewardSpec
 from gymnast.utils.settings import saved_settings
 
@@ -26,8 +27,14 @@ class RLConfig:
     `gymnast rl`'s command line: the preset's tasks that the dataset has start states for, or else
     as many of the dataset's own."""
     fresh_scenes: bool = False
-    """Simulators only: start each group from a new scene (a random data seed) instead of the
-    dataset's scenes; a simulator can set up any scene, a world model only continues real frames."""
+    """Start each group from a new scene (a random data seed) instead of the dataset's scenes. A
+    simulator sets the scene up; a world model continues its first frame, rendered by a reset of
+    the real world: no action is taken, and such frames are counted apart (``reset_frames``)."""
+    scenes: str | None = None
+    """Test-time practice: train and evaluate on these scenes only, ``task:seed`` comma-separated
+    (say, the scene the policy is about to face: ``reach-v3:1000000``). Their first frames are
+    rendered by a reset (counted in ``reset_frames``); each is evaluated once, greedily. Replaces
+    --tasks."""
     instruction: str | None = None
     """Give the policy (and the judge) this sentence in every rollout and evaluation instead of the
     task's paraphrases: practise on your own wording. One task only."""
@@ -109,6 +116,11 @@ class RLConfig:
         for name in ("kl_coef", "disagreement_stop", "disagreement_penalty"):
             if getattr(self, name) < 0:
                 raise ValueError(f"RLConfig.{name} must be at least 0, got {getattr(self, name)}")
+        if self.scenes is not None:
+            if self.fresh_scenes:
+                raise ValueError("RLConfig: --scenes names the scenes to practise on; --fresh-scenes draws new ones; "
+                                 "give one of them")
+            parse_scenes(self.scenes)
         if self.instruction is not None and not self.instruction.strip():
             raise ValueError("RLConfig.instruction is empty; give a sentence or leave it out")
         if not 0 <= self.keep_low <= self.keep_high <= 1:

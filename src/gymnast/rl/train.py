@@ -37,8 +37,8 @@ from tqdm import tqdm
 from gymnast.config import EnvConfig
 from gymnast.envs.factory import EnvFactory
 from gymnast.envs.kinds import REAL
-from gymnast.envs.starts import Start, evaluation_starts, own_instruction, start_sampler
-from gymnast.envs.tasks import resolve_tasks
+from gymnast.envs.starts import Start, StartSampler, evaluation_starts, own_instruction, scene_starts
+from gymnast.envs.tasks import parse_scenes, resolve_tasks
 from gymnast.reward.base import Reward, check_fits
 from gymnast.rl import grpo
 from gymnast.rl.config import RLConfig, RLRun
@@ -64,8 +64,6 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
     env = run_spec.env
     if env.imagined and run_spec.wm is None:
         raise ValueError(f"--env {env} practises in a world model: give it with --wm RUN")
-    if config.fresh_scenes and env.imagined:
-        raise ValueError(f"fresh scenes need a simulator: --env {env} starts only from the dataset's real frames")
     levers = ["--" + name.replace("_", "-") for name in ("disagreement_stop", "disagreement_penalty")
               if getattr(config, name) > 0]
     if levers and not env.imagined:
@@ -76,15 +74,18 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
         raise ValueError(f"{levers[0]} needs a world-model ensemble to disagree (gymnast "
                          f"make-ensemble); {run_spec.wm} is a single world model")
     reward = make_reward(run_spec.reward, world_model)
-    check_fits(reward, str(run_spec.reward), env, demonstrations=not config.fresh_scenes)
-    data = None if config.fresh_scenes else Path(run_spec.data or policy_dataset(run_spec.policy))
-    tasks = resolve_tasks(config.tasks)
+    from_dataset = not config.fresh_scenes and config.scenes is None
+    check_fits(reward, str(run_spec.reward), env, demonstrations=from_dataset)
+    data = Path(run_spec.data or policy_dataset(run_spec.policy)) if from_dataset else None
+    scenes = parse_scenes(config.scenes) if config.scenes is not None else None
+    tasks = tuple(dict.fromkeys(task for task, _ in scenes)) if scenes else resolve_tasks(config.tasks)
     if config.instruction is not None and len(tasks) != 1:
         raise ValueError(f"--instruction is one sentence for one task, but --tasks {config.tasks} names {len(tasks)}; "
                          "practise one task at a time")
     env_config = EnvConfig(image_size=policy.config.image_size, horizon=config.horizon)
-    draw_starts = start_sampler(tasks, None if config.fresh_scenes else dataset_starts(data, tasks), env_config,
-                                config.instruction)
+    practice = own_instruction(scene_starts(scenes, env_config), config.instruction) if scenes else None
+    draw_starts = StartSampler(tasks, practice or (dataset_starts(data, tasks) if data else None), env_config,
+                               config.instruction)
     envs = EnvFactory(env, policy.chunk_size, env_config, config.gap, config.workers, world_model,
                       stop_above=config.disagreement_stop or None)
     resolved = {"rl": dataclasses.asdict(config), "run": run_spec.to_json(), "model": policy.spec(),
@@ -95,8 +96,8 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
     sampler = torch.Generator().manual_seed(config.seed)  # start states and env seeds
     actions = torch.Generator().manual_seed(config.seed + 1)  # the policy's token draws
     reference = _frozen_copy(policy) if config.kl_coef > 0 else None
-    state = {"real_interactions": 0, "eval_real_interactions": 0, "watch_real_interactions": 0, "curve": [],
-             "wall_s": 0.0}
+    state = {"real_interactions": 0, "eval_real_interactions": 0, "watch_real_interactions": 0,
+             "reset_frames": len(practice or ()), "curve": [], "wall_s": 0.0}
     start_step = 0
     if resume:
         trainer, rng = load_checkpoint(resolve_checkpoint(out), policy, optimizer)
@@ -109,7 +110,9 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
     write_run_config(out, resolved)
     metrics = MetricsLog(out, resume_step=start_step if resume else None)
     board = _tensorboard(out, start_step) if config.tensorboard else None
-    eval_starts = own_instruction(evaluation_starts(tasks, config.eval_episodes, env_config), config.instruction)
+    eval_starts = practice or own_instruction(evaluation_starts(tasks, config.eval_episodes, env_config),
+                                              config.instruction)
+    reset_frames_before = state.get("reset_frames", 0)  # runs saved before the count have none
 
     def log(step: int, values: dict[str, float]) -> None:
         values = {key: value for key, value in values.items() if np.isfinite(value)}  # NaN: nothing to report
@@ -150,6 +153,8 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
             values["time/step_s"] = time.perf_counter() - started
             values["train/lr"] = schedule.get_last_lr()[0]
             values["rollout/real_interactions"] = state["real_interactions"]
+            state["reset_frames"] = reset_frames_before + draw_starts.rendered
+            values["rollout/reset_frames"] = state["reset_frames"]
             values |= reward.metrics()  # a VLM judge's request, retry, cache and token counts
             # The watch replays actions in the real world: with real interactions there is nothing to check.
             if batch is not None and config.watch_every and done % config.watch_every == 0 and not env.real_interactions:
@@ -190,7 +195,7 @@ def rl_step(env: VectorEnv, policy, reward: Reward, draw_starts: Callable[[int, 
 
     Args:
         env: the run's vector env with R = B * G rollouts.
-        draw_starts: `draw(count, generator)` start states (`gymnast.envs.starts.start_sampler`).
+        draw_starts: `draw(count, generator)` start states (`gymnast.envs.starts.StartSampler`).
         sampler: draws the start states and the env's reset seeds.
         actions: draws the policy's tokens.
         reference: the frozen starting policy of the KL penalty, or None.
@@ -336,6 +341,7 @@ def write_summary(out: Path, run_spec: RLRun, config: RLConfig, state: dict) -> 
         "real_interactions": state["real_interactions"],
         "eval_real_interactions": state["eval_real_interactions"],
         "watch_real_interactions": state["watch_real_interactions"],
+        "reset_frames": state.get("reset_frames", 0),
         "wall_s": state["wall_s"],
         "curve": state["curve"],
     }
@@ -346,8 +352,8 @@ def write_summary(out: Path, run_spec: RLRun, config: RLConfig, state: dict) -> 
 def with_tasks_from_data(run_spec: RLRun, config: RLConfig) -> RLConfig:
     """`config` for a run whose tasks were not named: the preset's tasks that its start-state
     dataset has, or else as many of the dataset's own (`tasks_with_starts`); fresh scenes need no
-    dataset and keep the preset's."""
-    if config.fresh_scenes:
+    dataset and keep the preset's, and named scenes name their own."""
+    if config.fresh_scenes or config.scenes is not None:
         return config
     data = Path(run_spec.data or policy_dataset(run_spec.policy))
     return dataclasses.replace(config, tasks=",".join(tasks_with_starts(data, resolve_tasks(config.tasks))))
