@@ -3,6 +3,9 @@ PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
+# This exact version from PyPI is the CPU build of torch: it installs without CUDA packages. The
+# library itself accepts any torch in pyproject.toml's range, such as a GPU user's CUDA build.
+TORCH_CPU := torch==2.13.0
 DEMO := runs/demo
 
 .PHONY: demo test setup clean
@@ -12,7 +15,7 @@ $(STAMP): pyproject.toml Makefile
 		{ echo "gymnast needs Python >= 3.11 (found $$($(PYTHON) --version)); set PYTHON=python3.11"; exit 1; }
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[dev]'
+	$(BIN)/python -m pip install --quiet -e '.[dev]' '$(TORCH_CPU)'
 	@# A CUDA build of torch (or its nvidia-* wheels) would mean gigabytes nobody asked for.
 	@! $(BIN)/python -m pip list 2>/dev/null | grep -qi '^nvidia' || \
 		{ echo "set-up pulled CUDA packages; the CPU build is expected"; exit 1; }
