@@ -1,7 +1,7 @@
 """The embedded vision-language-action model: a small VLA that trains on a laptop CPU.
 
-Image -> a grid of vision tokens (`gymnast.policy.vision`), conditioned on the instruction's
-MiniLM embedding (FiLM); K x A learned action queries attend to those tokens and to each other
+Image -> a grid of vision tokens conditioned on the instruction (`gymnast.policy.observation`);
+K x A learned action queries attend to those tokens and to each other
 through a small transformer decoder without a causal mask, so the whole chunk is decoded in
 parallel in one forward pass, as in OpenVLA-OFT. Each query ends in a 256-way categorical over
 its action dimension's bins.
@@ -22,8 +22,7 @@ from torch import nn
 
 from gymnast.policy.action_tokenizer import ActionTokenizer
 from gymnast.policy.base import ActionSample
-from gymnast.policy.text import EMBEDDING_DIM, InstructionEncoder
-from gymnast.policy.vision import make_vision_encoder, to_float_image
+from gymnast.policy.observation import ObservationConditioned
 
 
 @dataclass(frozen=True)
@@ -52,7 +51,7 @@ class VLAConfig:
         return self.chunk_size * self.action_dim
 
 
-class EmbeddedVLA(nn.Module):
+class EmbeddedVLA(ObservationConditioned):
     """The `Policy` implementation shipped with gymnast (see `gymnast.policy.base.Policy`).
 
     Args:
@@ -62,20 +61,15 @@ class EmbeddedVLA(nn.Module):
     """
 
     def __init__(self, config: VLAConfig, tokenizer: ActionTokenizer | None = None, pretrained_vision: bool = True) -> None:
-        super().__init__()
-        self.config = config
-        self.tokenizer = tokenizer or ActionTokenizer(bins=config.bins)
-        if self.tokenizer.action_dim != config.action_dim or self.tokenizer.bins != config.bins:
+        tokenizer = tokenizer or ActionTokenizer(bins=config.bins)
+        if tokenizer.action_dim != config.action_dim or tokenizer.bins != config.bins:
             raise ValueError(
-                f"tokenizer has {self.tokenizer.action_dim} dims x {self.tokenizer.bins} bins, "
+                f"tokenizer has {tokenizer.action_dim} dims x {tokenizer.bins} bins, "
                 f"config wants {config.action_dim} x {config.bins}"
             )
+        super().__init__(config.vision, config.width, config.image_size, pretrained_vision)
+        self.config, self.tokenizer = config, tokenizer
         self.chunk_size, self.action_dim = config.chunk_size, config.action_dim
-        grid = config.image_size // 16
-        self.vision = make_vision_encoder(config.vision, config.width, pretrained=pretrained_vision)
-        self.vision_position = nn.Parameter(torch.zeros(1, grid * grid, config.width))
-        self.text_film = nn.Linear(EMBEDDING_DIM, 2 * config.width)
-        self.text_token = nn.Linear(EMBEDDING_DIM, config.width)
         self.queries = nn.Parameter(torch.randn(1, config.num_tokens, config.width) * 0.02)
         layer = nn.TransformerDecoderLayer(
             config.width, config.heads, dim_feedforward=2 * config.width, dropout=0.0, batch_first=True, norm_first=True
@@ -83,33 +77,18 @@ class EmbeddedVLA(nn.Module):
         self.decoder = nn.TransformerDecoder(layer, config.layers)
         self.norm = nn.LayerNorm(config.width)
         self.head = nn.Linear(config.width, config.bins)
-        self.text = InstructionEncoder()
 
     # -- the network -----------------------------------------------------------------------------
 
     def forward(self, images: torch.Tensor, text: torch.Tensor, bf16_vision: bool = False) -> torch.Tensor:
-        """(B, H, W, 3) uint8 images and (B, 384) instruction embeddings -> (B, N, V) logits.
-
-        `bf16_vision` runs the image encoder under bfloat16 autocast: about 1.4x faster for the
-        convolutions on a CPU, while the small decoder is faster (and exact) in float32.
-        """
-        expected = (self.config.image_size, self.config.image_size, 3)
-        if tuple(images.shape[1:]) != expected:
-            raise ValueError(f"images must be (B, {', '.join(map(str, expected))}), got {tuple(images.shape)}")
-        with torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16_vision):
-            tokens = self.vision(to_float_image(images))
-        tokens = tokens.float() + self.vision_position  # (B, P, D)
-        scale, shift = self.text_film(text).unsqueeze(1).chunk(2, dim=-1)
-        tokens = tokens * (1 + scale) + shift
-        memory = torch.cat([self.text_token(text).unsqueeze(1), tokens], dim=1)  # (B, 1 + P, D)
+        """(B, H, W, 3) uint8 images and (B, 384) instruction embeddings -> (B, N, V) logits."""
+        memory = self.memory(images, text, bf16_vision)  # (B, 1 + P, D)
         queries = self.queries.expand(len(images), -1, -1)  # (B, N, D)
         return self.head(self.norm(self.decoder(queries, memory)))
 
     def logits(self, obs: torch.Tensor, instructions: Sequence[str], bf16_vision: bool = False) -> torch.Tensor:
         """(B, N, V) action-token logits for images and their instructions."""
-        if len(instructions) != len(obs):
-            raise ValueError(f"{len(obs)} images but {len(instructions)} instructions")
-        return self(obs, self.text(instructions).to(self.queries.dtype), bf16_vision)
+        return self(obs, self.embed_instructions(instructions, len(obs)), bf16_vision)
 
     # -- the Policy protocol ------------------------------------------------------------------------
 

@@ -1,0 +1,39 @@
+"""Load a policy checkpoint of any family: the saved spec names the class that rebuilds it.
+
+A small name -> "module:Class" table, imported lazily, so that loading one family never imports
+the others.
+"""
+
+from __future__ import annotations
+
+import importlib
+from pathlib import Path
+
+from torch import nn
+
+POLICY_FAMILIES = {
+    "vla": "gymnast.policy.vla:EmbeddedVLA",
+    "flow_vla": "gymnast.policy.flow_vla:FlowVLA",
+}
+"""The key a family's ``spec()`` saves its architecture under -> the class that rebuilds it."""
+
+
+def load_policy(run: str | Path) -> nn.Module:
+    """The newest checkpoint of a run directory (or a checkpoint directory itself), in eval mode.
+
+    Raises:
+        FileNotFoundError: no checkpoint there (the message names the directory).
+        ValueError: the checkpoint's spec names no known policy family.
+    """
+    from gymnast.utils.checkpoint import load_model
+
+    return load_model(Path(run), build_policy)
+
+
+def build_policy(spec: dict) -> nn.Module:
+    """The policy a saved spec describes (weights not loaded)."""
+    family = next((name for name in POLICY_FAMILIES if name in spec), None)
+    if family is None:
+        raise ValueError(f"the saved model spec has keys {sorted(spec)}; a policy's has one of {sorted(POLICY_FAMILIES)}")
+    module, name = POLICY_FAMILIES[family].split(":")
+    return getattr(importlib.import_module(module), name).from_spec(spec)

@@ -1,0 +1,62 @@
+"""What every embedded policy sees: the camera image as vision tokens, read in the light of the
+instruction.
+
+The image becomes a grid of P vision tokens (`gymnast.policy.vision`) with learned positions,
+modulated by the instruction's MiniLM embedding (FiLM), and one more token carries the
+instruction itself: the (B, 1 + P, D) memory an action decoder attends to. The tokenized VLA and
+the flow-matching VLA share it, so they differ only in how they turn it into actions.
+
+Legend: B batch, H/W image size, P vision tokens, D width.
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import torch
+from torch import nn
+
+from gymnast.policy.text import EMBEDDING_DIM, InstructionEncoder
+from gymnast.policy.vision import make_vision_encoder, to_float_image
+
+
+class ObservationConditioned(nn.Module):
+    """Base of the embedded policies: the observation encoder and its memory.
+
+    Args:
+        vision: image encoder name (`gymnast.policy.vision.VISION_ENCODERS`).
+        width: token width D.
+        image_size: side of the square input image (a multiple of 16).
+        pretrained_vision: load ImageNet weights where the encoder has them.
+    """
+
+    def __init__(self, vision: str, width: int, image_size: int, pretrained_vision: bool) -> None:
+        super().__init__()
+        grid = image_size // 16
+        self.observed_shape = (image_size, image_size, 3)
+        self.vision = make_vision_encoder(vision, width, pretrained=pretrained_vision)
+        self.vision_position = nn.Parameter(torch.zeros(1, grid * grid, width))
+        self.text_film = nn.Linear(EMBEDDING_DIM, 2 * width)
+        self.text_token = nn.Linear(EMBEDDING_DIM, width)
+        self.text = InstructionEncoder()
+
+    def embed_instructions(self, instructions: Sequence[str], batch: int) -> torch.Tensor:
+        """(B, 384) instruction embeddings for a batch of `batch` images."""
+        if len(instructions) != batch:
+            raise ValueError(f"{batch} images but {len(instructions)} instructions")
+        return self.text(instructions).to(self.vision_position.dtype)
+
+    def memory(self, images: torch.Tensor, text: torch.Tensor, bf16_vision: bool = False) -> torch.Tensor:
+        """(B, H, W, 3) uint8 images and (B, 384) instruction embeddings -> (B, 1 + P, D).
+
+        `bf16_vision` runs the image encoder under bfloat16 autocast: about 1.4x faster for the
+        convolutions on a CPU, while the small decoders are faster (and exact) in float32.
+        """
+        if tuple(images.shape[1:]) != self.observed_shape:
+            raise ValueError(f"images must be (B, {', '.join(map(str, self.observed_shape))}), got {tuple(images.shape)}")
+        with torch.autocast(images.device.type, dtype=torch.bfloat16, enabled=bf16_vision):
+            tokens = self.vision(to_float_image(images))
+        tokens = tokens.float() + self.vision_position  # (B, P, D)
+        scale, shift = self.text_film(text).unsqueeze(1).chunk(2, dim=-1)
+        tokens = tokens * (1 + scale) + shift
+        return torch.cat([self.text_token(text).unsqueeze(1), tokens], dim=1)  # (B, 1 + P, D)
