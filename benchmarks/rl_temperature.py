@@ -20,7 +20,7 @@ import torch
 import gymnast  # noqa: F401  (sets MUJOCO_GL)
 from gymnast.config import EnvConfig
 from gymnast.envs.sim_vector import SimVectorEnv
-from gymnast.policy.vla import load_policy
+from gymnast.policy.load import load_policy
 from gymnast.rl.rollout import collect_rollouts, dataset_starts
 from gymnast.utils.atomic import write_json
 

@@ -20,7 +20,7 @@ from gymnast.envs.imagined import BatchedImaginedEnv
 from gymnast.envs.metaworld import MetaWorldEnv
 from gymnast.eval.actors import ImaginedPlanActor, PolicyActor
 from gymnast.eval.record import PolicyActors, policy_tag, record_policy
-from gymnast.policy.vla import load_policy
+from gymnast.policy.load import load_policy
 from gymnast.world_model.base import load_world_model
 
 RUN = Path(__file__).resolve().parents[2] / "results" / "sft" / "policy"

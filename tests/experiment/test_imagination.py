@@ -15,7 +15,7 @@ from gymnast.envs.factory import EnvFactory
 from gymnast.envs.kinds import REAL
 from gymnast.envs.starts import evaluation_starts
 from gymnast.experiment.imagination import ImaginationConfig, measure_imagination
-from gymnast.policy.vla import load_policy
+from gymnast.policy.load import load_policy
 from gymnast.reward.select import make_reward
 from gymnast.reward.spec import RewardSpec
 from gymnast.rl.evaluate import replay_actions

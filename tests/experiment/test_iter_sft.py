@@ -54,7 +54,7 @@ def test_mismatched_extra_samples_are_refused_with_their_shapes():
 
 
 def test_fine_tuning_starts_from_the_given_policy(tiny_dataset, tmp_path):
-    from gymnast.policy.vla import load_policy
+    from gymnast.policy.load import load_policy
 
     config = dataclasses.replace(SFT_PRESETS["debug"], steps=2, checkpoint_every=2, demos_per_task=1)
     first = train_sft(tiny_dataset, tmp_path / "first", config, progress=False)

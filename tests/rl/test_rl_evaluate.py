@@ -6,7 +6,7 @@ from rl_helpers import POLICY
 from gymnast.config import EnvConfig
 from gymnast.envs.factory import EnvFactory
 from gymnast.envs.kinds import REAL
-from gymnast.policy.vla import load_policy
+from gymnast.policy.load import load_policy
 from gymnast.rl.evaluate import watch_hacking
 from gymnast.rl.rollout import collect_rollouts, dataset_starts
 

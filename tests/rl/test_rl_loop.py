@@ -12,7 +12,7 @@ import pytest
 import torch
 
 from gymnast.cli import main
-from gymnast.policy.vla import load_policy
+from gymnast.policy.load import load_policy
 from gymnast.envs.starts import start_options
 from gymnast.rl.rollout import collect_rollouts, dataset_starts
 from gymnast.rl.config import RL_PRESETS

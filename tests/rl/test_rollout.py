@@ -9,7 +9,7 @@ from rl_helpers import POLICY, WORLD_MODEL
 from gymnast.config import EnvConfig
 from gymnast.envs.imagined import BatchedImaginedEnv
 from gymnast.envs.sim_vector import SimVectorEnv
-from gymnast.policy.vla import load_policy
+from gymnast.policy.load import load_policy
 from gymnast.rl.rollout import collect_rollouts, dataset_starts
 from gymnast.world_model.base import load_world_model
 

@@ -145,7 +145,7 @@ def load_run_policy(run_dir: str) -> Policy:
     """This process's policy from `run_dir`, loaded once and reused across episodes."""
     import torch
 
-    from gymnast.policy.vla import load_policy
+    from gymnast.policy.load import load_policy
 
     if multiprocessing.parent_process() is not None:
         # Each worker is one of several processes on the cores; torch's default of one thread

@@ -138,7 +138,7 @@ def measure_imagination_runs(policy: str | Path, wm: str | Path, reward: RewardS
                              out: Path | None = None, progress: bool = True) -> dict:
     """`measure_imagination` of saved runs: a policy run, a world-model run and a reward spec
     (``judge:RUN`` or ``vlm:MODEL@BASE_URL``, see `gymnast.reward.spec`)."""
-    from gymnast.policy.vla import load_policy
+    from gymnast.policy.load import load_policy
     from gymnast.reward.select import make_reward
     from gymnast.world_model.base import load_world_model
 

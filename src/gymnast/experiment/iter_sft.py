@@ -47,7 +47,7 @@ def imagine_successes(policy_run: Path, wm_run: Path, judge_run: Path, data: Pat
     ``judged_successes``, ``samples``)."""
     from gymnast.envs.imagined import BatchedImaginedEnv
     from gymnast.envs.tasks import resolve_tasks
-    from gymnast.policy.vla import load_policy
+    from gymnast.policy.load import load_policy
     from gymnast.reward.select import make_reward
     from gymnast.reward.spec import RewardSpec
     from gymnast.rl.rollout import collect_rollouts, concat_rollouts, score_groups

@@ -170,7 +170,7 @@ def _worldgym(stages: Stages, config: ExperimentConfig, out: Path, policies: dic
     import math
 
     from gymnast.experiment.worldgym import Candidate, WorldGym, correlation, noise_ladder
-    from gymnast.policy.vla import load_policy
+    from gymnast.policy.load import load_policy
 
     paths = dict(policies)
     checkpoints = sorted(p for p in (policies["sft"] / "checkpoints").glob("[0-9]*") if p.is_dir())

@@ -85,7 +85,7 @@ def noise_ladder(policy_run: Path, noise: Sequence[float], seed: int = 0, prefix
         ValueError: no level, a repeated level, or a negative one.
     """
     from gymnast.policy.noisy import NoisyPolicy
-    from gymnast.policy.vla import load_policy
+    from gymnast.policy.load import load_policy
 
     if not noise:
         raise ValueError("the noise ladder needs at least one level")

@@ -56,7 +56,7 @@ logger = logging.getLogger(__name__)
 
 def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False, progress: bool = True) -> dict:
     """Trains (or resumes) an RL run in `out`; returns the summary (also RUN/summary.json)."""
-    from gymnast.policy.vla import load_policy
+    from gymnast.policy.load import load_policy
     from gymnast.reward.select import make_reward
     from gymnast.world_model.base import load_world_model
     from gymnast.world_model.ensemble import EnsembleWorldModel
