@@ -87,8 +87,9 @@ def sft(
     tasks: str | None = None,
     seed: int | None = None,
     camera: str | None = None,
+    policy_type: Literal["tokens", "flow"] | None = None,
 ) -> None:
-    """Behaviour-clone the embedded VLA on N successful expert demonstrations per task.
+    """Behaviour-clone a VLA on N successful expert demonstrations per task.
 
     Args:
         out: run directory: checkpoints, metrics.jsonl, config.json.
@@ -101,13 +102,15 @@ def sft(
         tasks: restrict to these tasks (comma-separated).
         seed: override the seed.
         camera: the dataset camera to read (e.g. front); default: its first video (else image) feature.
+        policy_type: the policy family: tokens (the tokenized VLA, the default) or flow (the
+            flow-matching VLA of VLA-RFT). Saved with the checkpoint; rl and eval read it there.
     """
     from gymnast.policy.sft import SFT_PRESETS, saved_sft_config, train_sft
 
     config, inputs = resolve(
         "sft", out, resume, SFT_PRESETS[preset], inputs={"data": data}, required=("data",),
         overrides={"demos_per_task": demos_per_task, "steps": steps, "tasks": tasks, "seed": seed,
-                   "vla.vision": vision, "camera": camera},
+                   "vla.vision": vision, "camera": camera, "policy": policy_type},
         saved=lambda: (saved_sft_config(out), saved_inputs(out, "data")))
     checkpoint = train_sft(inputs["data"], out, config, resume=resume)
     print(f"policy: {checkpoint}")

@@ -12,7 +12,8 @@ from safetensors.torch import load_file
 
 from gymnast.data.lerobot import EpisodeDataset
 from gymnast.policy.sft import SFT_PRESETS, SFTConfig, load_demos, random_shift, select_demos, train_sft
-from gymnast.policy.vla import VLAConfig, load_policy
+from gymnast.policy.load import load_policy
+from gymnast.policy.vla import VLAConfig
 from gymnast.utils.metrics import read_metrics
 
 TINY = dataclasses.replace(SFT_PRESETS["debug"], demos_per_task=2, vla=VLAConfig(width=32, layers=1, heads=2, image_size=32))
@@ -46,16 +47,19 @@ def test_random_shift_moves_content_without_changing_shape():
     assert torch.equal(random_shift(images, 0, torch.Generator()), images)
 
 
-def test_sft_drives_the_loss_down(tiny_dataset, tmp_path):
-    config = dataclasses.replace(TINY, steps=60, batch_size=16, lr=2e-3, warmup_steps=5, log_every=1, checkpoint_every=60)
+@pytest.mark.parametrize("family", ["tokens", "flow"])
+def test_sft_drives_the_loss_down(family, tiny_dataset, tmp_path):
+    config = dataclasses.replace(TINY, policy=family, steps=60, batch_size=16, lr=2e-3, warmup_steps=5, log_every=1, checkpoint_every=60)
     train_sft(tiny_dataset, tmp_path, config, progress=False)
     losses = [row["train/loss"] for row in read_metrics(tmp_path)]
     assert sum(losses[-10:]) / 10 < 0.75 * losses[0], losses
-    assert load_policy(tmp_path).config.image_size == 32
+    policy = load_policy(tmp_path)
+    assert policy.config.image_size == 32 and {"tokens": "vla", "flow": "flow_vla"}[family] in policy.spec()
 
 
-def test_resume_from_a_checkpoint_continues_exactly(tiny_dataset, tmp_path):
-    config = dataclasses.replace(TINY, steps=6, checkpoint_every=3, log_every=1)
+@pytest.mark.parametrize("family", ["tokens", "flow"])
+def test_resume_from_a_checkpoint_continues_exactly(family, tiny_dataset, tmp_path):
+    config = dataclasses.replace(TINY, policy=family, steps=6, checkpoint_every=3, log_every=1)
     whole = tmp_path / "whole"
     train_sft(tiny_dataset, whole, config, progress=False)
     # A run that stopped after its step-3 checkpoint: copy what it would have left on disk.
@@ -93,3 +97,16 @@ def test_cli_sft_then_eval_runs_end_to_end(tiny_dataset, tmp_path, capsys):
           "--env.image-size", "32", "--env.horizon", "20", "--out", str(report)])
     assert json.loads(report.read_text())["episodes"] == 2
     assert "reach-v3" in capsys.readouterr().out
+
+
+def test_cli_sft_trains_a_flow_policy_that_eval_reads(tiny_dataset, tmp_path, capsys):
+    from gymnast.cli import main
+
+    run = tmp_path / "flow"
+    main(["sft", "--data", str(tiny_dataset), "--out", str(run), "--preset", "debug", "--policy-type", "flow"])
+    assert json.loads((run / "config.json").read_text())["sft"]["policy"] == "flow"
+    main(["sft", "--out", str(run), "--resume"])  # the family comes from the run
+    report = tmp_path / "eval.json"
+    main(["eval", "--policy", str(run), "--tasks", "reach-v3", "--episodes", "1", "--workers", "1",
+          "--env.image-size", "32", "--env.horizon", "10", "--out", str(report)])
+    assert json.loads(report.read_text())["episodes"] == 1

@@ -5,7 +5,8 @@ from __future__ import annotations
 import torch
 
 from gymnast.policy.text import InstructionEncoder
-from gymnast.policy.vla import EmbeddedVLA, VLAConfig, load_policy
+from gymnast.policy.load import load_policy
+from gymnast.policy.vla import EmbeddedVLA, VLAConfig
 from gymnast.utils.checkpoint import save_checkpoint
 
 TINY = VLAConfig(width=32, layers=1, heads=2, chunk_size=3, image_size=32)

@@ -125,9 +125,9 @@ class FlowVLA(ObservationConditioned):
         sigma = config.sigma_min + (config.sigma_max - config.sigma_min) * torch.sigmoid(self.sigma(features))
         return self.velocity(features), sigma
 
-    def observe(self, obs: torch.Tensor, instructions: Sequence[str]) -> torch.Tensor:
+    def observe(self, obs: torch.Tensor, instructions: Sequence[str], bf16_vision: bool = False) -> torch.Tensor:
         """(B, 1 + P, D) the memory every integration step of a chunk attends to."""
-        return self.memory(obs, self.embed_instructions(instructions, len(obs)))
+        return self.memory(obs, self.embed_instructions(instructions, len(obs)), bf16_vision)
 
     # -- the Policy protocol ------------------------------------------------------------------------
 
@@ -177,8 +177,14 @@ class FlowVLA(ObservationConditioned):
 
     # -- supervised learning ------------------------------------------------------------------------
 
+    def imitation_loss(self, images: torch.Tensor, texts: Sequence[str], chunks: torch.Tensor, valid: torch.Tensor,
+                       bf16: bool = False, generator: torch.Generator | None = None) -> tuple[torch.Tensor, dict]:
+        """SFT's loss on expert chunks: `flow_loss`, and metrics."""
+        loss = self.flow_loss(images, texts, chunks, valid, generator, bf16)
+        return loss, {"train/loss": loss.item()}
+
     def flow_loss(self, obs: torch.Tensor, instructions: Sequence[str], actions: torch.Tensor, valid: torch.Tensor,
-                  generator: torch.Generator | None = None) -> torch.Tensor:
+                  generator: torch.Generator | None = None, bf16_vision: bool = False) -> torch.Tensor:
         """The flow-matching loss on expert chunks (SFT, and VLA-RFT's auxiliary loss in RL).
 
         A flow time t ~ U(0, 1) and noise x_0 per chunk; the network's velocity at
@@ -190,7 +196,7 @@ class FlowVLA(ObservationConditioned):
             actions: (B, K, A) expert chunks in environment units.
             valid: (B, K) bool, False for the padding after an episode's end.
         """
-        memory = self.observe(obs, instructions)
+        memory = self.observe(obs, instructions, bf16_vision)
         # Past an episode's end the chunk holds its last valid action: the actions attend to each
         # other, so whatever stood there would leak into the valid ones' velocities.
         steps = torch.arange(valid.shape[1], device=valid.device)

@@ -15,13 +15,16 @@ import logging
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Literal
 
 import torch
 import torch.nn.functional as F
+from torch import nn
 from tqdm import tqdm
 
 from gymnast.data.lerobot import EpisodeDataset
 from gymnast.data.schema import EpisodeInfo
+from gymnast.policy.flow_vla import FlowVLA, FlowVLAConfig
 from gymnast.policy.vla import EmbeddedVLA, VLAConfig
 from gymnast.utils.checkpoint import resolve_checkpoint, resume_training, save_training, write_run_config
 from gymnast.utils.metrics import MetricsLog
@@ -31,6 +34,8 @@ from gymnast.utils.settings import from_json, saved_settings
 logger = logging.getLogger(__name__)
 
 DEMO_BEHAVIOURS = ("expert", "noisy_expert")
+# The architecture fields both policy families have: a flow policy is built from `SFTConfig.vla`'s.
+_SHARED_ARCHITECTURE = ("vision", "width", "layers", "heads", "chunk_size", "action_dim", "image_size")
 
 
 @dataclass(frozen=True)
@@ -63,6 +68,11 @@ class SFTConfig:
     """Seed of initialisation, batch order and augmentation."""
     tasks: str = ""
     """Restrict to these tasks (comma-separated); empty = every task in the dataset."""
+    policy: Literal["tokens", "flow"] = "tokens"
+    """Policy family: tokens (the tokenized VLA) or flow (the flow-matching VLA of VLA-RFT, with
+    `vla`'s architecture and `flow_steps` integration steps; docs/policy.md)."""
+    flow_steps: int = 5
+    """Flow policy only: Euler steps from noise to an action chunk."""
     vla: VLAConfig = field(default_factory=VLAConfig)
     """Model architecture."""
 
@@ -143,19 +153,6 @@ def random_shift(images: torch.Tensor, pad: int, generator: torch.Generator) -> 
     return shifted.to(torch.uint8)
 
 
-def sft_loss(
-    model: EmbeddedVLA, images: torch.Tensor, texts: list[str], chunks: torch.Tensor, valid: torch.Tensor, bf16: bool = False
-):
-    """Masked token cross-entropy; returns (loss, metrics)."""
-    logits = model.logits(images, texts, bf16_vision=bf16)  # (B, N, V)
-    targets = model.chunk_tokens(chunks)  # (B, N)
-    mask = valid.repeat_interleave(model.action_dim, dim=1).float()  # (B, N): chunk-major like the tokens
-    per_token = F.cross_entropy(logits.transpose(1, 2), targets, reduction="none")  # (B, N)
-    loss = (per_token * mask).sum() / mask.sum()
-    accuracy = ((logits.argmax(-1) == targets).float() * mask).sum() / mask.sum()
-    return loss, {"train/loss": loss.item(), "train/token_accuracy": accuracy.item()}
-
-
 def train_sft(data: Path, out: Path, config: SFTConfig, resume: bool = False, progress: bool = True,
               init: Path | None = None, extra: DemoSet | None = None) -> Path:
     """Trains (or resumes) an SFT run in `out`; returns the final checkpoint directory.
@@ -168,10 +165,10 @@ def train_sft(data: Path, out: Path, config: SFTConfig, resume: bool = False, pr
     """
     dataset = EpisodeDataset(data, config.camera)
     if init is not None:
-        from gymnast.policy.vla import load_policy
+        from gymnast.policy.load import load_policy
 
         model = load_policy(init)
-        config = dataclasses.replace(config, vla=model.config)
+        config = _with_architecture_of(model, config)
     if dataset.image_shape[0] != config.vla.image_size:
         if init is not None:
             raise ValueError(f"{data} has {dataset.image_shape[0]}px images but the policy in {init} sees "
@@ -182,7 +179,7 @@ def train_sft(data: Path, out: Path, config: SFTConfig, resume: bool = False, pr
                 len(demos.instructions), f" and {len(extra.images)} extra samples" if extra is not None else "")
     torch.manual_seed(config.seed)
     if init is None:
-        model = EmbeddedVLA(config.vla)
+        model = build_sft_policy(config)
     pool, draw = _batch_pool(demos, extra, config.batch_size)
     optimizer = torch.optim.AdamW(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
     schedule = torch.optim.lr_scheduler.LambdaLR(optimizer, warmup_cosine(config.warmup_steps, config.steps))
@@ -203,16 +200,33 @@ def train_sft(data: Path, out: Path, config: SFTConfig, resume: bool = False, pr
         batch = draw(sampler)
         images = random_shift(pool.images[batch], config.shift_augment, sampler)
         texts = [pool.instructions[i] for i in pool.instruction[batch].tolist()]
-        loss, values = sft_loss(model, images, texts, pool.chunks[batch], pool.valid[batch], config.bf16)
+        loss, values = model.imitation_loss(images, texts, pool.chunks[batch], pool.valid[batch], config.bf16, sampler)
         values["train/grad_norm"] = gradient_step(loss, model, optimizer, schedule)
         done = step + 1
         if done % config.log_every == 0 or done == config.steps:
             values |= {"train/lr": schedule.get_last_lr()[0], "time/step_s": (time.perf_counter() - started) / (done - start)}
             metrics.log(done, values)
-            bar.set_postfix(loss=f"{values['train/loss']:.3f}", acc=f"{values['train/token_accuracy']:.2f}")
+            bar.set_postfix(loss=f"{values['train/loss']:.3f}")
         if done % config.checkpoint_every == 0 or done == config.steps:
             checkpoint = save_training(out, done, model, resolved, optimizer, schedule, sampler)
     return checkpoint or resolve_checkpoint(out)
+
+
+def build_sft_policy(config: SFTConfig) -> nn.Module:
+    """A fresh policy of the family and architecture `config` names."""
+    if config.policy == "tokens":
+        return EmbeddedVLA(config.vla)
+    shared = {name: getattr(config.vla, name) for name in _SHARED_ARCHITECTURE}
+    return FlowVLA(FlowVLAConfig(**shared, steps=config.flow_steps))
+
+
+def _with_architecture_of(model: nn.Module, config: SFTConfig) -> SFTConfig:
+    """`config` describing the family and architecture of `model` (fine-tuning keeps them)."""
+    if isinstance(model, EmbeddedVLA):
+        return dataclasses.replace(config, policy="tokens", vla=model.config)
+    shared = {name: getattr(model.config, name) for name in _SHARED_ARCHITECTURE}
+    return dataclasses.replace(config, policy="flow", flow_steps=model.config.steps,
+                               vla=dataclasses.replace(config.vla, **shared))
 
 
 def _batch_pool(demos: DemoSet, extra: DemoSet | None, batch_size: int):

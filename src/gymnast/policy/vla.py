@@ -14,10 +14,10 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Sequence
 
 import torch
+import torch.nn.functional as F
 from torch import nn
 
 from gymnast.policy.action_tokenizer import ActionTokenizer
@@ -133,6 +133,20 @@ class EmbeddedVLA(ObservationConditioned):
         """(B, K, A) actions -> (B, N) tokens (the SFT targets)."""
         return self.tokenizer.encode(actions).flatten(1)
 
+    # -- supervised learning ------------------------------------------------------------------------
+
+    def imitation_loss(self, images: torch.Tensor, texts: Sequence[str], chunks: torch.Tensor, valid: torch.Tensor,
+                       bf16: bool = False, generator: torch.Generator | None = None) -> tuple[torch.Tensor, dict]:
+        """SFT's loss on expert chunks (B, K, A) with their (B, K) validity: the masked token
+        cross-entropy, and metrics. Nothing is drawn, so `generator` is unused."""
+        logits = self.logits(images, texts, bf16_vision=bf16)  # (B, N, V)
+        targets = self.chunk_tokens(chunks)  # (B, N)
+        mask = valid.repeat_interleave(self.action_dim, dim=1).float()  # (B, N): chunk-major like the tokens
+        per_token = F.cross_entropy(logits.transpose(1, 2), targets, reduction="none")  # (B, N)
+        loss = (per_token * mask).sum() / mask.sum()
+        accuracy = ((logits.argmax(-1) == targets).float() * mask).sum() / mask.sum()
+        return loss, {"train/loss": loss.item(), "train/token_accuracy": accuracy.item()}
+
     # -- persistence --------------------------------------------------------------------------------
 
     def spec(self) -> dict:
@@ -143,14 +157,3 @@ class EmbeddedVLA(ObservationConditioned):
     def from_spec(cls, spec: dict) -> EmbeddedVLA:
         # The ImageNet weights are replaced by the checkpoint's right after, so skip loading them.
         return cls(VLAConfig(**spec["vla"]), ActionTokenizer.from_dict(spec["tokenizer"]), pretrained_vision=False)
-
-
-def load_policy(run: str | Path) -> EmbeddedVLA:
-    """The newest checkpoint of a run directory (or a checkpoint directory itself), in eval mode.
-
-    Raises:
-        FileNotFoundError: no checkpoint there (the message names the directory).
-    """
-    from gymnast.utils.checkpoint import load_model
-
-    return load_model(Path(run), EmbeddedVLA.from_spec)
