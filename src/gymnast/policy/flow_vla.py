@@ -145,18 +145,20 @@ class FlowVLA(ObservationConditioned):
             x = mean + temperature * sigma * self._noise(x.shape, generator, memory)
             path.append(x)
         path = torch.stack(path, dim=1)  # (B, S + 1, K, A)
-        return ActionSample(actions=self._to_actions(x), tokens=path.flatten(1),
-                            logp=self._path_log_prob(memory, path, temperature)[0])
+        return ActionSample(actions=self._to_actions(x), tokens=path.flatten(1).cpu(),
+                            logp=self._path_log_prob(memory, path, temperature)[0].cpu())
 
     def log_prob(self, obs: torch.Tensor, instructions: Sequence[str], tokens: torch.Tensor,
                  temperature: float = 1.0) -> torch.Tensor:
         """(B, N) log-density of each action element's path, summed over the steps; differentiable."""
-        return self._path_log_prob(self.observe(obs, instructions), self._path(tokens), temperature)[0]
+        memory = self.observe(obs, instructions)
+        return self._path_log_prob(memory, self._path(tokens).to(memory.device), temperature)[0]
 
     def log_prob_and_entropy(self, obs: torch.Tensor, instructions: Sequence[str], tokens: torch.Tensor,
                              temperature: float = 1.0) -> tuple[torch.Tensor, torch.Tensor]:
         """`log_prob`, and the (B, N) entropy of each element's transitions along the given path."""
-        return self._path_log_prob(self.observe(obs, instructions), self._path(tokens), temperature)
+        memory = self.observe(obs, instructions)
+        return self._path_log_prob(memory, self._path(tokens).to(memory.device), temperature)
 
     @torch.no_grad()
     def act(self, obs: torch.Tensor, instructions: Sequence[str]) -> torch.Tensor:
@@ -207,7 +209,7 @@ class FlowVLA(ObservationConditioned):
         t = self._noise((len(target),), generator, memory, uniform=True)
         x_t = (1 - t[:, None, None]) * noise + t[:, None, None] * target
         velocity = self.field(memory, x_t, t)[0]
-        weight = valid.to(velocity.dtype)[:, :, None].expand_as(velocity)  # (B, K, A)
+        weight = valid.to(velocity.device, velocity.dtype)[:, :, None].expand_as(velocity)  # (B, K, A)
         return ((velocity - (target - noise)) ** 2 * weight).sum() / weight.sum().clamp(min=1)
 
     # -- persistence --------------------------------------------------------------------------------

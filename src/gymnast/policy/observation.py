@@ -6,6 +6,10 @@ modulated by the instruction's MiniLM embedding (FiLM), and one more token carri
 instruction itself: the (B, 1 + P, D) memory an action decoder attends to. The tokenized VLA and
 the flow-matching VLA share it, so they differ only in how they turn it into actions.
 
+The encoder runs where the policy's parameters are: images and instructions come from the host
+and are copied there, and what the policies hand back to the host (actions, tokens,
+log-probabilities of samples) is on the host again.
+
 Legend: B batch, H/W image size, P vision tokens, D width.
 """
 
@@ -18,6 +22,7 @@ from torch import nn
 
 from gymnast.policy.text import EMBEDDING_DIM, InstructionEncoder
 from gymnast.policy.vision import make_vision_encoder, to_float_image
+from gymnast.utils.device import to_device
 
 
 class ObservationConditioned(nn.Module):
@@ -44,7 +49,7 @@ class ObservationConditioned(nn.Module):
         """(B, 384) instruction embeddings for a batch of `batch` images."""
         if len(instructions) != batch:
             raise ValueError(f"{batch} images but {len(instructions)} instructions")
-        return self.text(instructions).to(self.vision_position.dtype)
+        return to_device(self.text(instructions), self.vision_position.device).to(self.vision_position.dtype)
 
     def memory(self, images: torch.Tensor, text: torch.Tensor, bf16_vision: bool = False) -> torch.Tensor:
         """(B, H, W, 3) uint8 images and (B, 384) instruction embeddings -> (B, 1 + P, D).
@@ -54,6 +59,7 @@ class ObservationConditioned(nn.Module):
         """
         if tuple(images.shape[1:]) != self.observed_shape:
             raise ValueError(f"images must be (B, {', '.join(map(str, self.observed_shape))}), got {tuple(images.shape)}")
+        images = to_device(images, self.vision_position.device)  # the camera's frames live on the host
         with torch.autocast(images.device.type, dtype=torch.bfloat16, enabled=bf16_vision):
             tokens = self.vision(to_float_image(images))
         tokens = tokens.float() + self.vision_position  # (B, P, D)

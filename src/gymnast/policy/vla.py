@@ -104,30 +104,36 @@ class EmbeddedVLA(ObservationConditioned):
             raise ValueError(f"temperature must be positive, got {temperature}; use act() for greedy actions")
         log_probs = torch.log_softmax(self.logits(obs, instructions).float() / temperature, dim=-1)  # (B, N, V)
         flat = log_probs.flatten(0, 1).exp()  # (B * N, V)
-        tokens = torch.multinomial(flat, 1, generator=generator).view(log_probs.shape[:2])  # (B, N)
+        tokens = self._draw(flat, generator).view(log_probs.shape[:2])  # (B, N)
         logp = log_probs.gather(-1, tokens.unsqueeze(-1)).squeeze(-1)
-        return ActionSample(actions=self._decode(tokens), tokens=tokens, logp=logp)
+        return ActionSample(actions=self._decode(tokens), tokens=tokens.cpu(), logp=logp.cpu())
 
     def log_prob(
         self, obs: torch.Tensor, instructions: Sequence[str], tokens: torch.Tensor, temperature: float = 1.0
     ) -> torch.Tensor:
         log_probs = torch.log_softmax(self.logits(obs, instructions).float() / temperature, dim=-1)
-        return log_probs.gather(-1, tokens.unsqueeze(-1)).squeeze(-1)  # (B, N)
+        return log_probs.gather(-1, tokens.to(log_probs.device).unsqueeze(-1)).squeeze(-1)  # (B, N)
 
     def log_prob_and_entropy(
         self, obs: torch.Tensor, instructions: Sequence[str], tokens: torch.Tensor, temperature: float = 1.0
     ) -> tuple[torch.Tensor, torch.Tensor]:
         log_probs = torch.log_softmax(self.logits(obs, instructions).float() / temperature, dim=-1)  # (B, N, V)
         entropy = -(log_probs.exp() * log_probs).sum(-1)  # (B, N)
-        return log_probs.gather(-1, tokens.unsqueeze(-1)).squeeze(-1), entropy
+        return log_probs.gather(-1, tokens.to(log_probs.device).unsqueeze(-1)).squeeze(-1), entropy
 
     @torch.no_grad()
     def act(self, obs: torch.Tensor, instructions: Sequence[str]) -> torch.Tensor:
         return self._decode(self.logits(obs, instructions).argmax(-1))
 
     def _decode(self, tokens: torch.Tensor) -> torch.Tensor:
-        """(B, N) tokens -> (B, K, A) actions."""
-        return self.tokenizer.decode(tokens.view(len(tokens), self.chunk_size, self.action_dim))
+        """(B, N) tokens -> (B, K, A) actions on the host."""
+        return self.tokenizer.decode(tokens.cpu().view(len(tokens), self.chunk_size, self.action_dim))
+
+    @staticmethod
+    def _draw(probabilities: torch.Tensor, generator: torch.Generator | None) -> torch.Tensor:
+        """(M, V) probabilities -> (M, 1) draws with `generator`, on its device (the host's by default)."""
+        device = generator.device if generator is not None else probabilities.device
+        return torch.multinomial(probabilities.to(device), 1, generator=generator).to(probabilities.device)
 
     def chunk_tokens(self, actions: torch.Tensor) -> torch.Tensor:
         """(B, K, A) actions -> (B, N) tokens (the SFT targets)."""
@@ -140,8 +146,8 @@ class EmbeddedVLA(ObservationConditioned):
         """SFT's loss on expert chunks (B, K, A) with their (B, K) validity: the masked token
         cross-entropy, and metrics. Nothing is drawn, so `generator` is unused."""
         logits = self.logits(images, texts, bf16_vision=bf16)  # (B, N, V)
-        targets = self.chunk_tokens(chunks)  # (B, N)
-        mask = valid.repeat_interleave(self.action_dim, dim=1).float()  # (B, N): chunk-major like the tokens
+        targets = self.chunk_tokens(chunks).to(logits.device)  # (B, N)
+        mask = valid.repeat_interleave(self.action_dim, dim=1).float().to(logits.device)  # (B, N): chunk-major like the tokens
         per_token = F.cross_entropy(logits.transpose(1, 2), targets, reduction="none")  # (B, N)
         loss = (per_token * mask).sum() / mask.sum()
         accuracy = ((logits.argmax(-1) == targets).float() * mask).sum() / mask.sum()

@@ -25,6 +25,7 @@ from torch import nn
 from gymnast.policy.text import EMBEDDING_DIM, InstructionEncoder
 from gymnast.policy.vision import to_float_image
 from gymnast.reward.judge import JudgeConfig, ThresholdJudge, check_videos
+from gymnast.utils.device import to_device
 
 FRAMES_PER_PASS = 512  # frames through the CNN at once: bounds memory on long batches of videos
 
@@ -63,10 +64,12 @@ class FrameJudge(ThresholdJudge, nn.Module):
         logits = []
         for start in range(0, len(frames), FRAMES_PER_PASS):
             part = slice(start, start + FRAMES_PER_PASS)
-            pair = torch.cat([to_float_image(first[part]), to_float_image(frames[part])], dim=1) * 2.0 - 1.0
-            with torch.autocast(self.text.weight.device.type, dtype=torch.bfloat16):  # ~2x faster convolutions
-                image = self.vision(pair.to(self.text.weight.device)).float()
-            logits.append(self.head(torch.cat([image, self.text(text[part])], dim=1)).squeeze(1))
+            device = self.text.weight.device
+            pair = torch.cat([to_float_image(to_device(first[part], device)),
+                              to_float_image(to_device(frames[part], device))], dim=1) * 2.0 - 1.0
+            with torch.autocast(device.type, dtype=torch.bfloat16):  # ~2x faster convolutions
+                image = self.vision(pair).float()
+            logits.append(self.head(torch.cat([image, self.text(to_device(text[part], device))], dim=1)).squeeze(1))
         return torch.cat(logits)
 
     @torch.no_grad()
@@ -79,7 +82,7 @@ class FrameJudge(ThresholdJudge, nn.Module):
         later = videos[:, 1:].flatten(0, 1)  # (B*(T-1), H, W, 3)
         first = videos[:, :1].expand(-1, length - 1, -1, -1, -1).flatten(0, 1)
         text = self.encoder(instructions)[:, None].expand(-1, length - 1, -1).flatten(0, 1)
-        probabilities = torch.sigmoid(self(first, later, text).float()).view(batch, length - 1)
+        probabilities = torch.sigmoid(self(first, later, text).float()).cpu().view(batch, length - 1)
         return torch.cat([torch.zeros(batch, 1), probabilities], dim=1)
 
     def probability(self, videos: torch.Tensor, instructions: Sequence[str]) -> torch.Tensor:

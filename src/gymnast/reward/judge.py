@@ -27,6 +27,7 @@ from torch import nn
 from gymnast.policy.text import EMBEDDING_DIM, InstructionEncoder
 from gymnast.policy.vision import SmallCNN, to_float_image
 from gymnast.reward.base import RewardContext, RewardNeeds
+from gymnast.utils.device import to_device
 
 JUDGED_FRAMES = 4
 
@@ -92,17 +93,17 @@ class LearnedJudge(ThresholdJudge, nn.Module):
 
     def forward(self, frames: torch.Tensor, text: torch.Tensor) -> torch.Tensor:
         """(B, F, H, W, 3) uint8 judged frames and (B, 384) instruction embeddings -> (B,) logits."""
-        batch = frames.shape[0]
-        features = self.vision(to_float_image(frames.flatten(0, 1))).mean(dim=1)  # (B*F, D)
+        batch, device = frames.shape[0], self.position.device
+        features = self.vision(to_float_image(to_device(frames.flatten(0, 1), device))).mean(dim=1)  # (B*F, D)
         features = features.view(batch, JUDGED_FRAMES, -1) + self.position  # (B, F, D)
-        return self.head(torch.cat([features.flatten(1), self.text(text)], dim=1)).squeeze(1)
+        return self.head(torch.cat([features.flatten(1), self.text(to_device(text, device))], dim=1)).squeeze(1)
 
     @torch.no_grad()
     def probability(self, videos: torch.Tensor, instructions: Sequence[str]) -> torch.Tensor:
         """(B,) P(success) for (B, T, H, W, 3) uint8 videos."""
         check_videos(videos, instructions)
         picked = videos[:, judged_frame_indices(videos.shape[1])]  # (B, F, H, W, 3)
-        return torch.sigmoid(self(picked, self.encoder(instructions)))
+        return torch.sigmoid(self(picked, self.encoder(instructions))).cpu()
 
 def check_videos(videos: torch.Tensor, instructions: Sequence[str]) -> None:
     """Raises ValueError unless `videos` is (B, T, H, W, 3) uint8 with B instructions."""

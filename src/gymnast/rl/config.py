@@ -85,6 +85,9 @@ class RLConfig:
     """Sim-to-real gap of the software simulator (``--env sim``)."""
     workers: int = 2
     """Simulator processes (sim/real rollouts, evaluation, the watch)."""
+    device: str = "auto"
+    """Where the policy, the world model and the judge run: auto (CUDA when torch sees a GPU), cpu,
+    cuda or cuda:N. Environments and rollout records stay on the host."""
     eval_every: int = 25
     """Steps between evaluations (also at the start and the end); 0 evaluates only at both ends."""
     eval_episodes: int = 10

@@ -48,6 +48,7 @@ from gymnast.rl.rollout import (Rollouts, collect_rollouts, concat_rollouts, dat
 from gymnast.rl.videos import write_group_video
 from gymnast.utils.atomic import write_json
 from gymnast.utils.checkpoint import load_checkpoint, resolve_checkpoint, save_checkpoint, write_run_config
+from gymnast.utils.device import resolve_device, to_device
 from gymnast.utils.metrics import MetricsLog
 from gymnast.utils.optim import warmup_cosine
 
@@ -68,12 +69,15 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
               if getattr(config, name) > 0]
     if levers and not env.imagined:
         raise ValueError(f"{levers[0]} acts on imagined rollouts; --env {env} imagines none")
-    policy = load_policy(run_spec.policy)
-    world_model = load_world_model(run_spec.wm) if run_spec.wm else None
+    device = resolve_device(config.device)
+    policy = load_policy(run_spec.policy).to(device)
+    world_model = load_world_model(run_spec.wm).to(device) if run_spec.wm else None
     if levers and not isinstance(world_model, EnsembleWorldModel):
         raise ValueError(f"{levers[0]} needs a world-model ensemble to disagree (gymnast "
                          f"make-ensemble); {run_spec.wm} is a single world model")
     reward = make_reward(run_spec.reward, world_model)
+    if isinstance(reward, torch.nn.Module):  # a learned judge
+        reward.to(device)
     from_dataset = not config.fresh_scenes and config.scenes is None
     check_fits(reward, str(run_spec.reward), env, demonstrations=from_dataset)
     data = Path(run_spec.data or policy_dataset(run_spec.policy)) if from_dataset else None
@@ -308,7 +312,9 @@ def update_policy(policy, optimizer: torch.optim.Optimizer, batch: Rollouts, adv
             if reference is not None:
                 with torch.no_grad():
                     ref_logp = reference.log_prob(obs, texts, tokens, config.temperature)
-            loss, values = grpo.policy_loss(logp, batch.logp[r, s], advantages[r], batch.token_mask[r, s],
+            old, advantage, mask = (to_device(x, logp.device) for x in (batch.logp[r, s], advantages[r],
+                                                                          batch.token_mask[r, s]))
+            loss, values = grpo.policy_loss(logp, old, advantage, mask,
                                             config.clip_low, config.clip_high, total, ref_logp, config.kl_coef,
                                             entropy, config.entropy_coef)
             loss.backward()

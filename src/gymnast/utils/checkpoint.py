@@ -41,7 +41,8 @@ def save_checkpoint(
     final = root / f"{step:06d}"
     staging = Path(tempfile.mkdtemp(dir=root, prefix=f".{step:06d}."))
     try:
-        save_file({k: v.detach().contiguous() for k, v in model.state_dict().items()}, staging / "model.safetensors")
+        # Weights are saved from the host, so a checkpoint written on a GPU loads on any machine.
+        save_file({k: v.detach().cpu().contiguous() for k, v in model.state_dict().items()}, staging / "model.safetensors")
         (staging / "config.json").write_text(json.dumps(config, indent=2, default=str))
         (staging / "trainer.json").write_text(json.dumps({"step": step, **(trainer or {})}, indent=2))
         if optimizer is not None:
@@ -76,8 +77,9 @@ def load_checkpoint(checkpoint: Path, model: nn.Module, optimizer: torch.optim.O
     """Restores weights (and optimizer state) in place; returns (trainer state, rng tensors)."""
     model.load_state_dict(load_file(checkpoint / "model.safetensors"))
     if optimizer is not None:
-        optimizer.load_state_dict(torch.load(checkpoint / "optimizer.pt", weights_only=True))
-    rng = torch.load(checkpoint / "rng.pt", weights_only=True) if (checkpoint / "rng.pt").exists() else {}
+        # Read onto the host; the optimizer moves its state to its parameters' device.
+        optimizer.load_state_dict(torch.load(checkpoint / "optimizer.pt", weights_only=True, map_location="cpu"))
+    rng = torch.load(checkpoint / "rng.pt", weights_only=True, map_location="cpu") if (checkpoint / "rng.pt").exists() else {}
     return json.loads((checkpoint / "trainer.json").read_text()), rng
 
 

@@ -27,6 +27,7 @@ from typing import Any, Protocol
 import torch
 
 from gymnast.utils.checkpoint import load_model
+from gymnast.utils.device import module_device, to_device
 
 
 class WorldModel(Protocol):
@@ -99,12 +100,14 @@ def rollout(model: WorldModel, context: torch.Tensor, actions: torch.Tensor,
     Args:
         model: the world model.
         context: (B, C', H, W, 3) uint8 real frames; the last one is where the rollout starts.
-        actions: (B, T, A) the actions.
+        actions: (B, T, A) the actions (both copied to the model's device; the frames come back
+            to the host).
         generator: passed to the model (stochastic backends draw from it).
     """
-    state = model.init_state(context, generator=generator)
-    _, frames = model.step(state, actions, generator=generator)
-    return ImaginedRollout(frames, actions.float())
+    device = module_device(model) if isinstance(model, torch.nn.Module) else torch.device("cpu")
+    state = model.init_state(to_device(context, device), generator=generator)
+    _, frames = model.step(state, to_device(actions, device), generator=generator)
+    return ImaginedRollout(frames.cpu(), actions.float())
 
 
 BACKENDS = {"embedded": "gymnast.world_model.embedded:EmbeddedWorldModel",
