@@ -46,16 +46,16 @@ def test_truncated_video_names_the_file(dataset_dir):
         EpisodeDataset(dataset_dir).load(1)
 
 
-def test_missing_video_names_the_file(dataset_dir):
+def test_missing_video_names_the_file_when_the_dataset_is_opened(dataset_dir):
     (dataset_dir / VIDEO).unlink()
-    with pytest.raises(FileNotFoundError, match=re.escape(str(dataset_dir / VIDEO))):
-        EpisodeDataset(dataset_dir).load(0)
+    with pytest.raises(DatasetError, match=re.escape(f"video file {dataset_dir / VIDEO} does not exist")):
+        EpisodeDataset(dataset_dir)
 
 
 def test_missing_data_field_names_field_and_file(dataset_dir):
-    rewrite_parquet(dataset_dir / DATA, lambda t: t.drop_columns(["observation.state"]))
+    rewrite_parquet(dataset_dir / DATA, lambda t: t.drop_columns(["action"]))
     with pytest.raises(
-        DatasetError, match=re.escape(f"{dataset_dir / DATA}: field 'observation.state' is missing")
+        DatasetError, match=re.escape(f"{dataset_dir / DATA}: field 'action' is missing")
     ):
         EpisodeDataset(dataset_dir).load(0)
 

@@ -100,8 +100,8 @@ def test_v21_dataset_reads_with_defaults_for_missing_facts(tmp_path):
     assert (len(dataset), dataset.version, dataset.fps, dataset.camera_key) == (2, "v2.1", FPS, "top")
     assert dataset.image_shape == (32, 32, 3) and dataset.lengths == [4, 7]
     assert dataset.episodes == [
-        EpisodeInfo(TASK, TASK, True, "expert", 0.0, -1, "external"),  # next.success set on its last row
-        EpisodeInfo(TASK, TASK, False, "expert", 0.0, -1, "external"),
+        EpisodeInfo(TASK, TASK, True, "expert", 0.0, 0, "external"),  # next.success set on its last row
+        EpisodeInfo(TASK, TASK, False, "expert", 0.0, 1, "external"),  # the seed: each episode its own scene
     ]
     for i, (columns, frames) in enumerate(written):
         episode = dataset.load(i)
@@ -148,7 +148,7 @@ def test_v3_dataset_without_gymnast_columns_gets_the_defaults(tmp_path):
         bool(episode.successes.any()),
         "expert",
         0.0,
-        -1,
+        0,
         "external",
     )
     assert dataset.episodes == [expected]

@@ -4,6 +4,7 @@
     writer.add(episode); writer.flush()
     dataset = EpisodeDataset("data/demo")
     episode = dataset.load(0)                # frames (T+1, H, W, 3) uint8, actions (T, A), ...
+    square = dataset.fitted(96, "crop")      # the same episodes with 96 x 96 frames (gymnast.data.frames)
 
 Datasets made elsewhere have no ``gymnast/...`` episode columns; their `EpisodeInfo` gets the
 defaults documented in `gymnast.data.lerobot_format.episode_info`. ``docs/dataset_format.md``
@@ -14,14 +15,18 @@ Legend: T steps of an episode, H/W image height/width, A action dimensions.
 
 from __future__ import annotations
 
+import copy
 import functools
 from collections import OrderedDict
 from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
+import pyarrow.parquet as pq
 
 from gymnast.data import lerobot_v3, lerobot_v21
+from gymnast.data.action_stats import ActionStats, read_action_stats
+from gymnast.data.frames import Fit, fit_frames
 from gymnast.data.lerobot_format import (
     DatasetError,
     EpisodeRef,
@@ -48,8 +53,8 @@ class EpisodeDataset:
 
     Args:
         root: dataset directory (the one holding ``meta/info.json``).
-        camera: camera to read, e.g. ``front``; default: the first video feature, else the first
-            image feature.
+        camera: camera to read, e.g. ``front``; default: the first camera whose frames exist (a
+            video feature with its video files, else an image feature with its column).
 
     Attributes:
         root: dataset directory.
@@ -58,11 +63,14 @@ class EpisodeDataset:
         fps: frames per second.
         image_key: the camera feature read, e.g. ``observation.images.front``.
         camera_key: the camera name, e.g. ``front``.
-        image_shape: (H, W, 3) of the frames.
+        camera_shape: (H, W, 3) of the camera's frames as stored.
+        image_shape: (H, W, 3) of the frames `load` returns: `camera_shape`, or square once `fitted`.
+        action_dim: width A of the ``action`` feature.
 
     Raises:
         FileNotFoundError: ``meta/info.json`` or a metadata file is missing.
-        DatasetError: unsupported ``codebase_version`` or malformed metadata (names file and field).
+        DatasetError: unsupported ``codebase_version``, malformed metadata, no ``action`` feature,
+            or no camera with frames (the message names the file and field).
     """
 
     def __init__(self, root: str | Path, camera: str | None = None) -> None:
@@ -77,12 +85,20 @@ class EpisodeDataset:
             )
         features = lerobot_v3.info_field(self.info, "features", dict, info_path)
         self.fps = lerobot_v3.info_field(self.info, "fps", (int, float), info_path)
-        self.image_key = _camera_feature(features, camera, info_path)
+        self.action_dim = _action_dim(features, info_path)
+        self.image_key, self._refs = self._camera_refs(features, camera, info_path)
         self.camera_key = self.image_key.removeprefix("observation.images.")
-        self.image_shape = _image_shape(features[self.image_key], self.image_key, info_path)
-        reader = lerobot_v3 if self.version == lerobot_v3.CODEBASE_VERSION else lerobot_v21
-        self._refs: list[EpisodeRef] = reader.episode_refs(self.root, self.info, self.image_key)
+        self.camera_shape = _image_shape(features[self.image_key], self.image_key, info_path)
+        self.image_shape = self.camera_shape
+        self._fit: tuple[int, Fit] | None = None
         self._tables: OrderedDict[Path, pa.Table] = OrderedDict()
+
+    def fitted(self, size: int, fit: Fit) -> EpisodeDataset:
+        """The same dataset, its frames fitted to `size` x `size` by `fit` (`gymnast.data.frames.fit_frames`)."""
+        dataset = copy.copy(self)
+        dataset._tables = OrderedDict()
+        dataset._fit, dataset.image_shape = (size, fit), (size, size, 3)
+        return dataset
 
     def __len__(self) -> int:
         return len(self._refs)
@@ -91,6 +107,15 @@ class EpisodeDataset:
     def lengths(self) -> list[int]:
         """Number of steps T of each episode (it has T + 1 frames)."""
         return [ref.length - 1 for ref in self._refs]
+
+    @functools.cached_property
+    def action_stats(self) -> ActionStats:
+        """Statistics of the actions, from ``meta/stats.json`` or else from the data files.
+
+        Raises:
+            DatasetError: the stats file or a data file lacks the ``action`` field or has the wrong width.
+        """
+        return read_action_stats(self.root, self.action_dim, (ref.data_path for ref in self._refs))
 
     @functools.cached_property
     def episodes(self) -> list[EpisodeInfo]:
@@ -119,7 +144,40 @@ class EpisodeDataset:
                 frames = decode_video(ref.video_path, *ref.video_span, may_lack=1)
             except ValueError as e:
                 raise DatasetError(f"episode {ref.index}, field {self.image_key!r}: {e}") from e
+        if self._fit is not None:
+            frames = fit_frames(frames, *self._fit)
         return assemble_episode(ref, rows, frames)
+
+    def _camera_refs(self, features: dict, camera: str | None, info_path: Path) -> tuple[str, list[EpisodeRef]]:
+        """The camera feature to read and its episodes: the one asked for, or the first with frames.
+
+        Raises:
+            DatasetError: the camera asked for is not a feature or has no frames, or no camera has
+                any (the message names each camera and what it lacks).
+        """
+        reader = lerobot_v3 if self.version == lerobot_v3.CODEBASE_VERSION else lerobot_v21
+        if camera is not None:
+            if image_key(camera) not in features:
+                raise DatasetError(f"{info_path}: no feature {image_key(camera)!r} for camera {camera!r}")
+            refs = reader.episode_refs(self.root, self.info, image_key(camera))
+            lacking = _lacking_frames(refs, image_key(camera))
+            if lacking:
+                raise DatasetError(f"feature {image_key(camera)!r} (camera {camera!r}): {lacking}")
+            return image_key(camera), refs
+        reasons = []
+        for key in _camera_features(features):
+            try:
+                refs = reader.episode_refs(self.root, self.info, key)
+            except DatasetError as e:
+                reasons.append(f"{key!r}: {e}")
+                continue
+            lacking = _lacking_frames(refs, key)
+            if not lacking:
+                return key, refs
+            reasons.append(f"{key!r}: {lacking}")
+        if not reasons:
+            raise DatasetError(f"{info_path}: no feature of dtype 'video' or 'image' in 'features'")
+        raise DatasetError(f"{self.root}: no camera has frames to read; " + "; ".join(reasons))
 
     def _info(self, ref: EpisodeRef) -> EpisodeInfo:
         if has_info_columns(list(ref.columns)) or "next.success" not in self.info["features"]:
@@ -145,16 +203,38 @@ class EpisodeDataset:
         return table
 
 
-def _camera_feature(features: dict, camera: str | None, info_path: Path) -> str:
-    if camera is not None:
-        if image_key(camera) not in features:
-            raise DatasetError(f"{info_path}: no feature {image_key(camera)!r} for camera {camera!r}")
-        return image_key(camera)
-    for dtype in ("video", "image"):
-        keys = [k for k, f in features.items() if isinstance(f, dict) and f.get("dtype") == dtype]
-        if keys:
-            return keys[0]
-    raise DatasetError(f"{info_path}: no feature of dtype 'video' or 'image' in 'features'")
+def _camera_features(features: dict) -> list[str]:
+    """Camera features in the order a default camera is chosen: video features, then image ones."""
+    return [k for dtype in ("video", "image") for k, f in features.items() if isinstance(f, dict) and f.get("dtype") == dtype]
+
+
+def _lacking_frames(refs: list[EpisodeRef], key: str) -> str | None:
+    """What keeps the episodes from having frames of camera `key` (a missing video file or image
+    column, named), or None when every episode has them."""
+    for path in dict.fromkeys(ref.video_path for ref in refs if ref.video_path is not None):
+        if not path.is_file():
+            return f"video file {path} does not exist"
+    if refs and refs[0].video_path is None and refs[0].data_path.is_file():
+        path = refs[0].data_path  # image features are columns, and every data file has the same ones
+        try:
+            names = pq.read_schema(path).names
+        except (pa.ArrowException, OSError) as e:
+            raise DatasetError(f"{path}: cannot read parquet file: {e}") from e
+        if key not in names:
+            return f"{path} has no field {key!r}"
+    return None
+
+
+def _action_dim(features: dict, info_path: Path) -> int:
+    """The width of the ``action`` feature, which every model learns from."""
+    feature = features.get("action")
+    if not isinstance(feature, dict):
+        raise DatasetError(f"{info_path}: no 'action' feature in 'features' (found {sorted(features)}); "
+                           "gymnast learns from the robot's actions")
+    shape = feature.get("shape")
+    if not (isinstance(shape, list) and len(shape) == 1 and isinstance(shape[0], int) and shape[0] > 0):
+        raise DatasetError(f"{info_path}: features['action'].shape is {shape!r}, expected [A] with A > 0")
+    return shape[0]
 
 
 def _image_shape(feature: dict, key: str, info_path: Path) -> tuple[int, int, int]:

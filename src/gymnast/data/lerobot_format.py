@@ -294,7 +294,9 @@ def episode_info(ref: EpisodeRef, successes: np.ndarray | None) -> EpisodeInfo:
     """The episode's facts: from ``gymnast/...`` columns, or defaults for datasets made elsewhere.
 
     Defaults: task and instruction are the LeRobot task string, behaviour ``expert``, noise 0,
-    seed -1, env_variant ``external``, success = any ``next.success`` if recorded, else True.
+    seed = the episode index, env_variant ``external``, success = any ``next.success`` if
+    recorded, else True. A seed names a scene, and the held-out split is by scene: a recorded
+    episode is a scene of its own (its initial state is its own), so each may be held out alone.
     """
     if has_info_columns(list(ref.columns)):
         values = {name.removeprefix(GYMNAST_PREFIX): ref.columns[name] for name in INFO_COLUMNS}
@@ -303,7 +305,7 @@ def episode_info(ref: EpisodeRef, successes: np.ndarray | None) -> EpisodeInfo:
         except (TypeError, ValueError) as e:
             raise DatasetError(f"{ref.meta_path}: episode {ref.index}: {e}") from e
     success = bool(successes.any()) if successes is not None else True
-    return EpisodeInfo(ref.task, ref.task, success, "expert", 0.0, -1, "external")
+    return EpisodeInfo(ref.task, ref.task, success, "expert", 0.0, ref.index, "external")
 
 
 def decode_images(table: pa.Table, name: str, path: Path) -> np.ndarray:
@@ -347,8 +349,8 @@ def assemble_episode(ref: EpisodeRef, rows: pa.Table, frames: np.ndarray) -> Epi
 
     Rows written by gymnast end with one padded action (``action_is_pad``); rows from elsewhere
     pair every frame with an action, and the last action is dropped because the frame it leads
-    to was not recorded. Missing optional fields become zeros (rewards, environment state of
-    width 0); missing ``next.success`` marks only the last step successful.
+    to was not recorded. Missing optional fields become zeros (rewards; states and environment
+    states of width 0); missing ``next.success`` marks only the last step successful.
     """
     path, n_rows = ref.data_path, rows.num_rows
     if n_rows < 2:
@@ -361,7 +363,10 @@ def assemble_episode(ref: EpisodeRef, rows: pa.Table, frames: np.ndarray) -> Epi
             raise DatasetError(
                 f"{path}: field 'action_is_pad' of episode {ref.index} must mark only the last row"
             )
-    states = column_matrix(rows, "observation.state", path)
+    if "observation.state" in names:
+        states = column_matrix(rows, "observation.state", path)
+    else:
+        states = np.zeros((n_rows, 0), np.float32)
     actions = column_matrix(rows, "action", path)[:n_steps]
     if "observation.environment_state" in names:
         env_states = column_matrix(rows, "observation.environment_state", path)
