@@ -58,9 +58,13 @@ class WorldModel(Protocol):
 
 
 def _spaces(model: WorldModel, chunk_size: int) -> tuple[Dict, Box]:
+    """The observation space and the action space: each dimension spans the model's
+    ``action_range`` (the range its training data's actions spanned), or [-1, 1], Meta-World's."""
     size = model.image_size
     observation = Dict({"image": Box(0, 255, (size, size, 3), np.uint8)})
-    return observation, Box(-1.0, 1.0, (chunk_size, model.action_dim), np.float32)
+    low, high = getattr(model, "action_range", ((-1.0,) * model.action_dim, (1.0,) * model.action_dim))
+    shape = (chunk_size, model.action_dim)
+    return observation, Box(np.broadcast_to(np.float32(low), shape), np.broadcast_to(np.float32(high), shape), shape, np.float32)
 
 
 def _check_frames(frames: Any, size: int, batch: int | None = None) -> np.ndarray:
@@ -77,14 +81,14 @@ def _check_frames(frames: Any, size: int, batch: int | None = None) -> np.ndarra
     return frames.copy()
 
 
-def _check_actions(actions: Any, expected: tuple[int, ...], names: str) -> np.ndarray:
-    """Actions as a float32 array clipped to [-1, 1], or ValueError naming the shapes."""
+def _check_actions(actions: Any, space: Box, names: str) -> np.ndarray:
+    """Actions as a float32 array clipped to `space`, or ValueError naming the shapes."""
     actions = np.asarray(actions, dtype=np.float32)
-    if actions.shape != expected:
-        raise ValueError(f"actions must have shape {expected} {names}, got {actions.shape}")
+    if actions.shape != space.shape:
+        raise ValueError(f"actions must have shape {space.shape} {names}, got {actions.shape}")
     if not np.isfinite(actions).all():
         raise ValueError("actions must be finite")
-    return np.clip(actions, -1.0, 1.0)
+    return np.clip(actions, space.low, space.high)
 
 
 class _Imagination:
@@ -189,7 +193,7 @@ class ImaginedEnv(gym.Env):
 
     def step(self, action):
         """Imagines one chunk; reward 0.0 and terminated False always (a judge scores the video)."""
-        actions = _check_actions(action, self.action_space.shape, "(chunk_size, action_dim)")
+        actions = _check_actions(action, self.action_space, "(chunk_size, action_dim)")
         frames, truncated = self._sim.step(actions[None])
         frames = frames[0]  # (k, H, W, 3)
         info = {"instruction": self._instruction, "step": self._sim.steps, "frames": frames.copy()}
@@ -258,7 +262,7 @@ class BatchedImaginedEnv(VectorEnv):
 
     def step(self, actions):
         """Imagines one chunk per rollout; rewards 0 and terminations False (a judge scores videos)."""
-        actions = _check_actions(actions, self.action_space.shape, "(num_envs, chunk_size, action_dim)")
+        actions = _check_actions(actions, self.action_space, "(num_envs, chunk_size, action_dim)")
         frames, truncated = self._sim.step(actions)
         ended, extra = np.full(self.num_envs, truncated), {}
         if self._sim.disagreement is not None:

@@ -58,11 +58,13 @@ def simulate(env: MetaWorldEnv, seed: int, actions: np.ndarray) -> np.ndarray:
 
 def check_controllability(model: WorldModel, dataset: EpisodeDataset, heldout: list[int], config: ControllabilityConfig,
                           progress: bool = True) -> dict:
-    """Runs the check on the first `config.scenes` held-out scenes; returns its figures."""
+    """Runs the check on the first `config.scenes` held-out scenes; returns its figures (none when
+    no held-out scene can be replayed: episodes recorded on another robot have no simulator)."""
     scenes, seen = [], set()
+    worlds = {gap.env_variant for gap in GAPS.values()}
     for index in heldout:
         info = dataset.episodes[index]
-        if (info.task, info.seed) not in seen and dataset.lengths[index] >= config.horizon:
+        if info.env_variant in worlds and (info.task, info.seed) not in seen and dataset.lengths[index] >= config.horizon:
             seen.add((info.task, info.seed))
             scenes.append(index)
     scenes = scenes[: config.scenes]

@@ -47,7 +47,13 @@ class EmbeddedWorldModelConfig:
     context_frames: int = 2
     """Real frames the model starts from (two show which way things are moving)."""
     action_dim: int = 4
-    """Action dimensions."""
+    """Action dimensions (training takes them from the dataset's ``action`` feature)."""
+    action_low: tuple[float, ...] = ()
+    """(A,) action that the model's input maps to -1; with `action_high`, the dataset's per-dimension
+    min and max, set by training (`gymnast.data.action_stats`). Empty: actions are taken as they
+    are (models saved before the normalisation, whose actions were Meta-World's, in [-1, 1])."""
+    action_high: tuple[float, ...] = ()
+    """(A,) action that the model's input maps to +1."""
     latent_channels: int = 64
     """Channels Z of the latent grid at 1/8 resolution."""
     widths: tuple[int, int] = (24, 48)
@@ -70,6 +76,11 @@ class EmbeddedWorldModelConfig:
             raise ValueError(f"need context_frames >= 1 and blocks >= 1, got {self.context_frames}, {self.blocks}")
         if any(w % 8 for w in (*self.widths, self.latent_channels)):
             raise ValueError(f"widths and latent_channels must be multiples of 8 (group norm), got {self.widths}, {self.latent_channels}")
+        if len(self.action_low) != len(self.action_high) or (self.action_low and len(self.action_low) != self.action_dim):
+            raise ValueError(f"action_low and action_high need {self.action_dim} values each (action_dim) or none, "
+                             f"got {len(self.action_low)} and {len(self.action_high)}")
+        if any(high <= low for low, high in zip(self.action_low, self.action_high)):
+            raise ValueError(f"every action_high must exceed its action_low, got {self.action_low} / {self.action_high}")
 
 
 @dataclass(frozen=True)
@@ -150,6 +161,10 @@ class EmbeddedWorldModel(nn.Module):
         with torch.no_grad():  # start from "nothing moves"
             self.to_pixels.weight[4 * 4 :].zero_()
             self.to_pixels.bias[4 * 4 :].zero_()
+        if config.action_low:  # maps [low, high] onto [-1, 1] per dimension
+            low, high = torch.tensor(config.action_low), torch.tensor(config.action_high)
+            self.register_buffer("action_centre", (high + low) / 2, persistent=False)  # (A,)
+            self.register_buffer("action_half_range", (high - low) / 2, persistent=False)  # (A,)
         size = config.image_size
         ys, xs = torch.meshgrid(torch.linspace(-1, 1, size), torch.linspace(-1, 1, size), indexing="ij")
         self.register_buffer("identity_grid", torch.stack([xs, ys], dim=-1)[None], persistent=False)  # (1, H, W, 2)
@@ -167,6 +182,14 @@ class EmbeddedWorldModel(nn.Module):
     @property
     def action_dim(self) -> int:
         return self.config.action_dim
+
+    @property
+    def action_range(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
+        """(low, high) per action dimension: the range the training data's actions spanned (what
+        the imagined env's action space allows), [-1, 1] for models saved before it was recorded."""
+        if self.config.action_low:
+            return self.config.action_low, self.config.action_high
+        return (-1.0,) * self.action_dim, (1.0,) * self.action_dim
 
     @torch.inference_mode()
     def init_state(self, context: torch.Tensor, generator: torch.Generator | None = None) -> LatentState:
@@ -197,6 +220,8 @@ class EmbeddedWorldModel(nn.Module):
 
     def imagine(self, state: LatentState, actions: torch.Tensor) -> tuple[LatentState, torch.Tensor]:
         """Applies (B, K, A) actions; returns the new state and (B, K, 3, H, W) float frames."""
+        if self.config.action_low:
+            actions = (actions - self.action_centre) / self.action_half_range
         frames = []
         for k in range(actions.shape[1]):
             if state.since_anchor == self.config.reanchor_every:
@@ -235,5 +260,7 @@ class EmbeddedWorldModel(nn.Module):
     @classmethod
     def from_spec(cls, spec: dict) -> EmbeddedWorldModel:
         fields = {k: v for k, v in spec.items() if k != "backend"}
-        fields["widths"] = tuple(fields.get("widths", EmbeddedWorldModelConfig.widths))
+        for name in ("widths", "action_low", "action_high"):  # JSON lists back to tuples
+            if name in fields:
+                fields[name] = tuple(fields[name])
         return cls(EmbeddedWorldModelConfig(**fields))

@@ -93,6 +93,12 @@ class EnsembleWorldModel(nn.Module):
     def action_dim(self) -> int:
         return self.members[0].action_dim
 
+    @property
+    def action_range(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
+        """The first member's (see `EmbeddedWorldModel.action_range`)."""
+        default = ((-1.0,) * self.action_dim, (1.0,) * self.action_dim)
+        return getattr(self.members[0], "action_range", default)
+
     def init_state(self, context: torch.Tensor, generator: torch.Generator | None = None) -> EnsembleState:
         """See `WorldModel.init_state`: every member starts from the same context."""
         check_context(context, self.image_size)

@@ -31,6 +31,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from gymnast.data.frames import Fit, model_image_size
 from gymnast.data.lerobot import EpisodeDataset
 from gymnast.utils.atomic import write_json
 from gymnast.utils.checkpoint import resolve_checkpoint
@@ -74,8 +75,9 @@ def evaluate_world_model(wm: Path, data: Path, out: Path, config: WorldModelEval
     fraction = heldout_fraction(Path(wm))
     ensemble = isinstance(model, EnsembleWorldModel)
     dataset = EpisodeDataset(data, config.camera)
-    if dataset.image_shape[:2] != (model.image_size, model.image_size):
-        raise ValueError(f"{data}: frames are {dataset.image_shape}, the world model makes {model.image_size}x{model.image_size}")
+    if model_image_size(dataset.camera_shape, model.image_size) != model.image_size:
+        raise ValueError(f"{data}: frames are {dataset.camera_shape}, the world model makes {model.image_size}x{model.image_size}")
+    dataset = dataset.fitted(model.image_size, frame_fit(Path(wm)))
     _, heldout = split_episodes(dataset.episodes, fraction)
     if config.max_episodes:
         heldout = heldout[: config.max_episodes]
@@ -127,6 +129,15 @@ def heldout_fraction(wm: Path) -> float:
     if is_ensemble(wm):
         return min(heldout_fraction(member) for member in member_paths(wm))
     return json.loads((resolve_checkpoint(wm) / "config.json").read_text())["train"]["heldout_fraction"]
+
+
+def frame_fit(wm: Path) -> Fit:
+    """How a world-model run fitted its dataset's frames to its image size (`gymnast.data.frames`);
+    of an ensemble, its first member's. Runs saved before the choice existed read only frames of
+    their own size, which every fit leaves as they are."""
+    if is_ensemble(wm):
+        return frame_fit(member_paths(wm)[0])
+    return json.loads((resolve_checkpoint(wm) / "config.json").read_text())["train"].get("fit", "resize")
 
 
 def disagreement_error(table: dict[str, np.ndarray]) -> dict[str, float | None]:

@@ -28,6 +28,8 @@ import torch
 from safetensors.torch import load_file
 from tqdm import tqdm
 
+from gymnast.data.action_stats import ActionStats
+from gymnast.data.frames import Fit, model_image_size
 from gymnast.data.lerobot import EpisodeDataset
 from gymnast.utils.checkpoint import resolve_checkpoint, resume_training, save_training, write_run_config
 from gymnast.utils.metrics import MetricsLog
@@ -83,7 +85,12 @@ class WorldModelTrainConfig:
     """More datasets to train on besides DATA, with the same image size. Each is split by the same
     scene hash, so a scene held out of one is held out of all of them."""
     camera: str | None = None
-    """Camera to read from the dataset (e.g. ``front``); default: its first video (else image) feature."""
+    """Camera to read from the dataset (e.g. ``front``); default: the first camera whose frames exist."""
+    fit: Fit = "resize"
+    """How frames become the model's square image when they are not square or larger than 256 px
+    (they are then fitted to `model.image_size`): resize (the whole frame, aspect ratio not kept) or
+    crop (the central square). Square frames up to 256 px, a multiple of 8, set the image size and
+    are used as they are. Saved with the run, so everything reading real frames for it fits them alike."""
     model: EmbeddedWorldModelConfig = field(default_factory=EmbeddedWorldModelConfig)
     """Architecture."""
 
@@ -104,24 +111,26 @@ def train_world_model(data: Path, out: Path, config: WorldModelTrainConfig, resu
     """Trains (or resumes) a world-model run in `out`; returns the final checkpoint directory.
 
     Raises:
-        ValueError: the datasets' image sizes differ, or `config.init`'s model spec differs from this run's.
+        ValueError: the datasets' image sizes or action dimensions differ, or `config.init`'s model
+            spec differs from this run's.
         FileNotFoundError: `config.init` has no checkpoint.
+        DatasetError: a dataset lacks what training needs (the message names the file and field).
     """
     datasets = [EpisodeDataset(path, config.camera) for path in (data, *config.extra_data)]
-    dataset = datasets[0]
-    if dataset.image_shape[0] != config.model.image_size:
-        config = dataclasses.replace(config, model=dataclasses.replace(config.model, image_size=dataset.image_shape[0]))
     if config.init is not None and not resume:  # on resume the weights come from the run's own checkpoint
         config = dataclasses.replace(config, init=resolve_checkpoint(config.init))
+    config, datasets, stats = fit_to_data(config, datasets, keep_action_range=resume)
+    dataset = datasets[0]
     bank, heldout, counts = load_banks(datasets, config.heldout_fraction, progress)
     context = config.model.context_frames
 
     model = build_model(config if not resume else dataclasses.replace(config, init=None))
+    config = dataclasses.replace(config, model=model.config)  # fine-tuning keeps the action range of its weights
     optimizer = torch.optim.AdamW(model.parameters(), lr=config.lr, weight_decay=0.0)
     schedule = torch.optim.lr_scheduler.LambdaLR(optimizer, warmup_cosine(config.warmup_steps, config.steps))
     sampler = torch.Generator().manual_seed(config.seed)
     validation = heldout.sample(_VALIDATION_CLIPS, context, config.future, torch.Generator().manual_seed(1)) if heldout else None
-    resolved = {"train": _settings(config), "model": model.spec(), "data": str(data),
+    resolved = {"train": _settings(config), "model": model.spec(), "data": str(data), "action_stats": stats.to_dict(),
                 "train_episodes": len(bank), "heldout_episodes": len(heldout) if heldout else 0, "datasets": counts}
     start = resume_training(out, model, optimizer, schedule, sampler) if resume else 0
     if resume:
@@ -149,6 +158,31 @@ def train_world_model(data: Path, out: Path, config: WorldModelTrainConfig, resu
         if done % config.checkpoint_every == 0 or done == config.steps:
             checkpoint = save_training(out, done, model, resolved, optimizer, schedule, sampler)
     return checkpoint or resolve_checkpoint(out)
+
+
+def fit_to_data(config: WorldModelTrainConfig, datasets: Sequence[EpisodeDataset],
+                keep_action_range: bool = False) -> tuple[WorldModelTrainConfig, list[EpisodeDataset], ActionStats]:
+    """`config` with the model's image size and action space taken from the datasets, the datasets
+    with their frames fitted to that size (`gymnast.data.frames`), and their action statistics.
+
+    The action range is the datasets' per-dimension min and max, unless `keep_action_range` (a
+    resumed run keeps the range its weights were trained with).
+
+    Raises:
+        ValueError: the datasets' frames or action dimensions differ.
+        DatasetError: a dataset's actions cannot be read (the message names the file and field).
+    """
+    first = datasets[0]
+    for other in datasets[1:]:
+        if other.camera_shape != first.camera_shape:
+            size, wanted = "x".join(map(str, other.camera_shape[:2])), "x".join(map(str, first.camera_shape[:2]))
+            raise ValueError(f"{other.root}: frames are {size}, but {first.root} has {wanted}; "
+                             "every dataset of one world model needs one image size")
+    size = model_image_size(first.camera_shape, config.model.image_size)
+    stats = ActionStats.merge([d.action_stats for d in datasets])
+    low, high = (config.model.action_low, config.model.action_high) if keep_action_range else stats.action_range()
+    model = dataclasses.replace(config.model, image_size=size, action_dim=first.action_dim, action_low=low, action_high=high)
+    return dataclasses.replace(config, model=model), [d.fitted(size, config.fit) for d in datasets], stats
 
 
 def load_banks(datasets: Sequence[EpisodeDataset], heldout_fraction: float,
@@ -182,18 +216,21 @@ _WEIGHT_FREE = ("bf16", "reanchor_every")
 
 
 def build_model(config: WorldModelTrainConfig) -> EmbeddedWorldModel:
-    """The model training starts from: seeded by `config.seed`, with `config.init`'s weights when given.
+    """The model training starts from: seeded by `config.seed`, with `config.init`'s weights (and
+    their action range) when given.
 
     Raises:
         FileNotFoundError: `config.init` has no checkpoint.
         ValueError: `config.init`'s model spec differs from `config.model` (the message names the fields).
     """
     torch.manual_seed(config.seed)
-    model = EmbeddedWorldModel(config.model)
     if config.init is None:
-        return model
+        return EmbeddedWorldModel(config.model)
     checkpoint = resolve_checkpoint(config.init)
     source = json.loads((checkpoint / "config.json").read_text()).get("model", {})
+    # The weights were trained on actions normalised by their own range: it comes with them.
+    action_range = {name: tuple(source.get(name, ())) for name in ("action_low", "action_high")}
+    model = EmbeddedWorldModel(dataclasses.replace(config.model, **action_range))
     wanted = json.loads(json.dumps(model.spec()))  # tuples as JSON lists, like the saved spec
     differ = sorted(k for k in source.keys() | wanted.keys() if k not in _WEIGHT_FREE and source.get(k) != wanted.get(k))
     if differ:
