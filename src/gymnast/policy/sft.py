@@ -22,8 +22,10 @@ import torch.nn.functional as F
 from torch import nn
 from tqdm import tqdm
 
+from gymnast.data.frames import Fit, model_image_size
 from gymnast.data.lerobot import EpisodeDataset
 from gymnast.data.schema import EpisodeInfo
+from gymnast.policy.action_tokenizer import ActionTokenizer
 from gymnast.policy.flow_vla import FlowVLA, FlowVLAConfig
 from gymnast.policy.vla import EmbeddedVLA, VLAConfig
 from gymnast.utils.checkpoint import resolve_checkpoint, resume_training, save_training, write_run_config
@@ -45,7 +47,12 @@ class SFTConfig:
     demos_per_task: int = 10
     """Successful expert episodes per task to imitate (few-shot keeps SFT imperfect)."""
     camera: str | None = None
-    """Camera to read from the dataset (e.g. ``front``); default: its first video (else image) feature."""
+    """Camera to read from the dataset (e.g. ``front``); default: the first camera whose frames exist."""
+    fit: Fit = "resize"
+    """How frames become the policy's square image when they are not square or larger than 256 px
+    (they are then fitted to `vla.image_size`): resize (the whole frame, aspect ratio not kept) or
+    crop (the central square). Square frames up to 256 px, a multiple of 8, set the image size and
+    are used as they are. Saved with the run."""
     steps: int = 2400
     """Optimizer steps (about 8 minutes on 2 CPU cores at the default size)."""
     batch_size: int = 64
@@ -164,27 +171,30 @@ def train_sft(data: Path, out: Path, config: SFTConfig, resume: bool = False, pr
             demonstrations: half of every batch comes from each.
     """
     dataset = EpisodeDataset(data, config.camera)
+    size = model_image_size(dataset.camera_shape, config.vla.image_size)
     if init is not None:
         from gymnast.policy.load import load_policy
 
         model = load_policy(init)
         config = _with_architecture_of(model, config)
-    if dataset.image_shape[0] != config.vla.image_size:
-        if init is not None:
-            raise ValueError(f"{data} has {dataset.image_shape[0]}px images but the policy in {init} sees "
-                             f"{config.vla.image_size}px ones")
-        config = dataclasses.replace(config, vla=dataclasses.replace(config.vla, image_size=dataset.image_shape[0]))
+        if size != config.vla.image_size or dataset.action_dim != config.vla.action_dim:
+            raise ValueError(f"{data} makes {size}px images and {dataset.action_dim}-D actions, but the policy "
+                             f"in {init} sees {config.vla.image_size}px images and acts in {config.vla.action_dim}-D")
+    stats = dataset.action_stats  # read before training starts: a dataset without actions fails here
+    config = dataclasses.replace(config, vla=dataclasses.replace(config.vla, image_size=size, action_dim=dataset.action_dim))
+    dataset = dataset.fitted(size, config.fit)
     demos = load_demos(dataset, select_demos(dataset, config.demos_per_task, config.tasks), config.vla.chunk_size)
     logger.info("SFT on %d demonstrations (%d samples, %d instructions)%s", len(demos.episodes), len(demos.images),
                 len(demos.instructions), f" and {len(extra.images)} extra samples" if extra is not None else "")
     torch.manual_seed(config.seed)
     if init is None:
-        model = build_sft_policy(config)
+        model = build_sft_policy(config, stats.action_range())
     pool, draw = _batch_pool(demos, extra, config.batch_size)
     optimizer = torch.optim.AdamW(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
     schedule = torch.optim.lr_scheduler.LambdaLR(optimizer, warmup_cosine(config.warmup_steps, config.steps))
     sampler = torch.Generator().manual_seed(config.seed)
     resolved = {"sft": dataclasses.asdict(config), "model": model.spec(), "data": str(data),
+                "action_stats": stats.to_dict(),
                 "demos": [info.key for info in demos.episodes], "init": str(init) if init else None,
                 "extra_samples": len(extra.images) if extra is not None else 0}
     start = resume_training(out, model, optimizer, schedule, sampler) if resume else 0
@@ -212,12 +222,15 @@ def train_sft(data: Path, out: Path, config: SFTConfig, resume: bool = False, pr
     return checkpoint or resolve_checkpoint(out)
 
 
-def build_sft_policy(config: SFTConfig) -> nn.Module:
-    """A fresh policy of the family and architecture `config` names."""
+def build_sft_policy(config: SFTConfig, action_range: tuple[tuple[float, ...], tuple[float, ...]] | None = None) -> nn.Module:
+    """A fresh policy of the family and architecture `config` names, acting in `action_range`
+    ((low, high) per dimension, the dataset's: the tokenizer's bins or the flow's [-1, 1] span
+    it; default [-1, 1], Meta-World's)."""
+    low, high = action_range or ((-1.0,) * config.vla.action_dim, (1.0,) * config.vla.action_dim)
     if config.policy == "tokens":
-        return EmbeddedVLA(config.vla)
+        return EmbeddedVLA(config.vla, ActionTokenizer(low, high, config.vla.bins))
     shared = {name: getattr(config.vla, name) for name in _SHARED_ARCHITECTURE}
-    return FlowVLA(FlowVLAConfig(**shared, steps=config.flow_steps))
+    return FlowVLA(FlowVLAConfig(**shared, steps=config.flow_steps, low=low, high=high))
 
 
 def _with_architecture_of(model: nn.Module, config: SFTConfig) -> SFTConfig:

@@ -27,6 +27,7 @@ from pathlib import Path
 import torch
 from tqdm import tqdm
 
+from gymnast.data.frames import Fit, model_image_size
 from gymnast.data.lerobot import EpisodeDataset
 from gymnast.reward.base import Reward, RewardContext
 from gymnast.reward.frame_judge import FrameJudge, frame_loss
@@ -75,7 +76,12 @@ class JudgeTrainConfig:
     size; each is split by the same scene hashes, and every part (train, validation, held-out)
     takes its share of each."""
     camera: str | None = None
-    """Camera to read from the datasets (e.g. ``front``); default: their first video (else image) feature."""
+    """Camera to read from the datasets (e.g. ``front``); default: the first camera whose frames exist."""
+    fit: Fit = "resize"
+    """How frames become the judge's square image when they are not square or larger than 256 px
+    (they are then fitted to `judge.image_size`): resize (the whole frame, aspect ratio not kept) or
+    crop (the central square). Square frames up to 256 px, a multiple of 8, set the image size and
+    are used as they are. Use the world model's fit, so real and imagined frames look alike."""
     init: Path | None = None
     """Start from the weights of this judge run or checkpoint (fine-tuning, e.g. on a policy's newly
     recorded rollouts) instead of a random initialisation; its kind and architecture must be this
@@ -192,7 +198,8 @@ class FramePool:
         self.positives, self.negatives = torch.cat([empty, *positives]), torch.cat([empty, *negatives])  # (n, 2) (video, frame)
         if not len(self.positives) or not len(self.negatives):
             raise ValueError(f"judge training needs frames with and without success; got {len(self.positives)} "
-                             f"success frames and {len(self.negatives)} others")
+                             f"success frames and {len(self.negatives)} others (a dataset's field 'next.success' "
+                             "says which steps succeeded; without it only each episode's last step does)")
 
     def sample(self, batch: int, generator: torch.Generator):
         """(B, H, W, 3) first frames, (B, H, W, 3) frames, B instructions and (B,) labels; half successes."""
@@ -232,9 +239,11 @@ def train_judge(data: Path, out: Path, config: JudgeTrainConfig, wm: Path | None
     started = time.perf_counter()
     datasets = [EpisodeDataset(path, config.camera) for path in (data, *config.extra_data)]
     for other in datasets[1:]:
-        if other.image_shape != datasets[0].image_shape:
-            raise ValueError(f"{other.root}: frames are {other.image_shape}, but {data} has {datasets[0].image_shape}")
-    config = dataclasses.replace(config, judge=dataclasses.replace(config.judge, image_size=datasets[0].image_shape[0]))
+        if other.camera_shape != datasets[0].camera_shape:
+            raise ValueError(f"{other.root}: frames are {other.camera_shape}, but {data} has {datasets[0].camera_shape}")
+    size = model_image_size(datasets[0].camera_shape, config.judge.image_size)
+    config = dataclasses.replace(config, judge=dataclasses.replace(config.judge, image_size=size))
+    datasets = [dataset.fitted(size, config.fit) for dataset in datasets]
     parts = [split_scenes(dataset, config) for dataset in datasets]  # per dataset: (train, validation, held-out)
     train_ids, validation_ids, heldout_ids = ([p[k] for p in parts] for k in range(3))
     if not any(train_ids):

@@ -27,6 +27,7 @@ import numpy as np
 import torch
 from gymnasium.vector import VectorEnv
 
+from gymnast.data.frames import Fit
 from gymnast.data.lerobot import EpisodeDataset
 from gymnast.data.schema import EpisodeInfo
 from gymnast.envs.engine import run_batch
@@ -216,17 +217,28 @@ def tasks_with_starts(data: Path, wanted: Sequence[str]) -> tuple[str, ...]:
     return tuple(task for task in wanted if task in have) or tuple(have[: len(wanted)])
 
 
-def dataset_starts(data: Path, tasks: Sequence[str] | None = None) -> list[Start]:
+def dataset_starts(data: Path, tasks: Sequence[str] | None = None, image_size: int | None = None,
+                   fit: Fit = "resize", camera: str | None = None) -> list[Start]:
     """One start per (task, seed) scene of a dataset: its first frame, instruction and reference.
 
     The reference is the successful scripted-expert episode (with or without action noise) with
     the least noise in that scene; scenes with no successful expert episode are left out (they
     have no reference, and an imagined start should be one the expert solved in the real world).
 
+    Args:
+        data: dataset directory.
+        tasks: the tasks to take starts of (None: every task).
+        image_size: fit the frames to this square size by `fit`, as the models that will see them
+            were trained (`gymnast.data.frames`); None: the frames as stored.
+        fit: resize or crop, the models' training setting.
+        camera: the dataset camera to read (default: the first whose frames exist).
+
     Raises:
         ValueError: no scene of `tasks` has a successful expert episode.
     """
-    dataset = EpisodeDataset(data)
+    dataset = EpisodeDataset(data, camera)
+    if image_size is not None:
+        dataset = dataset.fitted(image_size, fit)
     best: dict[tuple[str, int], int] = {}
     for i, info in enumerate(dataset.episodes):
         if not _expert_solved(info) or (tasks and info.task not in tasks):

@@ -1,0 +1,100 @@
+"""A user's own robot: LeRobot datasets of other robots go through train-wm, sft, train-judge and eval-wm
+from the command line, with no code change; what cannot work is refused by name before training."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import pytest
+from robot_datasets import write_robot_dataset
+
+from gymnast.cli import main
+from gymnast.data.lerobot import EpisodeDataset
+from gymnast.policy.load import load_policy
+from gymnast.world_model.base import load_world_model
+
+ROBOTS = {
+    # 6 episodes: the scene hash holds out episodes 4 and 5, so eval-wm has some to measure.
+    "v2.1, 26-D actions, 120x160 at 10 fps": dict(version="v2.1", action_dim=26, fps=10, action_scale=3.0),
+    "v3.0, 7-D actions at 30 fps, a video one frame short": dict(version="v3.0", action_dim=7, fps=30, short_video=True),
+    "v2.0, two cameras, the first without video": dict(version="v2.0", action_dim=7, cameras=("wrist", "front"),
+                                                       without_video=("wrist",)),
+}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("robot", ROBOTS)
+def test_another_robots_dataset_trains_every_model_with_the_debug_presets(robot, tmp_path, capsys):
+    data = write_robot_dataset(tmp_path / "data", episodes=6, steps=10, **ROBOTS[robot])
+    stats = EpisodeDataset(data).action_stats
+    for command in ("train-wm", "sft", "train-judge"):
+        main([command, "--data", str(data), "--out", str(tmp_path / command), "--preset", "debug"])
+
+    wm = load_world_model(tmp_path / "train-wm")
+    assert (wm.image_size, wm.action_dim) == (96, stats.dim)  # non-square frames are fitted to the preset's size
+    assert (wm.config.action_low, wm.config.action_high) == stats.action_range()
+    saved = json.loads((tmp_path / "train-wm" / "config.json").read_text())
+    assert saved["train"]["fit"] == "resize" and saved["train"]["camera"] is None
+
+    policy = load_policy(tmp_path / "sft")
+    assert (policy.config.image_size, policy.action_dim) == (96, stats.dim)
+    assert (policy.tokenizer.low, policy.tokenizer.high) == stats.action_range()
+    saved_stats = json.loads(json.dumps(stats.to_dict()))  # as JSON keeps them, with the weights
+    assert json.loads((tmp_path / "sft" / "config.json").read_text())["action_stats"] == saved_stats
+    assert saved["action_stats"] == saved_stats
+
+    judge = json.loads((tmp_path / "train-judge" / "config.json").read_text())
+    assert judge["model"]["image_size"] == 96 and judge["train"]["fit"] == "resize"
+    capsys.readouterr()
+
+
+@pytest.mark.slow
+def test_eval_wm_fits_the_frames_as_the_world_model_was_trained(tmp_path, capsys):
+    from gymnast.world_model.train import WM_PRESETS, train_world_model
+
+    data = write_robot_dataset(tmp_path / "data", episodes=6, steps=10, height=64, width=48)
+    config = dataclasses.replace(WM_PRESETS["debug"], fit="crop")
+    train_world_model(data, tmp_path / "wm", config, progress=False)
+    assert json.loads((tmp_path / "wm" / "config.json").read_text())["train"]["fit"] == "crop"
+    main(["eval-wm", "--wm", str(tmp_path / "wm"), "--data", str(data), "--out", str(tmp_path / "report.json")])
+    report = json.loads((tmp_path / "report.json").read_text())
+    assert report["episodes"] == 2 and report["controllability"] == {}  # another robot's scenes have no simulator
+    capsys.readouterr()
+
+
+def _without_action(data: Path) -> None:
+    info = json.loads((data / "meta/info.json").read_text())
+    del info["features"]["action"]
+    (data / "meta/info.json").write_text(json.dumps(info))
+
+
+def _with_narrow_actions(data: Path) -> None:
+    info = json.loads((data / "meta/info.json").read_text())
+    info["features"]["action"]["shape"] = [8]
+    (data / "meta/info.json").write_text(json.dumps(info))
+
+
+BAD = {
+    "no action feature": (_without_action, ("train-wm", "sft", "train-judge"), "no 'action' feature in 'features'"),
+    "no camera with video": (lambda data: None, ("train-wm", "sft", "train-judge"), "no camera has frames to read"),
+    "actions narrower than declared": (_with_narrow_actions, ("train-wm", "sft"),
+                                       "field 'action' has 7 values per row, info.json's 'action' feature says 8"),
+}
+
+
+@pytest.mark.parametrize("case", BAD)
+def test_what_cannot_work_is_one_line_naming_the_field_before_training(case, tmp_path, capsys):
+    damage, commands, message = BAD[case]
+    without = ("front",) if case == "no camera with video" else ()
+    data = write_robot_dataset(tmp_path / "data", episodes=2, steps=3, without_video=without)
+    damage(data)
+    for command in commands:
+        out = tmp_path / command
+        with pytest.raises(SystemExit) as exit_info:
+            main([command, "--data", str(data), "--out", str(out), "--preset", "debug"])
+        assert exit_info.value.code == 2
+        error = capsys.readouterr().err
+        assert message in error and "Traceback" not in error, command
+        assert not out.exists() or not any(out.iterdir()), command
