@@ -134,6 +134,40 @@ def test_an_own_instruction_is_one_non_empty_sentence_for_one_task():
         EvalConfig(tasks="reach-v3", instruction="  ")
 
 
+def test_a_sentences_file_words_every_episode_of_every_task(tmp_path: Path, capsys):
+    sentences = tmp_path / "ours.txt"
+    sentences.write_text("# our wording\nreach-v3: touch the red dot\nreach-v3: go to the red dot\n\n"
+                         "push-v3: slide the puck onto the green mark\n")
+    policy = ZeroPolicy(chunk_size=10)
+    config = EvalConfig(tasks="reach-v3,push-v3", episodes=4, workers=1, videos_per_task=0, env=SHORT,
+                        sentences=sentences)
+    records = evaluate(policy, config, tmp_path / "own.json", progress=False)["records"]
+    reach = {r["instruction"] for r in records if r["task"] == "reach-v3"}
+    assert reach <= {"touch the red dot", "go to the red dot"} and len(reach) == 2  # the seed picks, both get used
+    assert {r["instruction"] for r in records if r["task"] == "push-v3"} == {"slide the puck onto the green mark"}
+    again = evaluate(ZeroPolicy(chunk_size=10), config, tmp_path / "again.json", progress=False)["records"]
+    assert [r["instruction"] for r in again] == [r["instruction"] for r in records]  # chosen by seed, not by chance
+    main(["eval", "--policy", "expert", "--tasks", "push-v3", "--episodes", "1", "--workers", "1",
+          "--videos-per-task", "0", "--sentences", str(sentences), "--out", str(tmp_path / "cli.json")])
+    assert json.loads((tmp_path / "cli.json").read_text())["records"][0]["instruction"] == "slide the puck onto the green mark"
+    capsys.readouterr()
+
+
+@pytest.mark.parametrize("text, message", [
+    ("reach-v3 touch the dot\n", "line 1: expected 'task: sentence'"),
+    ("# fine\nreach-v3:   \n", "line 2: the sentence for 'reach-v3' is empty"),
+    ("rech-v3: touch the dot\n", "line 1: Unknown Meta-World v3 task 'rech-v3'"),
+    ("# nothing\n", "no 'task: sentence' lines"),
+    ("push-v3: push it\n", "has no sentence for reach-v3"),
+])
+def test_a_bad_sentences_file_is_named_with_its_line(text, message, tmp_path: Path):
+    sentences = tmp_path / "ours.txt"
+    sentences.write_text(text)
+    with pytest.raises(ValueError, match=message) as error:
+        EvalConfig(tasks="reach-v3", sentences=sentences)
+    assert str(sentences) in str(error.value)
+
+
 def test_a_saved_vla_run_is_loaded_once_per_process_and_evaluated(tmp_path: Path):
     torch.manual_seed(0)
     model = EmbeddedVLA(VLAConfig(width=32, layers=1, heads=2, chunk_size=8, image_size=32))
@@ -205,3 +239,24 @@ def test_cli_eval_with_a_missing_run_directory_exits_with_a_message(tmp_path: Pa
         main(["eval", "--policy", str(tmp_path / "nope"), "--tasks", "reach-v3", "--out", str(tmp_path / "r.json")])
     assert exit_info.value.code == 2
     assert "policy run directory not found" in capsys.readouterr().err
+
+
+@pytest.mark.skipif(torch.cuda.is_available(), reason="this machine has a GPU")
+def test_eval_on_a_gpu_that_is_not_there_is_refused_before_any_episode(tmp_path: Path, capsys):
+    with pytest.raises(SystemExit):
+        main(["eval", "--policy", "expert", "--tasks", "reach-v3", "--episodes", "1", "--device", "cuda",
+              "--out", str(tmp_path / "gpu.json")])
+    assert "sees no CUDA GPU here" in capsys.readouterr().err
+    assert not (tmp_path / "gpu.json").exists()
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA GPU")
+def test_eval_on_a_gpu_gives_the_cpus_episodes(tmp_path: Path):
+    torch.manual_seed(0)
+    model = EmbeddedVLA(VLAConfig(width=32, layers=1, heads=2, chunk_size=8, image_size=32))
+    run = tmp_path / "run"
+    save_checkpoint(run, 1, model, {"model": model.spec()})
+    reports = {device: evaluate(str(run), EvalConfig(tasks="reach-v3", episodes=2, workers=1, videos_per_task=0,
+                                                     env=SHORT, device=device), tmp_path / f"{device}.json",
+                                progress=False) for device in ("cpu", "cuda")}
+    assert [r["success"] for r in reports["cuda"]["records"]] == [r["success"] for r in reports["cpu"]["records"]]

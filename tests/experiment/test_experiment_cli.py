@@ -14,10 +14,16 @@ from gymnast.experiment.arms import ARM_NAMES
 pytestmark = pytest.mark.slow
 
 
+OWN_SENTENCE = "move the gripper onto the red dot"
+
+
 @pytest.fixture(scope="module")
 def experiment(tmp_path_factory) -> Path:
-    out = tmp_path_factory.mktemp("experiment") / "exp"
-    main(["experiment", "--preset", "debug", "--out", str(out), "--workers", "1"])
+    root = tmp_path_factory.mktemp("experiment")
+    sentences = root / "sentences.txt"
+    sentences.write_text(f"# the language check in our own words\nreach-v3: {OWN_SENTENCE}\n")
+    out = root / "exp"
+    main(["experiment", "--preset", "debug", "--out", str(out), "--workers", "1", "--sentences", str(sentences)])
     return out
 
 
@@ -40,6 +46,8 @@ def test_robustness_language_and_worldgym_are_measured(experiment: Path):
     for name in ("sft", "rl_wm_judge", "rl_wm_verified"):
         assert set(summary["robustness"][name]) == {"none", "minor", "major"}
         assert summary["language"][name]["heldout"]["episodes"] == 1
+        own = json.loads((experiment / "eval" / f"{name}_heldout.json").read_text())
+        assert {record["instruction"] for record in own["records"]} == {OWN_SENTENCE}
         perturbed = json.loads((experiment / "eval" / f"{name}_major.json").read_text())
         assert perturbed["config"]["perturb"] == "major"
     policies = [row["policy"] for row in summary["worldgym"]]
@@ -72,7 +80,8 @@ def test_the_report_and_plots_are_written(experiment: Path):
 def test_a_rerun_skips_every_finished_stage_and_prints_the_table(experiment: Path, capsys):
     records = {path.name: path.read_text() for path in (experiment / "stages").glob("*.json")}
     began = time.perf_counter()
-    main(["experiment", "--preset", "debug", "--out", str(experiment), "--workers", "1"])
+    main(["experiment", "--preset", "debug", "--out", str(experiment), "--workers", "1", "--sentences",
+          str(experiment.parent / "sentences.txt")])
     assert time.perf_counter() - began < 60  # nothing is trained or evaluated again
     assert {path.name: path.read_text() for path in (experiment / "stages").glob("*.json")} == records
     out = capsys.readouterr().out
@@ -88,3 +97,12 @@ def test_other_settings_in_the_same_directory_are_refused(experiment: Path, caps
     with pytest.raises(SystemExit):
         main(["experiment", "--preset", "demo", "--out", str(experiment)])
     assert "holds an experiment with other settings" in capsys.readouterr().err
+
+
+def test_a_sentences_file_missing_a_task_is_refused_before_anything_runs(tmp_path: Path, capsys):
+    sentences = tmp_path / "ours.txt"
+    sentences.write_text("reach-v3: touch the red dot\n")
+    with pytest.raises(SystemExit):
+        main(["experiment", "--preset", "demo", "--out", str(tmp_path / "exp"), "--sentences", str(sentences)])
+    assert f"{sentences} has no sentence for" in capsys.readouterr().err
+    assert not (tmp_path / "exp").exists()

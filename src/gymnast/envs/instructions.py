@@ -33,8 +33,9 @@ from __future__ import annotations
 import difflib
 import hashlib
 import operator
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from types import MappingProxyType
 
 SPLITS = ("train", "heldout")
@@ -551,9 +552,44 @@ def instruction_for(task: str, seed: int, split: str = "train") -> str:
         ValueError: if the task or the split is unknown.
         TypeError: if the seed is not an integer.
     """
-    options = all_instructions(task, split)
+    return pick_sentence(all_instructions(task, split), f"{task}|{split}", seed)
+
+
+def pick_sentence(options: Sequence[str], key: str, seed: int) -> str:
+    """One of `options`, chosen by (`key`, `seed`) the same way in every process and machine."""
     seed = operator.index(seed)
-    # hash() is salted per process (PYTHONHASHSEED), so use a fixed digest. Mixing in the task
-    # keeps seed s from choosing the same position (e.g. the plainest wording) for every task.
-    digest = hashlib.blake2b(f"{task}|{split}|{seed}".encode(), digest_size=8).digest()
+    # hash() is salted per process (PYTHONHASHSEED), so use a fixed digest. Mixing in the key (the
+    # task) keeps seed s from choosing the same position (e.g. the plainest wording) for every task.
+    digest = hashlib.blake2b(f"{key}|{seed}".encode(), digest_size=8).digest()
     return options[int.from_bytes(digest, "big") % len(options)]
+
+
+def read_sentences(path: str | Path) -> dict[str, tuple[str, ...]]:
+    """A user's own instructions: a text file of ``task: sentence`` lines (several per task
+    allowed; blank lines and lines starting with ``#`` are skipped).
+
+    Raises:
+        FileNotFoundError: no such file.
+        ValueError: a line that is not ``task: sentence``, an unknown task or an empty sentence
+            (the message names the file and the line), or a file with no sentences.
+    """
+    path = Path(path)
+    sentences: dict[str, list[str]] = {}
+    for number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), start=1):
+        line = line.strip()
+        if not line or line.startswith("#"):
+            continue
+        task, colon, sentence = line.partition(":")
+        where = f"{path}, line {number}"
+        if not colon:
+            raise ValueError(f"{where}: expected 'task: sentence', got {line!r}")
+        if not sentence.strip():
+            raise ValueError(f"{where}: the sentence for {task.strip()!r} is empty")
+        try:
+            _lookup(task.strip())
+        except ValueError as e:
+            raise ValueError(f"{where}: {e}") from None
+        sentences.setdefault(task.strip(), []).append(sentence.strip())
+    if not sentences:
+        raise ValueError(f"{path}: no 'task: sentence' lines")
+    return {task: tuple(options) for task, options in sentences.items()}

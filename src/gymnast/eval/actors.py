@@ -141,14 +141,16 @@ def load_run_world_model(run_dir: str) -> WorldModel:
 
 
 @functools.lru_cache(maxsize=1)
-def load_run_policy(run_dir: str) -> Policy:
-    """This process's policy from `run_dir`, loaded once and reused across episodes."""
+def load_run_policy(run_dir: str, device: str = "cpu") -> Policy:
+    """This process's policy from `run_dir` on `device` (a `gymnast.utils.device` name), loaded
+    once and reused across episodes."""
     import torch
 
     from gymnast.policy.load import load_policy
+    from gymnast.utils.device import resolve_device
 
     if multiprocessing.parent_process() is not None:
         # Each worker is one of several processes on the cores; torch's default of one thread
         # per core in every one of them would oversubscribe the CPU many times over.
         torch.set_num_threads(1)
-    return load_policy(Path(run_dir))
+    return load_policy(Path(run_dir)).to(resolve_device(device))

@@ -30,13 +30,14 @@ from gymnast.eval.actors import PolicyActor, load_run_policy
 from gymnast.envs.engine import ScriptedActor, play_episode
 from gymnast.envs.experts import ScriptedExpert
 from gymnast.envs.gap import get_gap
-from gymnast.envs.instructions import SPLITS
+from gymnast.envs.instructions import SPLITS, pick_sentence, read_sentences
 from gymnast.envs.metaworld import MetaWorldEnv
 from gymnast.envs.parallel import cached_env, parallel_map
 from gymnast.envs.perturb import get_perturbation
 from gymnast.envs.tasks import eval_seed, resolve_tasks
 from gymnast.eval.stats import success_summary
 from gymnast.utils.atomic import atomic_path, write_json
+from gymnast.utils.device import resolve_device
 from gymnast.utils.video import BROWSER_CODEC, encode_video
 
 if TYPE_CHECKING:
@@ -69,8 +70,15 @@ class EvalConfig:
     instruction: str | None = None
     """Give the policy this sentence in every episode instead of the task's paraphrases (your own
     wording of the task); one task only."""
+    sentences: Path | None = None
+    """A file of ``task: sentence`` lines (your own wording; several per task allowed): each
+    episode's instruction is one of its task's sentences, chosen by its seed, instead of the
+    split's paraphrases. Every evaluated task needs one."""
     workers: int = 2
     """Processes that run episodes in parallel (one per core is best)."""
+    device: str = "cpu"
+    """Where the policy runs in each worker: cpu, cuda, cuda:N or auto (CUDA when torch sees a GPU).
+    The CPU by default: one episode's forward passes are small, and the simulator is the cost."""
     videos_per_task: int = 1
     """Episodes of each task (the first ones) saved as mp4 videos; 0 saves none."""
     first_eval_index: int = 0
@@ -93,6 +101,12 @@ class EvalConfig:
                 f"{self.env.image_size} (pick an even size or videos_per_task=0)"
             )
         # Fail here, in the calling process, rather than in every worker.
+        if self.sentences is not None:
+            if self.instruction is not None:
+                raise ValueError("EvalConfig: give your wording as one instruction or as a sentences file, not both")
+            missing = [task for task in resolve_tasks(self.tasks) if task not in self.own_sentences]
+            if missing:
+                raise ValueError(f"{self.sentences} has no sentence for {', '.join(missing)}")
         if self.instruction is not None:
             if not self.instruction.strip():
                 raise ValueError("EvalConfig.instruction is empty; give a sentence or leave it out")
@@ -102,8 +116,14 @@ class EvalConfig:
         resolve_tasks(self.tasks)
         get_perturbation(self.perturb)
         get_gap(self.gap)
+        resolve_device(self.device)
         eval_seed(self.first_eval_index)
         eval_seed(self.first_eval_index + self.episodes - 1)
+
+    @property
+    def own_sentences(self) -> dict[str, tuple[str, ...]]:
+        """The sentences file's task -> sentences (empty without one)."""
+        return read_sentences(self.sentences) if self.sentences is not None else {}
 
     @property
     def task_list(self) -> tuple[str, ...]:
@@ -134,16 +154,18 @@ class EvalJob:
     instruction_split: str
     video_path: str | None = None
     instruction: str | None = None
+    device: str = "cpu"
 
 
 def plan_episodes(config: EvalConfig, policy: str, video_dir: Path) -> list[EvalJob]:
     """Every episode the configuration asks for, task by task, in seed order."""
-    jobs = []
+    jobs, own = [], config.own_sentences
     for task in config.task_list:
         for i, seed in enumerate(config.seeds):
             video = str(video_dir / f"{task}_{seed}.mp4") if i < config.videos_per_task else None
+            instruction = pick_sentence(own[task], task, seed) if own else config.instruction
             jobs.append(EvalJob(task, seed, policy, config.env, config.gap, config.perturb,
-                                config.instruction_split, video, config.instruction))
+                                config.instruction_split, video, instruction, config.device))
     return jobs
 
 
@@ -165,7 +187,7 @@ def run_episode(job: EvalJob, policy: Policy | None = None) -> dict:
     elif job.policy == EXPERT:
         actor = ScriptedActor(ScriptedExpert(job.task))
     else:
-        actor = PolicyActor(load_run_policy(job.policy))
+        actor = PolicyActor(load_run_policy(job.policy, job.device))
     run = play_episode(env, actor, job.seed, record=("frames",) if job.video_path else (), instruction=job.instruction)
     if job.video_path:
         with atomic_path(job.video_path) as tmp:
@@ -245,8 +267,8 @@ def format_summary(report: dict) -> str:
 
 
 def _json_ready(value: dict) -> dict:
-    # Tuples become lists, so the returned report equals the one read back from the file.
-    return json.loads(json.dumps(value))
+    # Tuples become lists and paths strings, so the returned report equals the one read back from the file.
+    return json.loads(json.dumps(value, default=str))
 
 
 def _resolve_policy(policy: str | Policy, config: EvalConfig) -> tuple[str, Policy | None]:

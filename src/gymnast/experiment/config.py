@@ -11,9 +11,12 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass, field
+from pathlib import Path
 
 from gymnast.config import CommaFloats
 from gymnast.data.collect import CollectConfig
+from gymnast.envs.instructions import read_sentences
+from gymnast.envs.tasks import resolve_tasks
 from gymnast.policy.sft import SFT_PRESETS, SFTConfig
 from gymnast.reward.train_judge import JUDGE_PRESETS, JudgeTrainConfig
 from gymnast.rl.config import RL_PRESETS, RLConfig
@@ -58,6 +61,9 @@ class ExperimentConfig:
     """Real-world episodes per task for every arm's final evaluation (evaluation seeds)."""
     robustness_episodes: int = 10
     """Episodes per task under each perturbation (minor, major) and with held-out instructions."""
+    sentences: Path | None = None
+    """The language check's instructions: a file of ``task: sentence`` lines (your own wording,
+    several per task allowed) in place of the held-out paraphrases. Every task needs one."""
     worldgym_episodes: int = 10
     """Imagined episodes per task for each policy's WorldGym estimate (and real ones for the
     policies that have no final evaluation)."""
@@ -75,6 +81,10 @@ class ExperimentConfig:
         for name in ("eval_episodes", "robustness_episodes", "worldgym_episodes", "workers"):
             if getattr(self, name) < 1:
                 raise ValueError(f"ExperimentConfig.{name} must be at least 1, got {getattr(self, name)}")
+        if self.sentences is not None:  # checked now, not hours later at the language check
+            missing = [task for task in resolve_tasks(self.tasks) if task not in read_sentences(self.sentences)]
+            if missing:
+                raise ValueError(f"{self.sentences} has no sentence for {', '.join(missing)}")
         if not all(0 < noise < math.inf for noise in self.worldgym_noise):
             raise ValueError(f"ExperimentConfig.worldgym_noise must be finite and positive (noise 0 is the SFT arm, "
                              f"random actions are worldgym_random), got {self.worldgym_noise}")

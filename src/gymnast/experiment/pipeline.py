@@ -54,7 +54,7 @@ def run_experiment(config: ExperimentConfig, out: Path, reuse: dict[str, Path] |
             _evaluate(stages, f"eval_{name}_{perturb}", policies[name], config, out, config.robustness_episodes, env,
                       progress, perturb=perturb)
         _evaluate(stages, f"eval_{name}_heldout", policies[name], config, out, config.robustness_episodes, env,
-                  progress, instruction_split="heldout")
+                  progress, instruction_split="heldout", sentences=config.sentences)
     stages.run("worldgym", lambda: _worldgym(stages, config, out, policies, wm, judge, env, progress))
     return write_report(out, stages, config)
 
@@ -148,13 +148,14 @@ def _train_arm(stages: Stages, name: str, config: ExperimentConfig, out: Path, s
 
 
 def _evaluate(stages: Stages, stage: str, policy: Path, config: ExperimentConfig, out: Path, episodes: int,
-              env: EnvConfig, progress: bool, perturb: str = "none", instruction_split: str = "train") -> dict:
+              env: EnvConfig, progress: bool, perturb: str = "none", instruction_split: str = "train",
+              sentences: Path | None = None) -> dict:
     """A real-world evaluation of `policy` as a stage; its record keeps the summary figures."""
     from gymnast.eval.evaluate import EvalConfig, evaluate
 
     def work() -> dict:
         settings = EvalConfig(tasks=config.tasks, episodes=episodes, perturb=perturb, instruction_split=instruction_split,
-                              workers=config.workers, videos_per_task=1 if perturb == "none" else 0,
+                              sentences=sentences, workers=config.workers, videos_per_task=1 if perturb == "none" else 0,
                               env=dataclasses.replace(env))
         report = evaluate(str(policy), settings, out / "eval" / f"{stage.removeprefix('eval_')}.json", progress)
         keep = ("success", "ci_low", "ci_high", "episodes", "successes", "per_task", "real_interactions", "videos")
@@ -195,7 +196,7 @@ def _save_settings(out: Path, config: ExperimentConfig) -> None:
     experiments in one table, so it is refused."""
     import json
 
-    settings = json.loads(json.dumps(dataclasses.asdict(config)))
+    settings = json.loads(json.dumps(dataclasses.asdict(config), default=str))  # paths as strings
     path = out / "config.json"
     if path.exists() and json.loads(path.read_text()) != settings:
         raise ValueError(f"{out} holds an experiment with other settings ({path}); use a new --out, the same "

@@ -107,6 +107,7 @@ def build_summary(stages: Stages, config: ExperimentConfig) -> dict:
         "worldgym": worldgym["policies"],
         "robustness": robustness,
         "language": language,
+        "language_sentences": str(config.sentences) if config.sentences is not None else None,
         "curves": _curves(stages),
         "watch": _watch(stages),
         "judge": {k: v for k, v in (judge_metrics or {}).items() if k.startswith(("real_", "imagined_"))},

@@ -72,7 +72,9 @@ def _per_task_table(summary: dict) -> list[str]:
 
 
 def _robustness_tables(summary: dict) -> list[str]:
-    lines = ["| policy | no perturbation | minor (2.5 cm) | major (5 cm) | trained instructions | held-out paraphrases |",
+    own = summary.get("language_sentences")  # None in experiments from before the sentences file
+    wording = f"your sentences ({own})" if own else "held-out paraphrases"
+    lines = [f"| policy | no perturbation | minor (2.5 cm) | major (5 cm) | trained instructions | {wording} |",
              "|---|---|---|---|---|---|"]
     for name, row in summary["robustness"].items():
         language = summary["language"][name]
