@@ -1,6 +1,7 @@
 """The levers against exploiting the world model, side by side on reach-v3 with the reward-hacking
 watch: no lever, a stop where the world-model ensemble disagrees, MOPO's penalty on disagreement,
-and a KL anchor to the SFT policy (docs/rl.md, "Resisting exploitation").
+a KL anchor to the SFT policy and an imitation anchor on expert demonstrations (docs/rl.md,
+"Resisting exploitation").
 
 Every arm is one `gymnast rl` run in the ensemble's imagination with the judge reward and the
 same seed, settings and start draws; only its lever differs. The no-lever arm runs first, and the
@@ -33,7 +34,7 @@ from gymnast.utils.metrics import read_metrics
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "results" / "rl" / "levers"
-ARMS = ("none", "stop", "penalty", "kl")
+ARMS = ("none", "stop", "penalty", "kl", "imitation")
 WATCH = ("eval/watch_imagined_success", "eval/watch_false_success", "eval/watch_real_success", "eval/watch_agreement")
 
 
@@ -47,6 +48,7 @@ def main() -> None:
     parser.add_argument("--stop", type=float, help="disagreement stop threshold (default: from the no-lever arm)")
     parser.add_argument("--penalty", type=float, help="disagreement penalty weight (default: from the no-lever arm)")
     parser.add_argument("--kl", type=float, default=0.1, help="KL anchor weight")
+    parser.add_argument("--imitation", type=float, default=0.1, help="imitation anchor weight (VLA-RFT's auxiliary loss)")
     parser.add_argument("--out", type=Path, default=ROOT / "runs" / "levers")
     parser.add_argument("--report-only", action="store_true", help="only tabulate the arms already run in --out")
     args = parser.parse_args()
@@ -67,7 +69,8 @@ def main() -> None:
     penalty = args.penalty or 0.5 / first["first_step"]["rollout/disagreement_mean"]
     for arm, lever in (("stop", ["--disagreement-stop", f"{stop:.6g}"]),
                        ("penalty", ["--disagreement-penalty", f"{penalty:.6g}"]),
-                       ("kl", ["--kl-coef", str(args.kl)])):
+                       ("kl", ["--kl-coef", str(args.kl)]),
+                       ("imitation", ["--imitation-coef", str(args.imitation)])):
         results["arms"][arm] = train(arm, lever, common, args.out)
     report(results)
 
@@ -98,9 +101,9 @@ def measure(run: Path) -> dict:
     summary = json.loads((run / "summary.json").read_text())
     settings = json.loads((run / "config.json").read_text())["rl"]
     levers = {"disagreement_stop": "--disagreement-stop", "disagreement_penalty": "--disagreement-penalty",
-              "kl_coef": "--kl-coef"}
+              "kl_coef": "--kl-coef", "imitation_coef": "--imitation-coef"}
     return {
-        "lever": " ".join(f"{flag} {settings[name]:.4g}" for name, flag in levers.items() if settings[name]) or "none",
+        "lever": " ".join(f"{flag} {settings[name]:.4g}" for name, flag in levers.items() if settings.get(name)) or "none",
         "wall_s": summary["wall_s"],
         "first_step": steps[0],
         "judged_train_success": [m.get("rollout/success") for m in steps],

@@ -66,3 +66,25 @@ def test_gymnast_eval_runs_a_flow_policy(flow_policy, tmp_path, capsys):
     main(["eval", "--policy", str(flow_policy), "--tasks", "reach-v3", "--episodes", "1", "--workers", "1",
           "--out", str(out), "--videos-per-task", "0"])
     assert json.loads(out.read_text())["episodes"] == 1
+
+
+@pytest.mark.parametrize("gate, active", [(0.0, 1.0), (1e9, 0.0)])
+def test_vla_rfts_imitation_loss_joins_the_update_unless_the_kl_gate_holds_it(gate, active, flow_policy, tmp_path,
+                                                                              capsys):
+    from gymnast.utils.metrics import read_metrics
+
+    out = tmp_path / "run"
+    main(["rl", "--policy", str(flow_policy), "--env", "sim", "--reward", "sim-dense", "--out", str(out),
+          "--preset", "debug", "--imitation-coef", "0.5", "--imitation-kl-gate", str(gate)])
+    updates = [m for m in read_metrics(out) if "train/imitation_active" in m]
+    assert updates and all(m["train/imitation_active"] == active for m in updates)
+    assert all(("train/imitation_loss" in m) == bool(active) for m in updates)
+    if gate > 0:  # the gate reads the KL to the starting policy, which is then kept
+        assert all("train/kl" in m for m in updates)
+
+
+def test_the_imitation_loss_needs_expert_demonstrations_of_the_tasks(flow_policy, tmp_path, capsys):
+    with pytest.raises(SystemExit):
+        main(["rl", "--policy", str(flow_policy), "--env", "sim", "--reward", "sim-dense", "--out", str(tmp_path / "r"),
+              "--preset", "debug", "--imitation-coef", "0.5", "--tasks", "push-v3", "--fresh-scenes"])
+    assert "has no successful expert episode of push-v3 to imitate" in capsys.readouterr().err

@@ -70,9 +70,15 @@ def evaluation_starts(tasks: Sequence[str], episodes: int, config: EnvConfig) ->
 
 
 class StartSampler:
-    """`sampler(count, generator)`: start states drawn uniformly from a pool (a dataset's scenes, or
-    the scenes a run practises on), or (`pool` None) fresh scenes of `tasks` from random data
-    seeds; with `instruction` in place of their own (see `own_instruction`).
+    """`sampler(count, generator)`: `count` start states, the tasks taking turns from a random first
+    one, each a random scene of its task: from a pool (a dataset's scenes, or the scenes a run
+    practises on), or (`pool` None) a fresh scene from a random data seed; with `instruction` in
+    place of their own (see `own_instruction`).
+
+    Taking turns keeps every step's batch balanced over the tasks (a step does not happen to
+    practise one task only), and it bounds how many environments of each task a simulator worker
+    keeps: about count / tasks of each, where independent draws made it build up to `count` of
+    every task over a run.
 
     A fresh scene's first frame is rendered by a reset of the real world: no action is taken, so it
     costs no real interaction, but it is a look at the real world, and `rendered` counts them.
@@ -82,18 +88,22 @@ class StartSampler:
                  instruction: str | None = None) -> None:
         if pool is not None and not pool:
             raise ValueError("no start states to draw from")
-        self.tasks, self.pool, self.config, self.instruction = list(tasks), pool, config, instruction
+        self.config, self.instruction = config, instruction
+        self.pool = None if pool is None else {task: [s for s in pool if s.task == task] for task in
+                                               dict.fromkeys(start.task for start in pool)}
+        self.tasks = list(self.pool) if self.pool is not None else list(tasks)
         self.rendered = 0
 
     def __call__(self, count: int, generator: torch.Generator) -> list[Start]:
+        first = int(torch.randint(len(self.tasks), (1,), generator=generator))
+        turns = [self.tasks[(first + i) % len(self.tasks)] for i in range(count)]
         if self.pool is not None:
-            picks = torch.randint(len(self.pool), (count,), generator=generator).tolist()
-            return own_instruction([self.pool[i] for i in picks], self.instruction)
-        picks = torch.randint(len(self.tasks), (count,), generator=generator).tolist()
+            picks = [self.pool[task][int(torch.randint(len(self.pool[task]), (1,), generator=generator))]
+                     for task in turns]
+            return own_instruction(picks, self.instruction)
         seeds = torch.randint(DATA_SEEDS.start, DATA_SEEDS.stop, (count,), generator=generator).tolist()
         self.rendered += count
-        return own_instruction(scene_starts([(self.tasks[t], seed) for t, seed in zip(picks, seeds)], self.config),
-                               self.instruction)
+        return own_instruction(scene_starts(list(zip(turns, seeds)), self.config), self.instruction)
 
 
 def own_instruction(starts: Sequence[Start], instruction: str | None) -> list[Start]:

@@ -63,6 +63,15 @@ class RLConfig:
     disagreement from its reward before group normalisation, as MOPO does (0: no penalty)."""
     entropy_coef: float = 0.0
     """Weight of the entropy bonus."""
+    imitation_coef: float = 0.0
+    """Weight of an imitation loss on the dataset's expert demonstrations of the run's tasks, added
+    to every update (VLA-RFT's auxiliary flow-matching loss for a flow policy, the token
+    cross-entropy for the tokenized one); 0: none."""
+    imitation_kl_gate: float = 0.0
+    """Add the imitation loss only while the update's KL to the starting policy exceeds this
+    (0: always). A starting policy is kept for it, as for --kl-coef."""
+    imitation_batch: int = 64
+    """Demonstration samples per imitation loss."""
     normalize_std: bool = True
     """Divide group advantages by the group's standard deviation."""
     keep_low: float = 0.1
@@ -109,14 +118,14 @@ class RLConfig:
 
     def __post_init__(self) -> None:
         for name in ("steps", "starts_per_step", "group_size", "horizon", "max_rounds", "minibatches", "micro_batch",
-                     "workers", "eval_episodes", "checkpoint_every", "video_every"):
+                     "workers", "eval_episodes", "checkpoint_every", "video_every", "imitation_batch"):
             if getattr(self, name) < 1:
                 raise ValueError(f"RLConfig.{name} must be at least 1, got {getattr(self, name)}")
         if self.group_size < 2:
             raise ValueError(f"RLConfig.group_size must be at least 2 (advantages compare a group), got {self.group_size}")
         if self.temperature <= 0:
             raise ValueError(f"RLConfig.temperature must be positive, got {self.temperature}")
-        for name in ("kl_coef", "disagreement_stop", "disagreement_penalty"):
+        for name in ("kl_coef", "disagreement_stop", "disagreement_penalty", "imitation_coef", "imitation_kl_gate"):
             if getattr(self, name) < 0:
                 raise ValueError(f"RLConfig.{name} must be at least 0, got {getattr(self, name)}")
         if self.scenes is not None:

@@ -43,6 +43,7 @@ from gymnast.reward.base import Reward, check_fits
 from gymnast.rl import grpo
 from gymnast.rl.config import RLConfig, RLRun
 from gymnast.rl.evaluate import evaluate_in_env, verdicts, watch_hacking
+from gymnast.rl.imitation import ImitationAnchor
 from gymnast.rl.rollout import (Rollouts, collect_rollouts, concat_rollouts, dataset_starts, score_groups,
                                 tasks_with_starts)
 from gymnast.rl.videos import write_group_video
@@ -99,7 +100,12 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
     schedule = torch.optim.lr_scheduler.LambdaLR(optimizer, warmup_cosine(config.warmup_steps, 10**12))
     sampler = torch.Generator().manual_seed(config.seed)  # start states and env seeds
     actions = torch.Generator().manual_seed(config.seed + 1)  # the policy's token draws
-    reference = _frozen_copy(policy) if config.kl_coef > 0 else None
+    reference = _frozen_copy(policy) if config.kl_coef > 0 or config.imitation_kl_gate > 0 else None
+    anchor = None
+    if config.imitation_coef > 0:
+        demos = Path(run_spec.data or policy_dataset(run_spec.policy))  # the experts', whatever the starts
+        anchor = ImitationAnchor.from_dataset(demos, tasks, policy.chunk_size, config.imitation_coef,
+                                              config.imitation_kl_gate, config.imitation_batch)
     state = {"real_interactions": 0, "eval_real_interactions": 0, "watch_real_interactions": 0,
              "reset_frames": len(practice or ()), "curve": [], "wall_s": 0.0}
     start_step = 0
@@ -150,7 +156,8 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
             done = step + 1
             started = time.perf_counter()
             batch, scores, values = rl_step(envs.train(config.starts_per_step * config.group_size), policy, reward,
-                                            draw_starts, config, sampler, actions, optimizer, schedule, reference)
+                                            draw_starts, config, sampler, actions, optimizer, schedule, reference,
+                                            anchor)
             interactions = int(values.pop("rollout/interactions"))
             if env.real_interactions:
                 state["real_interactions"] += interactions
@@ -185,7 +192,7 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
 
 def rl_step(env: VectorEnv, policy, reward: Reward, draw_starts: Callable[[int, torch.Generator], list[Start]],
             config: RLConfig, sampler: torch.Generator, actions: torch.Generator, optimizer: torch.optim.Optimizer,
-            schedule: torch.optim.lr_scheduler.LRScheduler, reference=None
+            schedule: torch.optim.lr_scheduler.LRScheduler, reference=None, anchor: ImitationAnchor | None = None
             ) -> tuple[Rollouts | None, torch.Tensor | None, dict[str, float]]:
     """One RL step, from start states to the policy update.
 
@@ -203,6 +210,8 @@ def rl_step(env: VectorEnv, policy, reward: Reward, draw_starts: Callable[[int, 
         sampler: draws the start states and the env's reset seeds.
         actions: draws the policy's tokens.
         reference: the frozen starting policy of the KL penalty, or None.
+        anchor: the imitation loss added to the update (`gymnast.rl.imitation`), or None; its
+            demonstrations are drawn with `actions`.
 
     Returns:
         (the kept rollouts or None, their (R,) scores or None, metrics), the metrics including
@@ -256,7 +265,8 @@ def rl_step(env: VectorEnv, policy, reward: Reward, draw_starts: Callable[[int, 
                 raise ValueError("disagreement_penalty needs rollouts from a world-model ensemble, which report disagreement")
             rewards = grpo.penalise_disagreement(scores, batch.disagreement, config.disagreement_penalty)
         advantages, advantage_metrics = grpo.group_advantages(rewards.view(-1, size), config.normalize_std)
-        values |= advantage_metrics | update_policy(policy, optimizer, batch, advantages.reshape(-1), config, reference)
+        values |= advantage_metrics | update_policy(policy, optimizer, batch, advantages.reshape(-1), config, reference,
+                                                    anchor, actions)
     schedule.step()
     values["time/update_s"] = time.perf_counter() - updated
     return batch, scores, values
@@ -284,7 +294,8 @@ def disagreement_metrics(rollouts: Rollouts, config: RLConfig) -> dict[str, floa
 
 
 def update_policy(policy, optimizer: torch.optim.Optimizer, batch: Rollouts, advantages: torch.Tensor,
-                  config: RLConfig, reference=None) -> dict[str, float]:
+                  config: RLConfig, reference=None, anchor: ImitationAnchor | None = None,
+                  generator: torch.Generator | None = None) -> dict[str, float]:
     """`minibatches` clipped policy-gradient steps on the batch's policy calls; returns metrics.
 
     Every policy call (r, s) that executed at least one action is a row; rows are processed in
@@ -300,6 +311,7 @@ def update_policy(policy, optimizer: torch.optim.Optimizer, batch: Rollouts, adv
         if total == 0:
             continue
         optimizer.zero_grad(set_to_none=True)
+        part_values: dict[str, float] = {}
         for micro in part.split(config.micro_batch):
             r, s = rows_r[micro], rows_s[micro]
             obs, texts, tokens = batch.observations[r, s], [instructions[i] for i in r.tolist()], batch.tokens[r, s]
@@ -319,7 +331,16 @@ def update_policy(policy, optimizer: torch.optim.Optimizer, batch: Rollouts, adv
                                             entropy, config.entropy_coef)
             loss.backward()
             for key, value in values.items():
-                totals[key] = totals.get(key, 0.0) + value / len(parts)
+                part_values[key] = part_values.get(key, 0.0) + value
+        if anchor is not None:
+            active = anchor.active(part_values.get("train/kl"))
+            if active:
+                imitation, values = anchor.loss(policy, generator)
+                imitation.backward()
+                part_values |= values
+            part_values["train/imitation_active"] = float(active)
+        for key, value in part_values.items():
+            totals[key] = totals.get(key, 0.0) + value / len(parts)
         norm = torch.nn.utils.clip_grad_norm_(policy.parameters(), config.max_grad_norm).item()
         totals["train/grad_norm"] = totals.get("train/grad_norm", 0.0) + norm / len(parts)
         optimizer.step()
