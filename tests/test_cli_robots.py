@@ -3,7 +3,6 @@ from the command line, with no code change; what cannot work is refused by name 
 
 from __future__ import annotations
 
-import dataclasses
 import json
 from pathlib import Path
 
@@ -52,11 +51,8 @@ def test_another_robots_dataset_trains_every_model_with_the_debug_presets(robot,
 
 @pytest.mark.slow
 def test_eval_wm_fits_the_frames_as_the_world_model_was_trained(tmp_path, capsys):
-    from gymnast.world_model.train import WM_PRESETS, train_world_model
-
     data = write_robot_dataset(tmp_path / "data", episodes=6, steps=10, height=64, width=48)
-    config = dataclasses.replace(WM_PRESETS["debug"], fit="crop")
-    train_world_model(data, tmp_path / "wm", config, progress=False)
+    main(["train-wm", "--data", str(data), "--out", str(tmp_path / "wm"), "--preset", "debug", "--fit", "crop"])
     assert json.loads((tmp_path / "wm" / "config.json").read_text())["train"]["fit"] == "crop"
     main(["eval-wm", "--wm", str(tmp_path / "wm"), "--data", str(data), "--out", str(tmp_path / "report.json")])
     report = json.loads((tmp_path / "report.json").read_text())
@@ -98,3 +94,12 @@ def test_what_cannot_work_is_one_line_naming_the_field_before_training(case, tmp
         error = capsys.readouterr().err
         assert message in error and "Traceback" not in error, command
         assert not out.exists() or not any(out.iterdir()), command
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("command, section", [("sft", "sft"), ("train-judge", "train")])
+def test_the_frame_fit_is_a_flag_saved_with_the_run(command, section, tmp_path, capsys):
+    data = write_robot_dataset(tmp_path / "data", episodes=6, steps=10, height=64, width=48)
+    main([command, "--data", str(data), "--out", str(tmp_path / "run"), "--preset", "debug", "--fit", "crop"])
+    assert json.loads((tmp_path / "run" / "config.json").read_text())[section]["fit"] == "crop"
+    capsys.readouterr()

@@ -15,6 +15,7 @@ from gymnast.cli_models import (Preset, eval_judge, eval_wm, experiment, imagina
                                 rl, serve_judge, train_judge, train_wm, worldgym)
 from gymnast.cli_settings import resolve, saved_inputs
 from gymnast.config import EnvConfig
+from gymnast.data.frames import Fit
 from gymnast.data.collect import CollectConfig
 from gymnast.data.summary import format_success_table
 from gymnast.eval.evaluate import EvalConfig
@@ -88,6 +89,7 @@ def sft(
     seed: int | None = None,
     camera: str | None = None,
     policy_type: Literal["tokens", "flow"] | None = None,
+    fit: Fit | None = None,
 ) -> None:
     """Behaviour-clone a VLA on N successful expert demonstrations per task.
 
@@ -104,13 +106,15 @@ def sft(
         camera: the dataset camera to read (e.g. front); default: its first video (else image) feature.
         policy_type: the policy family: tokens (the tokenized VLA, the default) or flow (the
             flow-matching VLA of VLA-RFT). Saved with the checkpoint; rl and eval read it there.
+        fit: how frames that are not the model's square size are fitted: resize (squash the whole
+            frame) or crop (the central square); saved with the run.
     """
     from gymnast.policy.sft import SFT_PRESETS, saved_sft_config, train_sft
 
     config, inputs = resolve(
         "sft", out, resume, SFT_PRESETS[preset], inputs={"data": data}, required=("data",),
         overrides={"demos_per_task": demos_per_task, "steps": steps, "tasks": tasks, "seed": seed,
-                   "vla.vision": vision, "camera": camera, "policy": policy_type},
+                   "vla.vision": vision, "camera": camera, "policy": policy_type, "fit": fit},
         saved=lambda: (saved_sft_config(out), saved_inputs(out, "data")))
     checkpoint = train_sft(inputs["data"], out, config, resume=resume)
     print(f"policy: {checkpoint}")

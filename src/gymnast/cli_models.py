@@ -14,6 +14,7 @@ import tyro
 
 from gymnast.cli_settings import flags_of, resolve, saved_inputs
 from gymnast.config import CommaFloats
+from gymnast.data.frames import Fit
 from gymnast.experiment.worldgym import DEFAULT_NOISE
 from gymnast.envs.kinds import EnvName, env_kind
 from gymnast.reward.chat_server import ChatLimits
@@ -35,6 +36,7 @@ def train_wm(
     init: Path | None = None,
     extra_data: tuple[Path, ...] = (),
     camera: str | None = None,
+    fit: Fit | None = None,
 ) -> None:
     """Train the embedded world model on every episode of a dataset (held-out scenes excepted).
 
@@ -49,13 +51,15 @@ def train_wm(
         init: fine-tune: start from the weights of this world-model run or checkpoint (same model spec).
         extra_data: more dataset directories to train on (same image size), split by the same scene hash.
         camera: the dataset camera to read (e.g. front); default: its first video (else image) feature.
+        fit: how frames that are not the model's square size are fitted: resize (squash the whole
+            frame) or crop (the central square); saved with the run.
     """
     from gymnast.world_model.train import WM_PRESETS, saved_train_config, train_world_model
 
     config, inputs = resolve(
         "train-wm", out, resume, WM_PRESETS[preset], inputs={"data": data}, required=("data",),
         overrides={"steps": steps, "seed": seed, "moving_weight": moving_weight, "init": init,
-                   "extra_data": extra_data or None, "camera": camera},
+                   "extra_data": extra_data or None, "camera": camera, "fit": fit},
         saved=lambda: (saved_train_config(out), saved_inputs(out, "data")))
     checkpoint = train_world_model(inputs["data"], out, config, resume=resume)
     print(f"world model: {checkpoint}")
@@ -149,6 +153,7 @@ def train_judge(
     extra_data: tuple[Path, ...] = (),
     init: Path | None = None,
     camera: str | None = None,
+    fit: Fit | None = None,
 ) -> None:
     """Train the embedded success judge on real episodes (and their re-imaginings with --wm), choose
     its threshold on validation scenes, then report its TPR and FPR on held-out real and imagined videos.
@@ -165,13 +170,15 @@ def train_judge(
         extra_data: more datasets to train and measure on (e.g. a policy's recorded rollouts).
         init: a judge run (or checkpoint) to fine-tune instead of starting from random weights.
         camera: the dataset camera to read (e.g. front); default: its first video (else image) feature.
+        fit: how frames that are not the model's square size are fitted: resize (squash the whole
+            frame) or crop (the central square); saved with the run.
     """
     from gymnast.reward.train_judge import JUDGE_PRESETS, saved_judge_config
     from gymnast.reward.train_judge import train_judge as train
 
     config, inputs = resolve(
         "train-judge", out, resume, JUDGE_PRESETS[preset], inputs={"data": data, "wm": wm}, required=("data",),
-        overrides={"steps": steps, "kind": kind, "extra_data": extra_data or None, "init": init, "camera": camera},
+        overrides={"steps": steps, "kind": kind, "extra_data": extra_data or None, "init": init, "camera": camera, "fit": fit},
         saved=lambda: (saved_judge_config(out), saved_inputs(out, "data", "wm")))
     report = train(inputs["data"], out, config, wm=inputs["wm"], resume=resume)
     print(json.dumps({k: v for k, v in report.items() if k.startswith(("real", "imagined"))}, indent=2))
