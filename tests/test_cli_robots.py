@@ -103,3 +103,43 @@ def test_the_frame_fit_is_a_flag_saved_with_the_run(command, section, tmp_path, 
     main([command, "--data", str(data), "--out", str(tmp_path / "run"), "--preset", "debug", "--fit", "crop"])
     assert json.loads((tmp_path / "run" / "config.json").read_text())[section]["fit"] == "crop"
     capsys.readouterr()
+
+
+@pytest.fixture(scope="module")
+def robot_models(tmp_path_factory) -> dict[str, Path]:
+    """Another robot's dataset (26-D actions, 120x160 frames, v2.1) and the three models trained on it."""
+    root = tmp_path_factory.mktemp("robot")
+    paths = {"data": write_robot_dataset(root / "data", episodes=6, steps=10, action_dim=26, action_scale=3.0)}
+    for command in ("train-wm", "sft", "train-judge"):
+        paths[command] = root / command
+        main([command, "--data", str(paths["data"]), "--out", str(paths[command]), "--preset", "debug"])
+    return paths
+
+
+def _rl_on_robot(models: dict[str, Path], out: Path, *extra: str) -> None:
+    main(["rl", "--policy", str(models["sft"]), "--env", "imagined", "--wm", str(models["train-wm"]),
+          "--reward", f"judge:{models['train-judge']}", "--out", str(out), "--preset", "debug", *extra])
+
+
+@pytest.mark.slow
+def test_rl_in_imagination_practises_on_another_robots_own_tasks(robot_models, tmp_path, capsys):
+    out = tmp_path / "rl"
+    _rl_on_robot(robot_models, out, "--no-real-eval", "--watch-every", "0")
+    summary = json.loads((out / "summary.json").read_text())
+    assert [point["step"] for point in summary["curve"]] == [0, 2]
+    assert summary["real_interactions"] == summary["eval_real_interactions"] == 0
+    tasks = {info.task for info in EpisodeDataset(robot_models["data"]).episodes}
+    assert set(summary["curve"][0]) >= {f"eval/own_success/{task}" for task in tasks}  # its own tasks, evaluated
+    saved = json.loads((out / "config.json").read_text())
+    assert saved["rl"]["tasks"] == "" and saved["frames"] == {"camera": None, "fit": "resize"}
+    capsys.readouterr()
+
+
+@pytest.mark.parametrize("extra, message", [
+    ((), "add --no-real-eval --watch-every 0"),
+    (("--no-real-eval", "--watch-every", "0", "--tasks", "fold the towel"), "has no task 'fold the towel'"),
+])
+def test_rl_on_another_robot_names_what_it_cannot_do(extra, message, robot_models, tmp_path, capsys):
+    with pytest.raises(SystemExit):
+        _rl_on_robot(robot_models, tmp_path / "rl", *extra)
+    assert message in capsys.readouterr().err

@@ -22,7 +22,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 from PIL import Image
 
-from gymnast.data.schema import Episode, EpisodeInfo
+from gymnast.data.schema import EXTERNAL, Episode, EpisodeInfo
 
 logger = logging.getLogger(__name__)
 
@@ -305,7 +305,7 @@ def episode_info(ref: EpisodeRef, successes: np.ndarray | None) -> EpisodeInfo:
         except (TypeError, ValueError) as e:
             raise DatasetError(f"{ref.meta_path}: episode {ref.index}: {e}") from e
     success = bool(successes.any()) if successes is not None else True
-    return EpisodeInfo(ref.task, ref.task, success, "expert", 0.0, ref.index, "external")
+    return EpisodeInfo(ref.task, ref.task, success, "expert", 0.0, ref.index, EXTERNAL)
 
 
 def decode_images(table: pa.Table, name: str, path: Path) -> np.ndarray:

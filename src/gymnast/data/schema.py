@@ -20,6 +20,8 @@ import numpy as np
 from gymnast.envs.experts import SCRIPTED_BEHAVIOURS
 
 POLICY = "policy"
+EXTERNAL = "external"
+"""The `EpisodeInfo.env_variant` of an episode recorded on another robot (a dataset gymnast did not write)."""
 BEHAVIOURS = (*SCRIPTED_BEHAVIOURS, POLICY)
 """How the actions of an episode were produced.
 

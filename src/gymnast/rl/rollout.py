@@ -29,7 +29,7 @@ from gymnasium.vector import VectorEnv
 
 from gymnast.data.frames import Fit
 from gymnast.data.lerobot import EpisodeDataset
-from gymnast.data.schema import EpisodeInfo
+from gymnast.data.schema import EXTERNAL, EpisodeInfo
 from gymnast.envs.engine import run_batch
 from gymnast.envs.starts import Start, start_options
 from gymnast.policy.base import ActionSample, Policy
@@ -202,6 +202,43 @@ def concat_rollouts(parts: list[Rollouts]) -> Rollouts:
         if field.name != "starts":
             tensors[field.name] = None if values[0] is None else torch.cat(values)
     return Rollouts(starts=tuple(start for part in parts for start in part.starts), **tensors)
+
+
+def recorded_elsewhere(data: Path) -> bool:
+    """Whether the dataset was recorded on another robot (a LeRobot dataset gymnast did not write):
+    gymnast has no simulator of it, so only the world model can practise from its scenes."""
+    return any(info.env_variant == EXTERNAL for info in EpisodeDataset(data).episodes)
+
+
+def own_tasks(data: Path, named: str = "") -> tuple[str, ...]:
+    """Another robot's tasks to practise: every task of the dataset that has a start state (`named`
+    empty), or those `named`, comma-separated, exactly as the dataset writes them.
+
+    Raises:
+        ValueError: a named task is not one of the dataset's (the message lists them).
+    """
+    have = tuple(dict.fromkeys(info.task for info in EpisodeDataset(data).episodes if _expert_solved(info)))
+    if not named:
+        return have
+    wanted = tuple(task.strip() for task in named.split(",") if task.strip())
+    unknown = [task for task in wanted if task not in have]
+    if unknown:
+        raise ValueError(f"{data} has no task {unknown[0]!r} to start from; its tasks: {', '.join(map(repr, have))}")
+    return wanted
+
+
+def heldout_starts(starts: Sequence[Start], per_task: int, fraction: float = 0.1) -> list[Start]:
+    """Up to `per_task` starts of each task from the scenes the models held out (the same scene hash
+    as their training split), for evaluating where no simulator can set up a new scene; a task
+    without a held-out scene lends its first training scenes."""
+    from gymnast.world_model.data import is_heldout
+
+    chosen = []
+    for task in dict.fromkeys(start.task for start in starts):
+        mine = [start for start in starts if start.task == task]
+        held = [start for start in mine if is_heldout(EpisodeInfo(task, "", True, "expert", 0.0, start.seed), fraction)]
+        chosen += (held or mine)[:per_task]
+    return chosen
 
 
 def tasks_with_starts(data: Path, wanted: Sequence[str]) -> tuple[str, ...]:

@@ -44,8 +44,8 @@ from gymnast.rl import grpo
 from gymnast.rl.config import RLConfig, RLRun
 from gymnast.rl.evaluate import evaluate_in_env, verdicts, watch_hacking
 from gymnast.rl.imitation import ImitationAnchor
-from gymnast.rl.rollout import (Rollouts, collect_rollouts, concat_rollouts, dataset_starts, score_groups,
-                                tasks_with_starts)
+from gymnast.rl.rollout import (Rollouts, collect_rollouts, concat_rollouts, dataset_starts, heldout_starts,
+                                own_tasks, recorded_elsewhere, score_groups, tasks_with_starts)
 from gymnast.rl.videos import write_group_video
 from gymnast.utils.atomic import write_json
 from gymnast.utils.checkpoint import load_checkpoint, resolve_checkpoint, save_checkpoint, write_run_config
@@ -83,18 +83,26 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
     check_fits(reward, str(run_spec.reward), env, demonstrations=from_dataset)
     data = Path(run_spec.data or policy_dataset(run_spec.policy)) if from_dataset else None
     scenes = parse_scenes(config.scenes) if config.scenes is not None else None
-    tasks = tuple(dict.fromkeys(task for task, _ in scenes)) if scenes else resolve_tasks(config.tasks)
+    elsewhere = data is not None and recorded_elsewhere(data)
+    if elsewhere:
+        _check_other_robot(data, env, config)
+        tasks = own_tasks(data, config.tasks)
+    else:
+        tasks = tuple(dict.fromkeys(task for task, _ in scenes)) if scenes else resolve_tasks(config.tasks)
     if config.instruction is not None and len(tasks) != 1:
         raise ValueError(f"--instruction is one sentence for one task, but --tasks {config.tasks} names {len(tasks)}; "
                          "practise one task at a time")
     env_config = EnvConfig(image_size=policy.config.image_size, horizon=config.horizon)
     practice = own_instruction(scene_starts(scenes, env_config), config.instruction) if scenes else None
-    draw_starts = StartSampler(tasks, practice or (dataset_starts(data, tasks) if data else None), env_config,
-                               config.instruction)
+    # Start frames as the policy saw its training frames: the same camera, fitted the same way.
+    frames = policy_frames(run_spec.policy)
+    pool = dataset_starts(data, tasks, policy.config.image_size, frames.get("fit", "resize"),
+                          frames.get("camera")) if data else None
+    draw_starts = StartSampler(tasks, practice or pool, env_config, config.instruction)
     envs = EnvFactory(env, policy.chunk_size, env_config, config.gap, config.workers, world_model,
                       stop_above=config.disagreement_stop or None)
     resolved = {"rl": dataclasses.asdict(config), "run": run_spec.to_json(), "model": policy.spec(),
-                "data": str(data) if data else None}
+                "data": str(data) if data else None, "frames": frames}
 
     optimizer = torch.optim.AdamW(policy.parameters(), lr=config.lr, weight_decay=0.0)
     schedule = torch.optim.lr_scheduler.LambdaLR(optimizer, warmup_cosine(config.warmup_steps, 10**12))
@@ -120,8 +128,11 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
     write_run_config(out, resolved)
     metrics = MetricsLog(out, resume_step=start_step if resume else None)
     board = _tensorboard(out, start_step) if config.tensorboard else None
-    eval_starts = practice or own_instruction(evaluation_starts(tasks, config.eval_episodes, env_config),
-                                              config.instruction)
+    if elsewhere:  # no simulator sets up new scenes of another robot: the models' held-out ones
+        eval_starts = own_instruction(heldout_starts(pool, config.eval_episodes), config.instruction)
+    else:
+        eval_starts = practice or own_instruction(evaluation_starts(tasks, config.eval_episodes, env_config),
+                                                  config.instruction)
     reset_frames_before = state.get("reset_frames", 0)  # runs saved before the count have none
 
     def log(step: int, values: dict[str, float]) -> None:
@@ -376,6 +387,19 @@ def write_summary(out: Path, run_spec: RLRun, config: RLConfig, state: dict) -> 
     return summary
 
 
+def _check_other_robot(data: Path, env, config: RLConfig) -> None:
+    """Raises ValueError, naming the fix, for what a dataset of another robot cannot give."""
+    if not env.imagined:
+        raise ValueError(f"{data} was recorded on another robot, of which gymnast has no simulator: only "
+                         "--env imagined can practise from its scenes")
+    if config.real_eval or config.watch_every:
+        raise ValueError(f"{data} was recorded on another robot, which gymnast cannot run: add --no-real-eval "
+                         "--watch-every 0 (the real evaluation and the reward-hacking watch act in the real world)")
+    if config.fresh_scenes or config.scenes is not None:
+        raise ValueError(f"{data} was recorded on another robot: only its own scenes can start a rollout, "
+                         "not --fresh-scenes or --scenes")
+
+
 def with_tasks_from_data(run_spec: RLRun, config: RLConfig) -> RLConfig:
     """`config` for a run whose tasks were not named: the preset's tasks that its start-state
     dataset has, or else as many of the dataset's own (`tasks_with_starts`); fresh scenes need no
@@ -383,6 +407,8 @@ def with_tasks_from_data(run_spec: RLRun, config: RLConfig) -> RLConfig:
     if config.fresh_scenes or config.scenes is not None:
         return config
     data = Path(run_spec.data or policy_dataset(run_spec.policy))
+    if recorded_elsewhere(data):
+        return dataclasses.replace(config, tasks="")  # all of the other robot's own tasks
     return dataclasses.replace(config, tasks=",".join(tasks_with_starts(data, resolve_tasks(config.tasks))))
 
 
@@ -392,11 +418,27 @@ def policy_dataset(policy_run: str | Path) -> str:
     Raises:
         ValueError: the run does not say.
     """
-    checkpoint = resolve_checkpoint(Path(policy_run))
-    for path in (Path(policy_run) / "config.json", checkpoint / "config.json"):
-        if path.exists() and "data" in (saved := json.loads(path.read_text())):
+    for saved in _policy_configs(policy_run):
+        if "data" in saved:
             return saved["data"]
     raise ValueError(f"{policy_run} does not say which dataset it was trained on; give the start states with --data DIR")
+
+
+def policy_frames(policy_run: str | Path) -> dict:
+    """How the policy's training frames were read: ``{"camera", "fit"}`` from its SFT settings (or
+    an RL run's, which keeps them); {} for a run from before they were saved (the defaults)."""
+    for saved in _policy_configs(policy_run):
+        if "frames" in saved or "sft" in saved:
+            settings = saved.get("frames") or saved["sft"]
+            return {key: settings[key] for key in ("camera", "fit") if key in settings}
+    return {}
+
+
+def _policy_configs(policy_run: str | Path) -> list[dict]:
+    """The policy run's config.json, then its checkpoint's (whichever exist)."""
+    checkpoint = resolve_checkpoint(Path(policy_run))
+    paths = (Path(policy_run) / "config.json", checkpoint / "config.json")
+    return [json.loads(path.read_text()) for path in paths if path.exists()]
 
 
 def _frozen_copy(policy):
