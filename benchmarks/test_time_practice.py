@@ -76,9 +76,14 @@ def measure(task: str, seed: int, run: Path) -> dict:
     import json
 
     summary = json.loads((run / "summary.json").read_text())
-    watched = [m for m in read_metrics(run) if "eval/watch_real_success" in m]
+    metrics = read_metrics(run)
+    watched = [m for m in metrics if "eval/watch_real_success" in m]
     last = watched[-1] if watched else {}
+    steps = [m for m in metrics if "rollout/kept_groups" in m]
     return {"task": task, "seed": seed,
+            # A step updates the policy only where the judge's verdicts on the scene's rollouts differ.
+            "updates": sum(m["rollout/kept_groups"] > 0 for m in steps), "steps": len(steps),
+            "judged_train_success": [m["rollout/success"] for m in steps],
             "imagined_before": summary["start_success"], "imagined_after": summary["end_success"],
             "real_before": summary["start_real_success"], "real_after": summary["end_real_success"],
             "watch_imagined_success": last.get("eval/watch_imagined_success"),
@@ -115,12 +120,15 @@ def table(results: dict) -> str:
     def mark(value) -> str:
         return "n/a" if value is None else ("yes" if value else "no")
 
-    lines = ["| task | seed | imagined before -> after | real before -> after | watch: judged / real success "
-             "of the last step's rollouts |", "|---|---|---|---|---|"]
+    lines = ["| task | seed | steps that updated | judged success of the training rollouts, per step | "
+             "imagined before -> after | real before -> after | watch: judged / real success of the last step's "
+             "rollouts |", "|---|---|---|---|---|---|---|"]
     for row in rows:
         watch = ("n/a" if row["watch_imagined_success"] is None else
                  f"{row['watch_imagined_success']:.0%} / {row['watch_real_success']:.0%}")
-        lines.append(f"| {row['task']} | {row['seed']} | {mark(row['imagined_before'])} -> {mark(row['imagined_after'])} "
+        judged = ", ".join(f"{x:.0%}" for x in row["judged_train_success"])
+        lines.append(f"| {row['task']} | {row['seed']} | {row['updates']} of {row['steps']} | {judged} | "
+                     f"{mark(row['imagined_before'])} -> {mark(row['imagined_after'])} "
                      f"| {mark(row['real_before'])} -> {mark(row['real_after'])} | {watch} |")
     lines += ["", f"Over {t['scenes']} scenes: real success {rate('real_before')} before, {rate('real_after')} after "
               f"({t['gained']} scenes gained, {t['lost']} lost); judged in imagination {rate('imagined_before')} -> "
