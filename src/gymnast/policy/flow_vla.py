@@ -32,29 +32,15 @@ import torch
 from torch import nn
 
 from gymnast.policy.base import ActionSample
-from gymnast.policy.observation import ObservationConditioned
+from gymnast.policy.observation import ObservationConditioned, PolicyArchitecture
 
 _LOG_2PI = math.log(2 * math.pi)
 
 
 @dataclass(frozen=True)
-class FlowVLAConfig:
+class FlowVLAConfig(PolicyArchitecture):
     """Architecture and sampler of the flow-matching VLA."""
 
-    vision: str = "cnn"
-    """Image encoder: cnn (small, from scratch) or efficientnet (ImageNet EfficientNet-Lite0)."""
-    width: int = 128
-    """Token width D."""
-    layers: int = 2
-    """Transformer decoder layers of the action head."""
-    heads: int = 4
-    """Attention heads."""
-    chunk_size: int = 5
-    """Actions per chunk K (executed open-loop before the next policy call)."""
-    action_dim: int = 4
-    """Action dimensions A."""
-    image_size: int = 96
-    """Side of the square input image."""
     steps: int = 5
     """Euler integration steps S from noise to actions."""
     sigma_min: float = 0.02

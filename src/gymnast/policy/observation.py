@@ -15,6 +15,8 @@ Legend: B batch, H/W image size, P vision tokens, D width.
 
 from __future__ import annotations
 
+import dataclasses
+from dataclasses import dataclass
 from typing import Sequence
 
 import torch
@@ -23,6 +25,31 @@ from torch import nn
 from gymnast.policy.text import EMBEDDING_DIM, InstructionEncoder
 from gymnast.policy.vision import make_vision_encoder, to_float_image
 from gymnast.utils.device import to_device
+
+
+@dataclass(frozen=True)
+class PolicyArchitecture:
+    """What every embedded policy's architecture has: the observation encoder's and the chunk's."""
+
+    vision: str = "cnn"
+    """Image encoder: cnn (small, from scratch) or efficientnet (ImageNet EfficientNet-Lite0)."""
+    width: int = 128
+    """Token width D."""
+    layers: int = 2
+    """Transformer decoder layers of the action head."""
+    heads: int = 4
+    """Attention heads."""
+    chunk_size: int = 5
+    """Actions per chunk K (executed open-loop before the next policy call)."""
+    action_dim: int = 4
+    """Action dimensions A."""
+    image_size: int = 96
+    """Side of the square input image."""
+
+
+def shared_architecture(config: PolicyArchitecture) -> dict:
+    """The `PolicyArchitecture` fields of any family's config, to build another family alike."""
+    return {field.name: getattr(config, field.name) for field in dataclasses.fields(PolicyArchitecture)}
 
 
 class ObservationConditioned(nn.Module):

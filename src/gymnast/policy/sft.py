@@ -27,6 +27,7 @@ from gymnast.data.lerobot import EpisodeDataset
 from gymnast.data.schema import EpisodeInfo
 from gymnast.policy.action_tokenizer import ActionTokenizer
 from gymnast.policy.flow_vla import FlowVLA, FlowVLAConfig
+from gymnast.policy.observation import shared_architecture
 from gymnast.policy.vla import EmbeddedVLA, VLAConfig
 from gymnast.utils.checkpoint import resolve_checkpoint, resume_training, save_training, write_run_config
 from gymnast.utils.metrics import MetricsLog
@@ -36,8 +37,6 @@ from gymnast.utils.settings import from_json, saved_settings
 logger = logging.getLogger(__name__)
 
 DEMO_BEHAVIOURS = ("expert", "noisy_expert")
-# The architecture fields both policy families have: a flow policy is built from `SFTConfig.vla`'s.
-_SHARED_ARCHITECTURE = ("vision", "width", "layers", "heads", "chunk_size", "action_dim", "image_size")
 
 
 @dataclass(frozen=True)
@@ -229,7 +228,7 @@ def build_sft_policy(config: SFTConfig, action_range: tuple[tuple[float, ...], t
     low, high = action_range or ((-1.0,) * config.vla.action_dim, (1.0,) * config.vla.action_dim)
     if config.policy == "tokens":
         return EmbeddedVLA(config.vla, ActionTokenizer(low, high, config.vla.bins))
-    shared = {name: getattr(config.vla, name) for name in _SHARED_ARCHITECTURE}
+    shared = shared_architecture(config.vla)  # a flow policy is built from `SFTConfig.vla`'s fields
     return FlowVLA(FlowVLAConfig(**shared, steps=config.flow_steps, low=low, high=high))
 
 
@@ -237,7 +236,7 @@ def _with_architecture_of(model: nn.Module, config: SFTConfig) -> SFTConfig:
     """`config` describing the family and architecture of `model` (fine-tuning keeps them)."""
     if isinstance(model, EmbeddedVLA):
         return dataclasses.replace(config, policy="tokens", vla=model.config)
-    shared = {name: getattr(model.config, name) for name in _SHARED_ARCHITECTURE}
+    shared = shared_architecture(model.config)
     return dataclasses.replace(config, policy="flow", flow_steps=model.config.steps,
                                vla=dataclasses.replace(config.vla, **shared))
 

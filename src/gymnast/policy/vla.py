@@ -22,29 +22,15 @@ from torch import nn
 
 from gymnast.policy.action_tokenizer import ActionTokenizer
 from gymnast.policy.base import ActionSample
-from gymnast.policy.observation import ObservationConditioned
+from gymnast.policy.observation import ObservationConditioned, PolicyArchitecture
 
 
 @dataclass(frozen=True)
-class VLAConfig:
+class VLAConfig(PolicyArchitecture):
     """Architecture of the embedded VLA."""
 
-    vision: str = "cnn"
-    """Image encoder: cnn (small, from scratch) or efficientnet (ImageNet EfficientNet-Lite0)."""
-    width: int = 128
-    """Token width D."""
-    layers: int = 2
-    """Transformer decoder layers over the action queries."""
-    heads: int = 4
-    """Attention heads."""
-    chunk_size: int = 5
-    """Actions per chunk K (executed open-loop before the next policy call)."""
-    action_dim: int = 4
-    """Action dimensions A."""
     bins: int = 256
     """Tokens per action dimension."""
-    image_size: int = 96
-    """Side of the square input image."""
 
     @property
     def num_tokens(self) -> int:

@@ -119,7 +119,9 @@ def train_world_model(data: Path, out: Path, config: WorldModelTrainConfig, resu
     datasets = [EpisodeDataset(path, config.camera) for path in (data, *config.extra_data)]
     if config.init is not None and not resume:  # on resume the weights come from the run's own checkpoint
         config = dataclasses.replace(config, init=resolve_checkpoint(config.init))
-    config, datasets, stats = fit_to_data(config, datasets, keep_action_range=resume)
+    # A resumed run keeps the action range its weights were trained with, whatever `config` says.
+    kept = _saved_action_range(resolve_checkpoint(out)) if resume else None
+    config, datasets, stats = fit_to_data(config, datasets, action_range=kept)
     dataset = datasets[0]
     bank, heldout, counts = load_banks(datasets, config.heldout_fraction, progress)
     context = config.model.context_frames
@@ -161,12 +163,12 @@ def train_world_model(data: Path, out: Path, config: WorldModelTrainConfig, resu
 
 
 def fit_to_data(config: WorldModelTrainConfig, datasets: Sequence[EpisodeDataset],
-                keep_action_range: bool = False) -> tuple[WorldModelTrainConfig, list[EpisodeDataset], ActionStats]:
+                action_range: tuple | None = None) -> tuple[WorldModelTrainConfig, list[EpisodeDataset], ActionStats]:
     """`config` with the model's image size and action space taken from the datasets, the datasets
     with their frames fitted to that size (`gymnast.data.frames`), and their action statistics.
 
-    The action range is the datasets' per-dimension min and max, unless `keep_action_range` (a
-    resumed run keeps the range its weights were trained with).
+    The action range is `action_range` (low, high) when given (a resumed run's), else the
+    datasets' per-dimension min and max.
 
     Raises:
         ValueError: the datasets' frames or action dimensions differ.
@@ -180,28 +182,28 @@ def fit_to_data(config: WorldModelTrainConfig, datasets: Sequence[EpisodeDataset
                              "every dataset of one world model needs one image size")
     size = model_image_size(first.camera_shape, config.model.image_size)
     stats = ActionStats.merge([d.action_stats for d in datasets])
-    low, high = (config.model.action_low, config.model.action_high) if keep_action_range else stats.action_range()
+    low, high = action_range if action_range is not None else stats.action_range()
     model = dataclasses.replace(config.model, image_size=size, action_dim=first.action_dim, action_low=low, action_high=high)
     return dataclasses.replace(config, model=model), [d.fitted(size, config.fit) for d in datasets], stats
+
+
+def _saved_action_range(checkpoint: Path) -> tuple:
+    """(low, high) of the model a checkpoint saved (both empty, the identity, for a model saved
+    before action ranges were)."""
+    saved = json.loads((checkpoint / "config.json").read_text()).get("model", {})
+    return tuple(saved.get("action_low", ())), tuple(saved.get("action_high", ()))
 
 
 def load_banks(datasets: Sequence[EpisodeDataset], heldout_fraction: float,
                progress: bool = False) -> tuple[EpisodeBank, EpisodeBank | None, list[dict]]:
     """The training and held-out episodes of several datasets, each split by scene.
 
+    The datasets' frames are one size: `fit_to_data` checked their cameras and fitted them.
+
     Returns:
         The training bank, the held-out bank (None when nothing is held out) and, per dataset, its
         path and how many episodes went to each side.
-
-    Raises:
-        ValueError: a dataset's frames are not the size of the first one's.
     """
-    first = datasets[0]
-    for other in datasets[1:]:
-        if other.image_shape != first.image_shape:
-            size, wanted = "x".join(map(str, other.image_shape[:2])), "x".join(map(str, first.image_shape[:2]))
-            raise ValueError(f"{other.root}: frames are {size}, but {first.root} has {wanted}; "
-                             "every dataset of one world model needs one image size")
     splits = [split_episodes(d.episodes, heldout_fraction) for d in datasets]
     counts = [{"data": str(d.root), "train_episodes": len(t), "heldout_episodes": len(h)} for d, (t, h) in zip(datasets, splits)]
     logger.info("training on %d episodes, %d held out", sum(len(t) for t, _ in splits), sum(len(h) for _, h in splits))
