@@ -428,9 +428,9 @@ def policy_frames(policy_run: str | Path) -> dict:
     """How the policy's training frames were read: ``{"camera", "fit"}`` from its SFT settings (or
     an RL run's, which keeps them); {} for a run from before they were saved (the defaults)."""
     for saved in _policy_configs(policy_run):
-        if "frames" in saved or "sft" in saved:
-            settings = saved.get("frames") or saved["sft"]
-            return {key: settings[key] for key in ("camera", "fit") if key in settings}
+        for section in ("frames", "sft"):
+            if section in saved:
+                return {key: saved[section][key] for key in ("camera", "fit") if key in saved[section]}
     return {}
 
 
