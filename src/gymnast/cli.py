@@ -158,6 +158,7 @@ def gap_report(
     episodes: int = 10,
     levels: tuple[str, ...] = ("mild", "strong"),
     workers: int = 2,
+    runner: str = "local",
     first_seed: int = 0,
     env: EnvConfig = EnvConfig(),
 ) -> None:
@@ -169,13 +170,14 @@ def gap_report(
         episodes: seeds per task.
         levels: gap levels to measure.
         workers: parallel processes.
+        runner: where they run: local, ray or ray:ADDRESS (see `gymnast eval --help`).
         first_seed: first data seed.
         env: camera, image size and horizon.
     """
     from gymnast.envs.gap_report import format_level, measure_gap_levels, write_gap_report
     from gymnast.envs.tasks import resolve_tasks
 
-    report = measure_gap_levels(resolve_tasks(tasks), episodes, levels, env, workers, first_seed)
+    report = measure_gap_levels(resolve_tasks(tasks), episodes, levels, env, workers, first_seed, runner=runner)
     for level, result in report["levels"].items():
         print(format_level(level, result["overall"]))
     print(f"report: {out} and {write_gap_report(out, report)}")

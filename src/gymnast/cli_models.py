@@ -320,6 +320,7 @@ def experiment(
     resume: bool = False,
     reuse: Annotated[list[str], tyro.conf.UseAppendAction] = [],  # noqa: B006 (read by tyro, never mutated)
     workers: int | None = None,
+    runner: str | None = None,
 ) -> None:
     """The headline comparison: data, SFT, world model, judge, six arms, real-world evaluation and
     the WorldGym check, then OUT/report.md, OUT/summary.json and OUT/plots/. Rerunning the same
@@ -333,13 +334,14 @@ def experiment(
             sft=RUN, world_model=RUN, judge=RUN); repeat for several, e.g. --reuse collect=data/mt10
             --reuse world_model=runs/wm_full.
         workers: simulator processes (default: the preset's, one per core on 2 cores).
+        runner: where they run: local, ray or ray:ADDRESS (default: the preset's, local).
     """
     from gymnast.experiment.config import EXPERIMENT_PRESETS
     from gymnast.experiment.pipeline import run_experiment, saved_experiment_config
     from gymnast.experiment.report import format_table
     from gymnast.experiment.stages import parse_reuse
 
-    config, _ = resolve("experiment", out, resume, EXPERIMENT_PRESETS[preset], overrides={"workers": workers},
+    config, _ = resolve("experiment", out, resume, EXPERIMENT_PRESETS[preset], overrides={"workers": workers, "runner": runner},
                         inputs={}, saved=lambda: (saved_experiment_config(out), {}))
     summary = run_experiment(config, out, parse_reuse(reuse))
     print(format_table(summary))

@@ -154,7 +154,8 @@ def _evaluate(stages: Stages, stage: str, policy: Path, config: ExperimentConfig
 
     def work() -> dict:
         settings = EvalConfig(tasks=config.tasks, episodes=episodes, perturb=perturb, instruction_split=instruction_split,
-                              workers=config.workers, videos_per_task=1 if perturb == "none" else 0,
+                              workers=config.workers, runner=config.runner,
+                              videos_per_task=1 if perturb == "none" else 0,
                               env=dataclasses.replace(env))
         report = evaluate(str(policy), settings, out / "eval" / f"{stage.removeprefix('eval_')}.json", progress)
         keep = ("success", "ci_low", "ci_high", "episodes", "successes", "per_task", "real_interactions", "videos")
