@@ -81,8 +81,8 @@ def test_workers_exit_within_seconds_of_their_parent_being_killed(kind):
 
 
 # A driver that started Ray on this machine, its two actors busy with long jobs.
-RAY_PARENT = ("import time, ray\nray.init(num_cpus=2, include_dashboard=False)\n"
-              "from gymnast.envs.parallel import parallel_map\nlist(parallel_map(time.sleep, [600, 600], 2, 'ray'))")
+RAY_PARENT = ("import time\nfrom gymnast.envs.parallel import parallel_map\nfrom gymnast.envs.ray_workers import init_ray\n"
+              "init_ray(num_cpus=2)\nlist(parallel_map(time.sleep, [600, 600], 2, 'ray'))")
 
 
 @pytest.mark.slow

@@ -31,7 +31,9 @@ def ray_here():
         return
     import ray
 
-    ray.init(num_cpus=2, include_dashboard=False, logging_level="WARNING")
+    from gymnast.envs.ray_workers import init_ray
+
+    init_ray(num_cpus=2)
     # Ray's workers cannot import this test module, so its helpers travel by value.
     ray.cloudpickle.register_pickle_by_value(sys.modules[__name__])
     yield

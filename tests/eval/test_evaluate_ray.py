@@ -30,7 +30,9 @@ def serial(tmp_path_factory) -> dict:
 
 @pytest.fixture(scope="module")
 def ray_here():
-    ray.init(num_cpus=2, include_dashboard=False, logging_level="WARNING")
+    from gymnast.envs.ray_workers import init_ray
+
+    init_ray(num_cpus=2)
     yield
     ray.shutdown()
 

@@ -53,11 +53,11 @@ def parallel_map(fn: Callable[[Item], Result], items: Iterable[Item], workers: i
     if workers <= 1 or len(items) <= 1:
         yield from map(fn, items)
         return
-    with Workers(runner, min(workers, len(items)), _Apply, (fn,)) as pool:
+    with Workers(runner, min(workers, len(items)), Apply, (fn,)) as pool:
         yield from pool.map("__call__", items)
 
 
-class _Apply:
+class Apply:
     """What a worker of `parallel_map` hosts: the function it applies to each item."""
 
     def __init__(self, fn: Callable[[Item], Result]) -> None:

@@ -2,10 +2,10 @@
 
 Imported only when such a runner is asked for, so the project works without Ray installed.
 
-Ray is started on first use in this process: ``ray.init()`` on this machine (or the cluster in
-``RAY_ADDRESS``), or ``ray.init(address)`` for ``ray:ADDRESS``. A Ray already initialised in this
-process, say by a script that chose its own resources, is used as it is. Every node of a cluster
-needs the project installed, in the same version, as its workers import it.
+Ray is started on first use in this process (`init_ray`): on this machine (or the cluster in
+``RAY_ADDRESS``), or at the address of ``ray:ADDRESS``. A Ray already initialised in this process,
+say by a script that chose its own resources, is used as it is. Every node of a cluster needs the
+project installed, in the same version, as its workers import it.
 
 Placement: an actor keeps Ray's default resources (one CPU to be placed, none while it runs) and
 is spread over the nodes. Holding a CPU for its lifetime would be the textbook way to get one
@@ -75,16 +75,35 @@ class RayWorker:
         ray.kill(self._actor)
 
 
+def init_ray(address: str | None = None, num_cpus: int | None = None) -> None:
+    """Connects this process to Ray, unless it already is.
+
+    Args:
+        address: the cluster to join; None: Ray's default (``RAY_ADDRESS``, else a new instance
+            on this machine).
+        num_cpus: the cores a new instance on this machine may use (None: all of them).
+
+    A new instance on this machine runs its workers at this process's priority. Ray's default
+    lowers them (nice 15) to keep its own services responsive, which on a busy machine leaves the
+    actors a fraction of the CPU that the local runner's processes get.
+    """
+    if ray.is_initialized():
+        return
+    options: dict[str, Any] = {"address": address, "include_dashboard": False, "logging_level": logging.WARNING}
+    if address is None and "RAY_ADDRESS" not in os.environ:  # a cluster keeps its own settings
+        options |= {"num_cpus": num_cpus, "_system_config": {"worker_niceness": os.getpriority(os.PRIO_PROCESS, 0)}}
+    ray.init(**options)
+
+
 class RayBackend:
-    """Workers as Ray actors, on the Ray this process is connected to (connecting first if need be).
+    """Workers as Ray actors, on the Ray this process is connected to (`init_ray` first).
 
     Args:
         address: the cluster to join; None: Ray's default (``RAY_ADDRESS``, else a new local instance).
     """
 
     def __init__(self, address: str | None) -> None:
-        if not ray.is_initialized():
-            ray.init(address=address, include_dashboard=False, logging_level=logging.WARNING)
+        init_ray(address)
 
     def start(self, factory: Callable[..., Any], args: tuple[Any, ...]) -> RayWorker:
         return RayWorker(factory, args)
