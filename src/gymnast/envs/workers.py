@@ -118,9 +118,6 @@ class Workers:
             self.close()
             raise
 
-    def __len__(self) -> int:
-        return len(self._workers)
-
     def pids(self) -> list[int]:
         """Each worker's process id, in order."""
         return [worker.pid() for worker in self._workers]
