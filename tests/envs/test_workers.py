@@ -70,6 +70,13 @@ def test_a_bad_runner_names_itself_and_the_choices(spec):
         EvalConfig(runner=spec)
 
 
+def test_without_ray_a_ray_runner_names_the_extra_to_install(monkeypatch):
+    monkeypatch.setitem(sys.modules, "ray", None)  # what an environment without Ray looks like to imports
+    with pytest.raises(ModuleNotFoundError, match=r"world-gymnast\[ray\]"):
+        parse_runner("ray:auto")
+    assert parse_runner("local") == Runner()
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("runner", RUNNERS)
 def test_an_evaluation_whose_worker_is_killed_returns_every_episode_once_as_the_serial_run(runner, ray_here, tmp_path):
