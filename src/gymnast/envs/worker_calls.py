@@ -28,11 +28,11 @@ def answer(hosted: Any, method: str, args: tuple[Any, ...]) -> tuple[Any, ...]:
         return "error", error, text
 
 
-def unpack(answer: tuple[Any, ...]) -> Any:
-    """The value of a worker's `answer`, or its exception raised here (the worker's traceback as its cause)."""
-    if answer[0] == "ok":
-        return answer[1]
-    _, error, text = answer
+def unpack(reply: tuple[Any, ...]) -> Any:
+    """The value in a worker's `answer`, or its exception raised here (the worker's traceback as its cause)."""
+    if reply[0] == "ok":
+        return reply[1]
+    _, error, text = reply
     raise error from RuntimeError(f"in the worker process:\n{text}")
 
 
