@@ -222,6 +222,7 @@ def dyna(
     steps: int | None = None,
     tasks: str | None = None,
     workers: int | None = None,
+    runner: str | None = None,
     real_rl: bool | None = None,
 ) -> None:
     """World-Gymnast's loop: RL in imagination, a few counted real rollouts of the new policy, the
@@ -242,6 +243,7 @@ def dyna(
         steps: RL steps in imagination per round (default: the preset's).
         tasks: tasks trained and evaluated on (default: the preset's).
         workers: simulator processes (default: the preset's).
+        runner: where they run: local, ray or ray:ADDRESS (default: the preset's, local).
         real_rl: also run RL in the real world for comparison (default: the preset's, on).
     """
     from gymnast.experiment.dyna import DYNA_PRESETS, DynaInputs, run_dyna, saved_dyna_settings
@@ -254,7 +256,8 @@ def dyna(
     config, inputs = resolve(
         "dyna", out, resume, DYNA_PRESETS[preset], inputs={"policy": policy, "wm": wm, "judge": judge, "data": data},
         overrides={"rounds": rounds, "rollouts_per_task": rollouts_per_task, "rl.steps": steps, "rl.tasks": tasks,
-                   "workers": workers, "real_rl": real_rl}, saved=saved, required=("policy", "wm", "judge"))
+                   "workers": workers, "runner": runner,
+                   "real_rl": real_rl}, saved=saved, required=("policy", "wm", "judge"))
     summary = run_dyna(config, DynaInputs(**inputs), out)
     print(dyna_table(summary))
     print(f"summary: {out / 'summary.json'}, plot: {out / summary['plot']}")

@@ -358,6 +358,7 @@ def imagination(
     horizon: int = 150,
     batch: int = 32,
     workers: int = 1,
+    runner: str = "local",
     videos: int = 4,
     seed: int = 0,
 ) -> None:
@@ -376,6 +377,7 @@ def imagination(
         horizon: actions per rollout.
         batch: rollouts stepped together.
         workers: simulator processes for the real-world envs.
+        runner: where they run: local, ray or ray:ADDRESS (see `gymnast eval --help`).
         videos: side-by-side videos (imagined | real replay | difference), disagreements first.
         seed: reset seed of the envs (what a stochastic world model draws from).
     """
@@ -383,7 +385,7 @@ def imagination(
     from gymnast.experiment.imagination_report import format_imagination
 
     config = ImaginationConfig(tasks=tasks, episodes=episodes, horizon=horizon, batch=batch, workers=workers,
-                               videos=videos, seed=seed)
+                               runner=runner, videos=videos, seed=seed)
     report = measure_imagination_runs(policy, wm, RewardSpec.parse(reward), config, out)
     print(format_imagination(report))
     print(f"report: {out / 'imagination.md'}")

@@ -111,7 +111,7 @@ def _imagination(sft: Path, wm: Path, judge: Path, config: ExperimentConfig, out
     from gymnast.reward.spec import RewardSpec
 
     settings = ImaginationConfig(tasks=config.tasks, episodes=config.worldgym_episodes, horizon=config.rl.horizon,
-                                 workers=config.workers, seed=config.seed)
+                                 workers=config.workers, runner=config.runner, seed=config.seed)
     report = measure_imagination_runs(sft, wm, RewardSpec.judge(judge), settings, out / "imagination", progress)
     return imagination_brief(report)
 
