@@ -287,6 +287,7 @@ def worldgym(
     episodes: int = 10,
     horizon: int = 150,
     workers: int = 2,
+    runner: str = "local",
     seed: int = 0,
 ) -> None:
     """WorldGym over a noise ladder: can the world model and judge rank policies like the real world?
@@ -305,11 +306,13 @@ def worldgym(
         episodes: evaluation seeds per task, in each world.
         horizon: actions per episode, in each world.
         workers: simulator processes for the real-world rollouts.
+        runner: where they run: local, ray or ray:ADDRESS (see `gymnast eval --help`).
         seed: seed of the noise.
     """
     from gymnast.experiment.worldgym import format_rows, run_worldgym
 
-    result = run_worldgym(policy, noise, wm, judge, tasks, episodes, out, horizon=horizon, workers=workers, seed=seed)
+    result = run_worldgym(policy, noise, wm, judge, tasks, episodes, out, horizon=horizon, workers=workers, seed=seed,
+                          runner=runner)
     print(format_rows(result))
     print(f"report: {out / 'worldgym.json'}, plot: {out / 'worldgym.png'}")
 

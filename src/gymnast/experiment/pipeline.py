@@ -186,7 +186,7 @@ def _worldgym(stages: Stages, config: ExperimentConfig, out: Path, policies: dic
     levels = (*config.worldgym_noise, *((math.inf,) if config.worldgym_random else ()))
     if levels:
         candidates += noise_ladder(policies["sft"], levels, config.seed, prefix="sft_")
-    with WorldGym(wm, judge, config.tasks, config.worldgym_episodes, env, config.workers) as gym:
+    with WorldGym(wm, judge, config.tasks, config.worldgym_episodes, env, config.workers, runner=config.runner) as gym:
         rows = gym.rows(candidates, real, progress)
     return {"policies": rows, **correlation([r["imagined"] for r in rows], [r["real"] for r in rows])}
 
