@@ -28,7 +28,7 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 import ray
-from ray.exceptions import RayActorError
+from ray.exceptions import NodeDiedError, OutOfMemoryError, RayActorError, WorkerCrashedError
 
 from gymnast.envs.worker_calls import WorkerDied, answer, unpack
 
@@ -47,6 +47,8 @@ class Host:
 
 
 _Actor = ray.remote(Host)
+DEATHS = (RayActorError, OutOfMemoryError, WorkerCrashedError, NodeDiedError)
+"""How Ray reports an actor's process gone: killed, crashed, ended by Ray's memory monitor, or its node lost."""
 
 
 class RayWorker:
@@ -62,7 +64,7 @@ class RayWorker:
     def result(self) -> Any:
         try:
             reply = ray.get(self.pending)
-        except RayActorError as error:
+        except DEATHS as error:
             raise WorkerDied(f"Ray actor {self._actor._actor_id.hex()} died: {error}") from error
         finally:
             self.pending = None
