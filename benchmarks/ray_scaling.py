@@ -5,7 +5,7 @@ The scripted expert's real-world evaluation episodes (`gymnast.eval.evaluate.run
 process (the reference), on 1 and 2 Ray actors, and on 2 local spawned workers. Episodes run the
 full horizon (no early end on success), so each is the same amount of work. Every worker first
 plays one episode of each task, so the figures leave out starting workers and building scenes
-(reported apart as ``startup_s``). The setups take turns for several rounds and each keeps its
+(reported apart as ``startup_s``, the median). The setups take turns for several rounds and each keeps its
 best (the median too), so that other work on the machine weighs on all of them alike. The goal:
 2 Ray workers at least 1.8x one, with every episode's result identical to the serial run's.
 
@@ -81,29 +81,29 @@ def main() -> None:
     jobs = [job for job in planned if job not in warm]
     load_before = os.getloadavg()
     setups = {"serial": ("local", 0), "ray_1": ("ray", 1), "ray_2": ("ray", 2), "local_2": ("local", 2)}
-    pools, startup = {}, {}
-    for name, (runner, count) in setups.items():
-        pools[name], startup[name] = start(runner, count, warm)
-    # Rounds alternate the setups, so that a change in the machine's load falls on all of them alike.
+    # Rounds alternate the setups, so that a change in the machine's load falls on all of them alike;
+    # each setup's workers are started afresh every round, so that only one setup holds memory at a time.
     seconds: dict[str, list[float]] = {name: [] for name in setups}
+    startup: dict[str, list[float]] = {name: [] for name in setups}
     identical = {name: True for name in setups}
     reference = None
     for _ in range(args.rounds):
-        for name, pool in pools.items():
+        for name, (runner, count) in setups.items():
+            pool, took = start(runner, count, warm)
+            startup[name].append(took)
             begin = time.perf_counter()
             records = sorted(pool.map("__call__", jobs), key=_key)
             seconds[name].append(time.perf_counter() - begin)
+            pool.close()
             reference = reference or records
             identical[name] &= records == reference
-    for pool in pools.values():
-        pool.close()
     load_after = os.getloadavg()
     rate = {name: len(jobs) / min(times) for name, times in seconds.items()}
     result = {
         "episodes_per_s": {name: round(value, 3) for name, value in rate.items()},
         "episodes_per_s_median": {name: round(len(jobs) / statistics.median(times), 3)
                                   for name, times in seconds.items()},
-        "startup_s": {name: round(value, 1) for name, value in startup.items()},
+        "startup_s": {name: round(statistics.median(times), 1) for name, times in startup.items()},
         "scaling_ray_2_over_1": round(rate["ray_2"] / rate["ray_1"], 2),
         "ray_2_over_serial": round(rate["ray_2"] / rate["serial"], 2),
         "goal_ray_2_over_1": GOAL,
