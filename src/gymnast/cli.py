@@ -165,6 +165,7 @@ def gap_report(
     episodes: int = 10,
     levels: tuple[str, ...] = ("mild", "strong"),
     workers: int = 2,
+    runner: str = "local",
     first_seed: int = 0,
     env: EnvConfig = EnvConfig(),
 ) -> None:
@@ -176,13 +177,14 @@ def gap_report(
         episodes: seeds per task.
         levels: gap levels to measure.
         workers: parallel processes.
+        runner: where they run: local, ray or ray:ADDRESS (see `gymnast eval --help`).
         first_seed: first data seed.
         env: camera, image size and horizon.
     """
     from gymnast.envs.gap_report import format_level, measure_gap_levels, write_gap_report
     from gymnast.envs.tasks import resolve_tasks
 
-    report = measure_gap_levels(resolve_tasks(tasks), episodes, levels, env, workers, first_seed)
+    report = measure_gap_levels(resolve_tasks(tasks), episodes, levels, env, workers, first_seed, runner=runner)
     for level, result in report["levels"].items():
         print(format_level(level, result["overall"]))
     print(f"report: {out} and {write_gap_report(out, report)}")
@@ -227,6 +229,7 @@ def dyna(
     steps: int | None = None,
     tasks: str | None = None,
     workers: int | None = None,
+    runner: str | None = None,
     real_rl: bool | None = None,
 ) -> None:
     """World-Gymnast's loop: RL in imagination, a few counted real rollouts of the new policy, the
@@ -247,6 +250,7 @@ def dyna(
         steps: RL steps in imagination per round (default: the preset's).
         tasks: tasks trained and evaluated on (default: the preset's).
         workers: simulator processes (default: the preset's).
+        runner: where they run: local, ray or ray:ADDRESS (default: the preset's, local).
         real_rl: also run RL in the real world for comparison (default: the preset's, on).
     """
     from gymnast.experiment.dyna import DYNA_PRESETS, DynaInputs, run_dyna, saved_dyna_settings
@@ -259,7 +263,8 @@ def dyna(
     config, inputs = resolve(
         "dyna", out, resume, DYNA_PRESETS[preset], inputs={"policy": policy, "wm": wm, "judge": judge, "data": data},
         overrides={"rounds": rounds, "rollouts_per_task": rollouts_per_task, "rl.steps": steps, "rl.tasks": tasks,
-                   "workers": workers, "real_rl": real_rl}, saved=saved, required=("policy", "wm", "judge"))
+                   "workers": workers, "runner": runner,
+                   "real_rl": real_rl}, saved=saved, required=("policy", "wm", "judge"))
     summary = run_dyna(config, DynaInputs(**inputs), out)
     print(dyna_table(summary))
     print(f"summary: {out / 'summary.json'}, plot: {out / summary['plot']}")

@@ -294,6 +294,7 @@ def worldgym(
     episodes: int = 10,
     horizon: int = 150,
     workers: int = 2,
+    runner: str = "local",
     seed: int = 0,
 ) -> None:
     """WorldGym over a noise ladder: can the world model and judge rank policies like the real world?
@@ -312,11 +313,13 @@ def worldgym(
         episodes: evaluation seeds per task, in each world.
         horizon: actions per episode, in each world.
         workers: simulator processes for the real-world rollouts.
+        runner: where they run: local, ray or ray:ADDRESS (see `gymnast eval --help`).
         seed: seed of the noise.
     """
     from gymnast.experiment.worldgym import format_rows, run_worldgym
 
-    result = run_worldgym(policy, noise, wm, judge, tasks, episodes, out, horizon=horizon, workers=workers, seed=seed)
+    result = run_worldgym(policy, noise, wm, judge, tasks, episodes, out, horizon=horizon, workers=workers, seed=seed,
+                          runner=runner)
     print(format_rows(result))
     print(f"report: {out / 'worldgym.json'}, plot: {out / 'worldgym.png'}")
 
@@ -328,6 +331,7 @@ def experiment(
     reuse: Annotated[list[str], tyro.conf.UseAppendAction] = [],  # noqa: B006 (read by tyro, never mutated)
     workers: int | None = None,
     sentences: Path | None = None,
+    runner: str | None = None,
 ) -> None:
     """The headline comparison: data, SFT, world model, judge, six arms, real-world evaluation and
     the WorldGym check, then OUT/report.md, OUT/summary.json and OUT/plots/. Rerunning the same
@@ -343,13 +347,15 @@ def experiment(
         workers: simulator processes (default: the preset's, one per core on 2 cores).
         sentences: a file of `task: sentence` lines, your own wording of the tasks: the language
             check gives the policies these instead of the held-out paraphrases.
+        runner: where they run: local, ray or ray:ADDRESS (default: the preset's, local).
     """
     from gymnast.experiment.config import EXPERIMENT_PRESETS
     from gymnast.experiment.pipeline import run_experiment, saved_experiment_config
     from gymnast.experiment.report import format_table
     from gymnast.experiment.stages import parse_reuse
 
-    config, _ = resolve("experiment", out, resume, EXPERIMENT_PRESETS[preset], overrides={"workers": workers, "sentences": sentences},
+    config, _ = resolve("experiment", out, resume, EXPERIMENT_PRESETS[preset],
+                        overrides={"workers": workers, "sentences": sentences, "runner": runner},
                         inputs={}, saved=lambda: (saved_experiment_config(out), {}))
     summary = run_experiment(config, out, parse_reuse(reuse))
     print(format_table(summary))
@@ -366,6 +372,7 @@ def imagination(
     horizon: int = 150,
     batch: int = 32,
     workers: int = 1,
+    runner: str = "local",
     videos: int = 4,
     seed: int = 0,
 ) -> None:
@@ -384,6 +391,7 @@ def imagination(
         horizon: actions per rollout.
         batch: rollouts stepped together.
         workers: simulator processes for the real-world envs.
+        runner: where they run: local, ray or ray:ADDRESS (see `gymnast eval --help`).
         videos: side-by-side videos (imagined | real replay | difference), disagreements first.
         seed: reset seed of the envs (what a stochastic world model draws from).
     """
@@ -391,7 +399,7 @@ def imagination(
     from gymnast.experiment.imagination_report import format_imagination
 
     config = ImaginationConfig(tasks=tasks, episodes=episodes, horizon=horizon, batch=batch, workers=workers,
-                               videos=videos, seed=seed)
+                               runner=runner, videos=videos, seed=seed)
     report = measure_imagination_runs(policy, wm, RewardSpec.parse(reward), config, out)
     print(format_imagination(report))
     print(f"report: {out / 'imagination.md'}")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib.util
 import os
 import signal
 import subprocess
@@ -32,6 +33,22 @@ def _children(pid: int) -> set[int]:
     return found
 
 
+def _descendants(pid: int) -> set[int]:
+    found, todo = set(), [pid]
+    while todo:
+        children = _children(todo.pop())
+        found |= children
+        todo.extend(children)
+    return found
+
+
+def _title(pid: int) -> str:
+    try:
+        return Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+    except OSError:
+        return ""
+
+
 def _alive(pid: int) -> bool:
     try:
         state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
@@ -58,6 +75,36 @@ def test_workers_exit_within_seconds_of_their_parent_being_killed(kind):
         while (survivors := {pid for pid in workers if _alive(pid)}) and time.monotonic() < deadline:
             time.sleep(0.2)
         assert not survivors, f"{kind}: workers {sorted(survivors)} outlived their killed parent"
+    finally:
+        if parent.poll() is None:
+            parent.kill()
+
+
+# A driver that started Ray on this machine, its two actors busy with long jobs.
+RAY_PARENT = ("import time\nfrom gymnast.envs.parallel import parallel_map\nfrom gymnast.envs.ray_workers import init_ray\n"
+              "init_ray(num_cpus=2)\nlist(parallel_map(time.sleep, [600, 600], 2, 'ray'))")
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads the process table from /proc")
+@pytest.mark.skipif(importlib.util.find_spec("ray") is None, reason="Ray is not installed")
+def test_ray_actors_and_ray_itself_exit_within_seconds_of_their_driver_being_killed():
+    parent = subprocess.Popen([sys.executable, "-c", RAY_PARENT], env={**os.environ, "OMP_NUM_THREADS": "1"})
+    try:
+        deadline = time.monotonic() + 180
+        while len([pid for pid in _descendants(parent.pid) if "ray::Host" in _title(pid)]) < 2:
+            assert parent.poll() is None, f"the Ray driver exited early with {parent.returncode}"
+            assert time.monotonic() < deadline, "the Ray driver started no actors"
+            time.sleep(0.5)
+        # Ray's dashboard and runtime-env agents poll for their raylet and follow it within about a
+        # minute; they hold no scene or model, so only the actors and Ray's core are timed here.
+        processes = {pid for pid in _descendants(parent.pid) if "Agent" not in _title(pid)}
+        parent.send_signal(signal.SIGKILL)
+        parent.wait()
+        deadline = time.monotonic() + 15
+        while (survivors := {pid for pid in processes if _alive(pid)}) and time.monotonic() < deadline:
+            time.sleep(0.2)
+        assert not survivors, f"{[_title(pid)[:60] for pid in survivors]} outlived their killed driver"
     finally:
         if parent.poll() is None:
             parent.kill()

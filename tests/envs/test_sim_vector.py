@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import os
+import signal
+
 import numpy as np
 import pytest
 from gymnasium.vector import AutoresetMode
@@ -180,9 +183,7 @@ def test_two_workers_give_exactly_the_outputs_of_one(env, two_workers):
 
 def test_a_dead_worker_raises_runtime_error_and_close_is_idempotent(two_workers):
     two_workers.reset(options={"tasks": TASKS, "seeds": [0, 1, 2]})
-    process, _ = two_workers._workers[1]
-    process.kill()  # the fixture's last use: it cannot recover from this
-    process.join()
+    os.kill(two_workers.workers.pids()[1], signal.SIGKILL)  # the fixture's last use: it cannot recover
     with pytest.raises(RuntimeError, match="worker 1 failed in step"):
         two_workers.step(random_chunks(1, 3)[0])
     two_workers.close()

@@ -39,6 +39,7 @@ from gymnast.envs.gap import get_gap
 from gymnast.envs.metaworld import MetaWorldEnv
 from gymnast.envs.parallel import cached_env, parallel_map
 from gymnast.envs.tasks import DATA_SEEDS, resolve_tasks
+from gymnast.envs.workers import parse_runner
 from gymnast.utils.atomic import write_json
 
 logger = logging.getLogger(__name__)
@@ -66,6 +67,10 @@ class CollectConfig:
     """Record in the real world (none) or a software simulator (mild, strong)."""
     workers: int = 2
     """Processes that record episodes in parallel (one per core is best)."""
+    runner: str = "local"
+    """Where the worker processes run: local (spawned on this machine), ray (Ray actors on a Ray
+    started here, or on the cluster in RAY_ADDRESS) or ray:ADDRESS (a Ray cluster, e.g. ray:auto or
+    ray:ray://head:10001)."""
     flush_every: int = 50
     """Consolidate staged episodes into dataset files after this many."""
     env: EnvConfig = field(default_factory=EnvConfig)
@@ -82,6 +87,7 @@ class CollectConfig:
                 f"seeds {self.first_seed}..{last} leave the data seed range "
                 f"[{DATA_SEEDS.start}, {DATA_SEEDS.stop}); evaluation seeds are never recorded"
             )
+        parse_runner(self.runner)
 
     @property
     def failures_per_task(self) -> int:
@@ -199,7 +205,7 @@ def collect(
     bar = tqdm(total=len(todo), desc="collect", unit="ep", disable=not progress)
     recorded = successes = 0
     try:
-        for episode in parallel_map(record, todo, config.workers):
+        for episode in parallel_map(record, todo, config.workers, config.runner):
             writer.add(episode)
             recorded += 1
             successes += episode.info.success

@@ -27,15 +27,16 @@ class EnvFactory:
         config: image size and horizon of the simulators (the imagined env uses the same horizon).
         gap: the software simulator's gap (the real world has none).
         workers: simulator processes per env.
+        runner: where they run: local, ray or ray:ADDRESS (`gymnast.envs.workers.parse_runner`).
         world_model: what the imagined env imagines with.
         stop_above: the imagined env stops a rollout before its first frame whose ensemble
             disagreement exceeds this (`BatchedImaginedEnv`); None never stops.
     """
 
     def __init__(self, kind: EnvKind, chunk_size: int, config: EnvConfig, gap: str, workers: int, world_model=None,
-                 stop_above: float | None = None) -> None:
+                 stop_above: float | None = None, runner: str = "local") -> None:
         self.kind, self.chunk_size, self.config, self.gap, self.workers = kind, chunk_size, config, gap, workers
-        self.world_model, self.stop_above = world_model, stop_above
+        self.world_model, self.stop_above, self.runner = world_model, stop_above, runner
         self.batch = 1
         self._envs: dict[tuple[str, int], VectorEnv] = {}
 
@@ -52,7 +53,8 @@ class EnvFactory:
                                                      self.stop_above)
             else:
                 gap = "none" if kind.real_interactions else self.gap
-                self._envs[key] = SimVectorEnv(num_envs, self.chunk_size, self.config, gap=gap, workers=self.workers)
+                self._envs[key] = SimVectorEnv(num_envs, self.chunk_size, self.config, gap=gap, workers=self.workers,
+                                                 runner=self.runner)
         return self._envs[key]
 
     def close(self) -> None:

@@ -68,20 +68,22 @@ def measure_one(job: GapJob) -> dict:
 
 
 def measure_gap(
-    gap: str, tasks: tuple[str, ...], episodes: int, config: EnvConfig, workers: int, first_seed: int
+    gap: str, tasks: tuple[str, ...], episodes: int, config: EnvConfig, workers: int, first_seed: int,
+    runner: str = "local",
 ) -> Iterator[dict]:
-    """Yields `measure_one` results for every task and seed (in completion order)."""
+    """Yields `measure_one` results for every task and seed (in completion order), run in `workers`
+    processes on `runner` (`gymnast.envs.workers.parse_runner`)."""
     jobs = [GapJob(task, first_seed + i, gap, config) for task in tasks for i in range(episodes)]
-    yield from parallel_map(measure_one, jobs, workers)
+    yield from parallel_map(measure_one, jobs, workers, runner)
 
 
 def measure_gap_levels(tasks: tuple[str, ...], episodes: int, levels: tuple[str, ...], config: EnvConfig, workers: int,
-                       first_seed: int, progress: bool = True) -> dict:
+                       first_seed: int, progress: bool = True, runner: str = "local") -> dict:
     """Every level measured on `episodes` seeds per task: its settings, `summarise`'s figures and
     the per-episode records."""
     report = {"tasks": list(tasks), "episodes_per_task": episodes, "horizon": config.horizon, "levels": {}}
     for level in levels:
-        records = list(tqdm(measure_gap(level, tasks, episodes, config, workers, first_seed),
+        records = list(tqdm(measure_gap(level, tasks, episodes, config, workers, first_seed, runner),
                             total=len(tasks) * episodes, desc=f"gap {level}", unit="ep", disable=not progress))
         report["levels"][level] = {"gap": dataclasses.asdict(get_gap(level)), **summarise(records), "records": records}
     return report

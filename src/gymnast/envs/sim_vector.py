@@ -14,21 +14,15 @@ frozen: never stepped again, its final frame repeated, NaN rewards, ``executed``
 Each episode is stepped by the rollout engine's `gymnast.envs.engine.play_chunk`, the code that
 plays `gymnast eval`'s and `gymnast collect`'s episodes, so success means the same in all of them.
 MuJoCo stepping and rendering are single-threaded, so ``workers > 1`` splits the B episodes into
-contiguous slices over ``spawn`` processes (see `gymnast.envs.parallel`); the episodes run the
-same code in either case, so the results are identical.
+contiguous slices over worker processes, spawned here or Ray actors (`gymnast.envs.workers`); the
+episodes run the same code in either case, so the results are identical.
 """
 
 from __future__ import annotations
 
-import contextlib
 import itertools
-import multiprocessing
-import os
-import traceback
 from collections import Counter
 from collections.abc import Callable
-from multiprocessing.connection import Connection
-from multiprocessing.process import BaseProcess
 from typing import Any, ClassVar, Self
 
 import numpy as np
@@ -41,8 +35,8 @@ from gymnast.envs.engine import EpisodeRun, play_chunk, start_episode
 from gymnast.envs.gap import get_gap
 from gymnast.envs.instructions import SPLITS
 from gymnast.envs.metaworld import ACTION_DIM, CONTROL_FPS, MetaWorldEnv
-from gymnast.envs.parallel import exit_with_parent
 from gymnast.envs.tasks import check_task
+from gymnast.envs.workers import Workers, parse_runner
 
 
 class _Episodes:
@@ -101,26 +95,6 @@ class _Episodes:
         self._envs.clear()
 
 
-def _work(conn: Connection, config: EnvConfig, gap: str, instruction_split: str, parent: int) -> None:
-    """A worker's loop: answers ``(method, args)`` with ``("ok", result)`` or ``("error", text)``."""
-    exit_with_parent(parent)
-    episodes = _Episodes(config, gap, instruction_split)
-    try:
-        while True:
-            method, args = conn.recv()
-            if method == "close":
-                break
-            try:
-                conn.send(("ok", getattr(episodes, method)(*args)))
-            except Exception:  # noqa: BLE001  (any failure goes back to the parent, which raises it)
-                conn.send(("error", traceback.format_exc()))
-    except (EOFError, KeyboardInterrupt):  # the parent is gone or interrupted: just exit
-        pass
-    finally:
-        episodes.close()
-        conn.close()
-
-
 class SimVectorEnv(VectorEnv):
     """B Meta-World episodes (of any tasks) stepped one action chunk at a time; no autoreset.
 
@@ -139,6 +113,7 @@ class SimVectorEnv(VectorEnv):
         gap: ``none`` (the real world), or a simulator gap such as ``mild``.
         instruction_split: ``train`` or ``heldout`` paraphrases of the default instructions.
         workers: processes to step the episodes in; 1 runs them in this process.
+        runner: where the processes run: local, ray or ray:ADDRESS (`gymnast.envs.workers.parse_runner`).
     """
 
     metadata: ClassVar[dict[str, Any]] = {
@@ -146,12 +121,13 @@ class SimVectorEnv(VectorEnv):
     }
 
     def __init__(self, num_envs: int, chunk_size: int = 5, config: EnvConfig | None = None, gap: str = "none",
-                 instruction_split: str = "train", workers: int = 1) -> None:
+                 instruction_split: str = "train", workers: int = 1, runner: str = "local") -> None:
         if num_envs < 1 or chunk_size < 1 or workers < 1:
             raise ValueError(f"need num_envs, chunk_size and workers >= 1, got {num_envs}, {chunk_size}, {workers}")
         if instruction_split not in SPLITS:
             raise ValueError(f"instruction_split must be one of {SPLITS}, got {instruction_split!r}")
         get_gap(gap)  # fail here, with its own message, rather than inside a worker
+        parse_runner(runner)
         self.config = config or EnvConfig()
         self.num_envs = num_envs
         size = self.config.image_size
@@ -163,18 +139,11 @@ class SimVectorEnv(VectorEnv):
         self._slices = [slice(a, b) for a, b in itertools.pairwise(bounds)]  # contiguous
         self._info: dict[str, np.ndarray] | None = None
         self._local: _Episodes | None = None
-        self._workers: list[tuple[BaseProcess, Connection]] = []  # (process, parent end of its pipe)
+        self.workers: Workers | None = None
         if len(self._slices) == 1:
             self._local = _Episodes(self.config, gap, instruction_split)
-            return
-        context = multiprocessing.get_context("spawn")  # forking a process holding GL is unsafe
-        for _ in self._slices:
-            conn, child = context.Pipe()
-            process = context.Process(target=_work, args=(child, self.config, gap, instruction_split, os.getpid()),
-                                      daemon=True)
-            process.start()
-            child.close()
-            self._workers.append((process, conn))
+        else:
+            self.workers = Workers(runner, len(self._slices), _Episodes, (self.config, gap, instruction_split))
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         """Starts episode i as ``MetaWorldEnv(tasks[i]).reset(seed=seeds[i])`` would.
@@ -228,16 +197,9 @@ class SimVectorEnv(VectorEnv):
         if self._local is not None:
             self._local.close()
             self._local = None
-        for _, conn in self._workers:
-            with contextlib.suppress(OSError):  # already dead
-                conn.send(("close", None))
-        for process, conn in self._workers:
-            process.join(timeout=10)
-            if process.is_alive():
-                process.terminate()
-                process.join()
-            conn.close()
-        self._workers = []
+        if self.workers is not None:
+            self.workers.close()
+            self.workers = None
 
     def __enter__(self) -> Self:
         return self
@@ -259,23 +221,9 @@ class SimVectorEnv(VectorEnv):
         """Runs ``method`` on every slice (one args tuple each); returns the results joined over B."""
         if self._local is not None:
             return getattr(self._local, method)(*args[0])
-        if not self._workers:
+        if self.workers is None:
             raise RuntimeError("the env is closed")
-        for (_, conn), slice_args in zip(self._workers, args):
-            with contextlib.suppress(OSError):  # a dead worker; recv below reports it
-                conn.send((method, slice_args))
-        parts, errors = [], []
-        for index, (_, conn) in enumerate(self._workers):  # read every answer: keeps pipes in step
-            try:
-                status, value = conn.recv()
-            except (EOFError, OSError):
-                status, value = "error", "the worker process died"
-            if status == "ok":
-                parts.append(value)
-            else:
-                errors.append(f"sim worker {index} failed in {method}():\n{value}")
-        if errors:
-            raise RuntimeError("\n".join(errors))
+        parts = self.workers.call_each(method, args)  # a worker that dies mid-rollout loses its episodes: raises
         return {key: np.concatenate([part[key] for part in parts]) for key in parts[0]}
 
     def _infos(self) -> dict[str, np.ndarray]:

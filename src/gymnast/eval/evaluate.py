@@ -35,6 +35,7 @@ from gymnast.envs.metaworld import MetaWorldEnv
 from gymnast.envs.parallel import cached_env, parallel_map
 from gymnast.envs.perturb import get_perturbation
 from gymnast.envs.tasks import eval_seed, resolve_tasks
+from gymnast.envs.workers import parse_runner
 from gymnast.eval.stats import success_summary
 from gymnast.utils.atomic import atomic_path, write_json
 from gymnast.utils.device import resolve_device
@@ -79,6 +80,10 @@ class EvalConfig:
     device: str = "cpu"
     """Where the policy runs in each worker: cpu, cuda, cuda:N or auto (CUDA when torch sees a GPU).
     The CPU by default: one episode's forward passes are small, and the simulator is the cost."""
+    runner: str = "local"
+    """Where the worker processes run: local (spawned on this machine), ray (Ray actors on a Ray
+    started here, or on the cluster in RAY_ADDRESS) or ray:ADDRESS (a Ray cluster, e.g. ray:auto or
+    ray:ray://head:10001)."""
     videos_per_task: int = 1
     """Episodes of each task (the first ones) saved as mp4 videos; 0 saves none."""
     first_eval_index: int = 0
@@ -117,6 +122,7 @@ class EvalConfig:
         get_perturbation(self.perturb)
         get_gap(self.gap)
         resolve_device(self.device)
+        parse_runner(self.runner)
         eval_seed(self.first_eval_index)
         eval_seed(self.first_eval_index + self.episodes - 1)
 
@@ -222,13 +228,13 @@ def evaluate(policy: str | Policy, config: EvalConfig, out: str | Path, progress
     video_dir = out.parent / f"{out.stem}{VIDEO_DIR_SUFFIX}"
     jobs = plan_episodes(config, label, video_dir)
     run = run_episode if in_process is None else functools.partial(run_episode, policy=in_process)
-    logger.info("evaluating %s: %d tasks x %d seeds, perturb=%s, gap=%s, %d workers",
-                label, len(config.task_list), config.episodes, config.perturb, config.gap, config.workers)
+    logger.info("evaluating %s: %d tasks x %d seeds, perturb=%s, gap=%s, %d workers (%s)", label,
+                len(config.task_list), config.episodes, config.perturb, config.gap, config.workers, config.runner)
     start = time.perf_counter()
     records: list[dict] = []
     bar = tqdm(total=len(jobs), desc="eval", unit="ep", disable=not progress)
     try:
-        for record in parallel_map(run, jobs, config.workers):
+        for record in parallel_map(run, jobs, config.workers, config.runner):
             records.append(record)
             bar.update()
             bar.set_postfix(success=f"{sum(r['success'] for r in records) / len(records):.0%}")

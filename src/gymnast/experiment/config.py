@@ -17,6 +17,7 @@ from gymnast.config import CommaFloats
 from gymnast.data.collect import CollectConfig
 from gymnast.envs.instructions import read_sentences
 from gymnast.envs.tasks import resolve_tasks
+from gymnast.envs.workers import parse_runner
 from gymnast.policy.sft import SFT_PRESETS, SFTConfig
 from gymnast.reward.train_judge import JUDGE_PRESETS, JudgeTrainConfig
 from gymnast.rl.config import RL_PRESETS, RLConfig
@@ -74,6 +75,9 @@ class ExperimentConfig:
     """WorldGym also rates uniformly random actions (the floor of the noise ladder)."""
     workers: int = 2
     """Simulator processes."""
+    runner: str = "local"
+    """Where the simulator processes of collection, RL and evaluation run: local, ray or
+    ray:ADDRESS (see `gymnast eval --help`)."""
     seed: int = 0
     """Seed of every stage."""
 
@@ -88,14 +92,16 @@ class ExperimentConfig:
         if not all(0 < noise < math.inf for noise in self.worldgym_noise):
             raise ValueError(f"ExperimentConfig.worldgym_noise must be finite and positive (noise 0 is the SFT arm, "
                              f"random actions are worldgym_random), got {self.worldgym_noise}")
+        parse_runner(self.runner)
 
     def resolved(self) -> ExperimentConfig:
-        """Every stage told the experiment's tasks, workers and seed (one place to set them)."""
+        """Every stage told the experiment's tasks, workers, runner and seed (one place to set them)."""
         return dataclasses.replace(
             self,
-            collect=dataclasses.replace(self.collect, tasks=self.tasks, workers=self.workers),
+            collect=dataclasses.replace(self.collect, tasks=self.tasks, workers=self.workers, runner=self.runner),
             sft=dataclasses.replace(self.sft, tasks="", seed=self.seed),
-            rl=dataclasses.replace(self.rl, tasks=self.tasks, gap=self.gap, workers=self.workers, seed=self.seed),
+            rl=dataclasses.replace(self.rl, tasks=self.tasks, gap=self.gap, workers=self.workers, runner=self.runner,
+                                   seed=self.seed),
         )
 
 

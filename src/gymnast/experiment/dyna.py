@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from gymnast.config import EnvConfig
+from gymnast.envs.workers import parse_runner
 from gymnast.experiment.stages import Stages
 from gymnast.rl.config import RL_PRESETS, RLConfig
 from gymnast.utils.settings import from_json, saved_settings
@@ -67,6 +68,8 @@ class DynaConfig:
     """Real evaluation episodes per task after each round, from the evaluation seeds."""
     workers: int = 2
     """Simulator processes (recording, evaluation, real-world RL)."""
+    runner: str = "local"
+    """Where the simulator processes run: local, ray or ray:ADDRESS (see `gymnast eval --help`)."""
     rl: RLConfig = field(default_factory=RLConfig)
     """GRPO settings of every round's imagined RL and of the real-world arm."""
 
@@ -78,12 +81,14 @@ class DynaConfig:
             raise ValueError(f"DynaConfig.rollout_temperature must be >= 0, got {self.rollout_temperature}")
         if self.real_reward not in ("sim", "sim-dense"):
             raise ValueError(f"DynaConfig.real_reward must be sim or sim-dense, got {self.real_reward!r}")
+        parse_runner(self.runner)
 
     @property
     def real_rl_config(self) -> RLConfig:
         """The real-world arm's settings: Dyna's, for all rounds' steps, evaluated at each round's end."""
         return dataclasses.replace(self.rl, steps=self.rounds * self.rl.steps, eval_every=self.rl.steps,
-                                   eval_episodes=self.eval_episodes, watch_every=0, workers=self.workers)
+                                   eval_episodes=self.eval_episodes, watch_every=0, workers=self.workers,
+                                   runner=self.runner)
 
 
 def _imagined_rl(**changes) -> RLConfig:
@@ -207,7 +212,7 @@ def record_rollouts(k: int, policy: Path, judge: Path, config: DynaConfig, out: 
     env = EnvConfig(image_size=load_run_policy(str(policy.resolve())).config.image_size, horizon=config.rl.horizon)
     collect = CollectConfig(tasks=config.rl.tasks, episodes_per_task=config.rollouts_per_task, noise=(0.0,),
                             first_seed=config.first_rollout_seed + (k - 1) * config.rollouts_per_task,
-                            workers=config.workers, env=env)
+                            workers=config.workers, runner=config.runner, env=env)
     record_policy(policy, collect, out, temperature=config.rollout_temperature, progress=progress)
     dataset = EpisodeDataset(out)
     # Before fine-tuning: how often the judge passed a failure (the errors this round teaches it).
@@ -298,7 +303,7 @@ def _evaluate(policy: Path, config: DynaConfig, report: Path) -> dict:
 
     size = load_run_policy(str(Path(policy).resolve())).config.image_size
     settings = EvalConfig(tasks=config.rl.tasks, episodes=config.eval_episodes, workers=config.workers,
-                          env=EnvConfig(image_size=size, horizon=config.rl.horizon))
+                          runner=config.runner, env=EnvConfig(image_size=size, horizon=config.rl.horizon))
     result = evaluate(str(policy), settings, report, progress=False)
     return {**{key: result[key] for key in ("success", "ci_low", "ci_high", "episodes", "successes", "per_task")},
             "eval_real_interactions": result["real_interactions"]}

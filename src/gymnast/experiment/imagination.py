@@ -35,6 +35,7 @@ from tqdm import tqdm
 from gymnast.config import EnvConfig
 from gymnast.envs.kinds import IMAGINED, REAL
 from gymnast.envs.starts import Start
+from gymnast.envs.workers import parse_runner
 from gymnast.eval.stats import wilson_interval
 from gymnast.policy.base import Policy
 from gymnast.reward.base import Reward
@@ -63,6 +64,8 @@ class ImaginationConfig:
     """Rollouts stepped together in each env."""
     workers: int = 1
     """Simulator processes for the real-world envs."""
+    runner: str = "local"
+    """Where the simulator processes run: local, ray or ray:ADDRESS (see `gymnast eval --help`)."""
     videos: int = 4
     """Side-by-side videos (imagined | real replay | difference) to write, disagreements first."""
     seed: int = 0
@@ -74,6 +77,7 @@ class ImaginationConfig:
                 raise ValueError(f"ImaginationConfig.{name} must be at least 1, got {getattr(self, name)}")
         if self.videos < 0:
             raise ValueError(f"ImaginationConfig.videos must be >= 0, got {self.videos}")
+        parse_runner(self.runner)
 
 
 def measure_imagination(policy: Policy, world_model: WorldModel, reward: Reward, config: ImaginationConfig,
@@ -113,7 +117,7 @@ def measure_imagination(policy: Policy, world_model: WorldModel, reward: Reward,
     envs = EnvFactory(IMAGINED, policy.chunk_size, env_config, "none", config.workers, world_model)
     # Replays run in an env that goes on after success, so each imagined frame has a real one.
     replays = EnvFactory(REAL, policy.chunk_size, dataclasses.replace(env_config, terminate_on_success=False), "none",
-                         config.workers)
+                         config.workers, runner=config.runner)
     state = _State(config.videos)
     try:
         for first in tqdm(range(0, len(starts), size), desc="imagination", unit="batch", disable=not progress):

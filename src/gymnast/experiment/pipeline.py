@@ -111,7 +111,7 @@ def _imagination(sft: Path, wm: Path, judge: Path, config: ExperimentConfig, out
     from gymnast.reward.spec import RewardSpec
 
     settings = ImaginationConfig(tasks=config.tasks, episodes=config.worldgym_episodes, horizon=config.rl.horizon,
-                                 workers=config.workers, seed=config.seed)
+                                 workers=config.workers, runner=config.runner, seed=config.seed)
     report = measure_imagination_runs(sft, wm, RewardSpec.judge(judge), settings, out / "imagination", progress)
     return imagination_brief(report)
 
@@ -155,7 +155,8 @@ def _evaluate(stages: Stages, stage: str, policy: Path, config: ExperimentConfig
 
     def work() -> dict:
         settings = EvalConfig(tasks=config.tasks, episodes=episodes, perturb=perturb, instruction_split=instruction_split,
-                              sentences=sentences, workers=config.workers, videos_per_task=1 if perturb == "none" else 0,
+                              sentences=sentences, workers=config.workers, runner=config.runner,
+                              videos_per_task=1 if perturb == "none" else 0,
                               env=dataclasses.replace(env))
         report = evaluate(str(policy), settings, out / "eval" / f"{stage.removeprefix('eval_')}.json", progress)
         keep = ("success", "ci_low", "ci_high", "episodes", "successes", "per_task", "real_interactions", "videos")
@@ -186,7 +187,7 @@ def _worldgym(stages: Stages, config: ExperimentConfig, out: Path, policies: dic
     levels = (*config.worldgym_noise, *((math.inf,) if config.worldgym_random else ()))
     if levels:
         candidates += noise_ladder(policies["sft"], levels, config.seed, prefix="sft_")
-    with WorldGym(wm, judge, config.tasks, config.worldgym_episodes, env, config.workers) as gym:
+    with WorldGym(wm, judge, config.tasks, config.worldgym_episodes, env, config.workers, runner=config.runner) as gym:
         rows = gym.rows(candidates, real, progress)
     return {"policies": rows, **correlation([r["imagined"] for r in rows], [r["real"] for r in rows])}
 

@@ -107,10 +107,11 @@ class WorldGym:
         env: image size (the policies' and the world model's) and horizon of both worlds.
         workers: simulator processes for the real rollouts.
         batch: most rollouts stepped together.
+        runner: where the simulator processes run: local, ray or ray:ADDRESS.
     """
 
     def __init__(self, wm_run: Path, judge_run: Path, tasks: str, episodes: int, env: EnvConfig, workers: int = 2,
-                 batch: int = 32) -> None:
+                 batch: int = 32, runner: str = "local") -> None:
         from gymnast.envs.starts import evaluation_starts
         from gymnast.envs.tasks import resolve_tasks
         from gymnast.reward.select import make_reward
@@ -119,7 +120,7 @@ class WorldGym:
 
         if episodes < 1:
             raise ValueError(f"WorldGym needs at least one episode per task, got {episodes}")
-        self.tasks, self.env, self.workers = resolve_tasks(tasks), env, workers
+        self.tasks, self.env, self.workers, self.runner = resolve_tasks(tasks), env, workers, runner
         self.world_model = load_world_model(wm_run)
         self.judge = make_reward(RewardSpec.judge(judge_run))
         self.starts = evaluation_starts(self.tasks, episodes, env)
@@ -163,7 +164,8 @@ class WorldGym:
         if hasattr(policy, "reseed"):  # a noisy policy: each estimate draws its own noise from the start
             policy.reseed()
         if policy.chunk_size not in self._factories:
-            factory = EnvFactory(IMAGINED, policy.chunk_size, self.env, "none", self.workers, self.world_model)
+            factory = EnvFactory(IMAGINED, policy.chunk_size, self.env, "none", self.workers, self.world_model,
+                                 runner=self.runner)
             factory.batch = self.batch
             self._factories[policy.chunk_size] = factory
         values = evaluate_in_env(self._factories[policy.chunk_size], kind, policy, self.judge, self.starts, prefix="wg")
@@ -201,7 +203,8 @@ def correlation(imagined: list[float], real: list[float]) -> dict:
 
 
 def run_worldgym(policy_run: Path, noise: Sequence[float], wm_run: Path, judge_run: Path, tasks: str, episodes: int,
-                 out: Path, horizon: int = 150, workers: int = 2, seed: int = 0, progress: bool = True) -> dict:
+                 out: Path, horizon: int = 150, workers: int = 2, seed: int = 0, progress: bool = True,
+                 runner: str = "local") -> dict:
     """`gymnast worldgym`: the noise ladder of one policy, estimated in imagination and in the
     real world; writes ``out/worldgym.json`` and ``out/worldgym.png`` and returns the JSON's content.
 
@@ -216,7 +219,7 @@ def run_worldgym(policy_run: Path, noise: Sequence[float], wm_run: Path, judge_r
     began = time.perf_counter()
     candidates = noise_ladder(policy_run, noise, seed)
     env = EnvConfig(image_size=candidates[0].policy.config.image_size, horizon=horizon)
-    with WorldGym(wm_run, judge_run, tasks, episodes, env, workers) as gym:
+    with WorldGym(wm_run, judge_run, tasks, episodes, env, workers, runner=runner) as gym:
         rows = gym.rows(candidates, progress=progress)
     result = {"rows": rows, **correlation([r["imagined"] for r in rows], [r["real"] for r in rows]),
               "settings": {"policy": str(policy_run), "noise": [json_noise(level) for level in noise],

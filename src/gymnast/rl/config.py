@@ -12,6 +12,7 @@ from typing import Any
 
 from gymnast.envs.kinds import EnvKind, env_kind
 from gymnast.envs.tasks import parse_scenes
+from gymnast.envs.workers import parse_runner
 from gymnast.reward.spec import RewardSpec
 from gymnast.utils.settings import saved_settings
 
@@ -97,6 +98,10 @@ class RLConfig:
     device: str = "auto"
     """Where the policy, the world model and the judge run: auto (CUDA when torch sees a GPU), cpu,
     cuda or cuda:N. Environments and rollout records stay on the host."""
+    runner: str = "local"
+    """Where the worker processes run: local (spawned on this machine), ray (Ray actors on a Ray
+    started here, or on the cluster in RAY_ADDRESS) or ray:ADDRESS (a Ray cluster, e.g. ray:auto or
+    ray:ray://head:10001)."""
     eval_every: int = 25
     """Steps between evaluations (also at the start and the end); 0 evaluates only at both ends."""
     eval_episodes: int = 10
@@ -137,6 +142,7 @@ class RLConfig:
             raise ValueError("RLConfig.instruction is empty; give a sentence or leave it out")
         if not 0 <= self.keep_low <= self.keep_high <= 1:
             raise ValueError(f"need 0 <= keep_low <= keep_high <= 1, got {self.keep_low}, {self.keep_high}")
+        parse_runner(self.runner)
 
 
 RL_PRESETS: dict[str, RLConfig] = {

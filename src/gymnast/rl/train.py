@@ -100,7 +100,7 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
                           frames.get("camera")) if data else None
     draw_starts = StartSampler(tasks, practice or pool, env_config, config.instruction)
     envs = EnvFactory(env, policy.chunk_size, env_config, config.gap, config.workers, world_model,
-                      stop_above=config.disagreement_stop or None)
+                      stop_above=config.disagreement_stop or None, runner=config.runner)
     resolved = {"rl": dataclasses.asdict(config), "run": run_spec.to_json(), "model": policy.spec(),
                 "data": str(data) if data else None, "frames": frames}
 
