@@ -264,7 +264,8 @@ def rl(
         config: the GRPO settings; each one left out keeps the preset's value.
     """
     from gymnast.rl.config import RLRun, saved_rl_settings
-    from gymnast.rl.train import train_rl, with_tasks_from_data
+    from gymnast.rl.inputs import with_tasks_from_data
+    from gymnast.rl.train import train_rl
 
     def saved() -> tuple[RLConfig, dict]:
         run_spec, settings = saved_rl_settings(out)

@@ -57,23 +57,28 @@ def _alive(pid: int) -> bool:
     return state != "Z"  # a zombie has exited; only its entry waits to be reaped
 
 
+def _survivors_of_killing(parent: subprocess.Popen, pids, seconds: float) -> set[int]:
+    """SIGKILLs `parent`, then waits up to `seconds` for `pids` to exit; returns those still alive."""
+    parent.send_signal(signal.SIGKILL)
+    parent.wait()
+    deadline = time.monotonic() + seconds
+    while (survivors := {pid for pid in pids if _alive(pid)}) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    return survivors
+
+
 @pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads the process table from /proc")
 @pytest.mark.parametrize("kind", sorted(PARENTS))
 def test_workers_exit_within_seconds_of_their_parent_being_killed(kind):
     parent = subprocess.Popen([sys.executable, "-c", PARENTS[kind]], env={**os.environ, "OMP_NUM_THREADS": "1"})
     try:
         deadline = time.monotonic() + 120
-        while len(workers := _children(parent.pid)) < 2:  # spawned workers start slowly (imports)
+        while len(_children(parent.pid)) < 2:  # spawned workers start slowly (imports)
             assert parent.poll() is None, f"the {kind} parent exited early with {parent.returncode}"
             assert time.monotonic() < deadline, f"the {kind} parent started no workers"
             time.sleep(0.2)
         time.sleep(3)  # let them finish starting (the watchdog is set up first thing)
-        workers = _children(parent.pid)
-        parent.send_signal(signal.SIGKILL)
-        parent.wait()
-        deadline = time.monotonic() + 10
-        while (survivors := {pid for pid in workers if _alive(pid)}) and time.monotonic() < deadline:
-            time.sleep(0.2)
+        survivors = _survivors_of_killing(parent, _children(parent.pid), seconds=10)
         assert not survivors, f"{kind}: workers {sorted(survivors)} outlived their killed parent"
     finally:
         if parent.poll() is None:
@@ -99,11 +104,7 @@ def test_ray_actors_and_ray_itself_exit_within_seconds_of_their_driver_being_kil
         # Ray's dashboard and runtime-env agents poll for their raylet and follow it within about a
         # minute; they hold no scene or model, so only the actors and Ray's core are timed here.
         processes = {pid for pid in _descendants(parent.pid) if "Agent" not in _title(pid)}
-        parent.send_signal(signal.SIGKILL)
-        parent.wait()
-        deadline = time.monotonic() + 15
-        while (survivors := {pid for pid in processes if _alive(pid)}) and time.monotonic() < deadline:
-            time.sleep(0.2)
+        survivors = _survivors_of_killing(parent, processes, seconds=15)
         assert not survivors, f"{[_title(pid)[:60] for pid in survivors]} outlived their killed driver"
     finally:
         if parent.poll() is None:

@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import copy
 import dataclasses
-import json
 import logging
 import time
 from collections.abc import Callable
@@ -44,8 +43,9 @@ from gymnast.rl import grpo
 from gymnast.rl.config import RLConfig, RLRun
 from gymnast.rl.evaluate import evaluate_in_env, verdicts, watch_hacking
 from gymnast.rl.imitation import ImitationAnchor
+from gymnast.rl.inputs import check_other_robot, policy_dataset, policy_frames
 from gymnast.rl.rollout import (Rollouts, collect_rollouts, concat_rollouts, dataset_starts, heldout_starts,
-                                own_tasks, recorded_elsewhere, score_groups, tasks_with_starts)
+                                own_tasks, recorded_elsewhere, score_groups)
 from gymnast.rl.videos import write_group_video
 from gymnast.utils.atomic import write_json
 from gymnast.utils.checkpoint import load_checkpoint, resolve_checkpoint, save_checkpoint, write_run_config
@@ -85,7 +85,7 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
     scenes = parse_scenes(config.scenes) if config.scenes is not None else None
     elsewhere = data is not None and recorded_elsewhere(data)
     if elsewhere:
-        _check_other_robot(data, env, config)
+        check_other_robot(data, env, config)
         tasks = own_tasks(data, config.tasks)
     else:
         tasks = tuple(dict.fromkeys(task for task, _ in scenes)) if scenes else resolve_tasks(config.tasks)
@@ -385,60 +385,6 @@ def write_summary(out: Path, run_spec: RLRun, config: RLConfig, state: dict) -> 
     }
     write_json(out / "summary.json", summary)
     return summary
-
-
-def _check_other_robot(data: Path, env, config: RLConfig) -> None:
-    """Raises ValueError, naming the fix, for what a dataset of another robot cannot give."""
-    if not env.imagined:
-        raise ValueError(f"{data} was recorded on another robot, of which gymnast has no simulator: only "
-                         "--env imagined can practise from its scenes")
-    if config.real_eval or config.watch_every:
-        raise ValueError(f"{data} was recorded on another robot, which gymnast cannot run: add --no-real-eval "
-                         "--watch-every 0 (the real evaluation and the reward-hacking watch act in the real world)")
-    if config.fresh_scenes or config.scenes is not None:
-        raise ValueError(f"{data} was recorded on another robot: only its own scenes can start a rollout, "
-                         "not --fresh-scenes or --scenes")
-
-
-def with_tasks_from_data(run_spec: RLRun, config: RLConfig) -> RLConfig:
-    """`config` for a run whose tasks were not named: the preset's tasks that its start-state
-    dataset has, or else as many of the dataset's own (`tasks_with_starts`); fresh scenes need no
-    dataset and keep the preset's, and named scenes name their own."""
-    if config.fresh_scenes or config.scenes is not None:
-        return config
-    data = Path(run_spec.data or policy_dataset(run_spec.policy))
-    if recorded_elsewhere(data):
-        return dataclasses.replace(config, tasks="")  # all of the other robot's own tasks
-    return dataclasses.replace(config, tasks=",".join(tasks_with_starts(data, resolve_tasks(config.tasks))))
-
-
-def policy_dataset(policy_run: str | Path) -> str:
-    """The dataset the policy was trained on (recorded in its config.json).
-
-    Raises:
-        ValueError: the run does not say.
-    """
-    for saved in _policy_configs(policy_run):
-        if "data" in saved:
-            return saved["data"]
-    raise ValueError(f"{policy_run} does not say which dataset it was trained on; give the start states with --data DIR")
-
-
-def policy_frames(policy_run: str | Path) -> dict:
-    """How the policy's training frames were read: ``{"camera", "fit"}`` from its SFT settings (or
-    an RL run's, which keeps them); {} for a run from before they were saved (the defaults)."""
-    for saved in _policy_configs(policy_run):
-        for section in ("frames", "sft"):
-            if section in saved:
-                return {key: saved[section][key] for key in ("camera", "fit") if key in saved[section]}
-    return {}
-
-
-def _policy_configs(policy_run: str | Path) -> list[dict]:
-    """The policy run's config.json, then its checkpoint's (whichever exist)."""
-    checkpoint = resolve_checkpoint(Path(policy_run))
-    paths = (Path(policy_run) / "config.json", checkpoint / "config.json")
-    return [json.loads(path.read_text()) for path in paths if path.exists()]
 
 
 def _frozen_copy(policy):
