@@ -111,6 +111,7 @@ def rollout(model: WorldModel, context: torch.Tensor, actions: torch.Tensor,
 
 
 BACKENDS = {"embedded": "gymnast.world_model.embedded:EmbeddedWorldModel",
+            "flow": "gymnast.world_model.flow:FlowWorldModel",
             "ensemble": "gymnast.world_model.ensemble:EnsembleWorldModel"}
 """Backend name -> "module:Class", imported only when a checkpoint (or an ensemble directory) asks for it."""
 

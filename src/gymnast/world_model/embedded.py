@@ -99,14 +99,14 @@ class LatentState:
         return LatentState(*(t[index] for t in tensors), since_anchor=self.since_anchor)
 
 
-def _pixel_shuffle_2x(x: torch.Tensor) -> torch.Tensor:
+def pixel_shuffle_2x(x: torch.Tensor) -> torch.Tensor:
     """`F.pixel_shuffle(x, 2)` as a view and one copy: about 3x faster on CPUs for bfloat16 inputs."""
     b, c, h, w = x.shape
     return x.view(b, c // 4, 2, 2, h, w).permute(0, 1, 4, 2, 5, 3).reshape(b, c // 4, 2 * h, 2 * w)
 
 
-class _ActionBlock(nn.Module):
-    """Residual block whose hidden features are scaled and shifted by the action (FiLM)."""
+class ActionBlock(nn.Module):
+    """Residual block whose hidden features are scaled and shifted by a condition vector, such as the action (FiLM)."""
 
     def __init__(self, channels: int, condition: int) -> None:
         super().__init__()
@@ -142,7 +142,7 @@ class EmbeddedWorldModel(nn.Module):
         self.embed_action = nn.Sequential(
             nn.Linear(config.action_dim, config.action_width), nn.SiLU(), nn.Linear(config.action_width, config.action_width)
         )
-        self.blocks = nn.ModuleList(_ActionBlock(z, config.action_width) for _ in range(config.blocks))
+        self.blocks = nn.ModuleList(ActionBlock(z, config.action_width) for _ in range(config.blocks))
         self.up_coarse = nn.ConvTranspose2d(z, coarse, 4, 2, 1)
         self.up_fine = nn.ConvTranspose2d(coarse, fine, 4, 2, 1)
         # Per output pixel: rgb, alpha and the flow (dx, dy) in [-1, 1] image units; 2x2 sub-pixels each.
@@ -216,7 +216,7 @@ class EmbeddedWorldModel(nn.Module):
     def _decode(self, z: torch.Tensor, state: LatentState) -> torch.Tensor:
         x = F.silu(self.up_coarse(z) + state.skip_coarse)  # (B, W2, H/4, W/4)
         x = F.silu(self.up_fine(x) + state.skip_fine)  # (B, W1, H/2, W/2)
-        x = _pixel_shuffle_2x(self.to_pixels(x))  # (B, 6, H, W)
+        x = pixel_shuffle_2x(self.to_pixels(x))  # (B, 6, H, W)
         rgb, alpha, flow = torch.sigmoid(x[:, :3]), torch.sigmoid(x[:, 3:4]), x[:, 4:].float()
         moved = F.grid_sample(state.background.float(), self.identity_grid + flow.permute(0, 2, 3, 1), mode="bilinear",
                               padding_mode="border", align_corners=True)  # (B, 3, H, W)
