@@ -1,10 +1,15 @@
-"""`gymnast train-wm`: fit the embedded world model to every episode of a dataset.
+"""`gymnast train-wm`: fit a world model (embedded or flow) to every episode of a dataset.
 
-Each step draws B clips of C real context frames followed by F future frames, imagines the F
+The embedded backend: each step draws B clips of C real context frames followed by F future frames, imagines the F
 frames open-loop from the context under the clip's real actions, and minimises the mean squared
 error of every imagined frame, backpropagating through the whole recurrence. Training on long
 open-loop clips is what keeps errors from compounding at test time: the model sees (and learns to
 correct) its own drift, never real frames it would not have in a rollout.
+
+The flow backend (`gymnast.world_model.flow`) trains on the same clips with its own loss
+(`flow_clip_loss`): its autoencoder reconstructs every frame, and its velocity network learns
+each future latent from the C before it, with noised context instead of backpropagation through
+the rollout.
 
 Three levers, all off by default: `moving_weight` makes the pixels that move (the arm, a puck) count
 more than the static table, which otherwise dominates the error and lets small objects fade;
@@ -23,6 +28,7 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Literal
 
 import torch
 from safetensors.torch import load_file
@@ -30,11 +36,14 @@ from tqdm import tqdm
 
 from gymnast.data.lerobot import EpisodeDataset
 from gymnast.utils.checkpoint import resolve_checkpoint, resume_training, save_training, write_run_config
+from gymnast.utils.device import resolve_device, to_device
 from gymnast.utils.metrics import MetricsLog
 from gymnast.utils.optim import gradient_step, warmup_cosine
 from gymnast.utils.settings import from_json, saved_settings
+from gymnast.world_model.base import WorldModel, rollout
 from gymnast.world_model.data import ClipBatch, EpisodeBank, split_episodes
 from gymnast.world_model.embedded import EmbeddedWorldModel, EmbeddedWorldModelConfig
+from gymnast.world_model.flow import FlowWorldModel, FlowWorldModelConfig, flow_clip_loss
 from gymnast.world_model.metrics import moving_mask, psnr, to_unit_float
 from gymnast.world_model.videos import write_side_by_side
 
@@ -84,8 +93,15 @@ class WorldModelTrainConfig:
     scene hash, so a scene held out of one is held out of all of them."""
     camera: str | None = None
     """Camera to read from the dataset (e.g. ``front``); default: its first video (else image) feature."""
+    backend: Literal["embedded", "flow"] = "embedded"
+    """Which world model to train: embedded (deterministic, warp and paint) or flow (generative:
+    latent flow matching, one sampled frame per action)."""
+    device: str = "auto"
+    """Where to train: auto (CUDA when torch sees a GPU, else the CPU), cpu, cuda or cuda:N."""
     model: EmbeddedWorldModelConfig = field(default_factory=EmbeddedWorldModelConfig)
-    """Architecture."""
+    """Architecture of the embedded backend."""
+    flow: FlowWorldModelConfig = field(default_factory=FlowWorldModelConfig)
+    """Architecture of the flow backend."""
 
 
 WM_PRESETS: dict[str, WorldModelTrainConfig] = {
@@ -96,6 +112,39 @@ WM_PRESETS: dict[str, WorldModelTrainConfig] = {
     "demo": WorldModelTrainConfig(steps=600, video_every=300, validate_every=100),
     "full": WorldModelTrainConfig(),
 }
+
+FLOW_PRESETS: dict[str, WorldModelTrainConfig] = {
+    "debug": WorldModelTrainConfig(
+        backend="flow", steps=4, batch_size=2, future=4, warmup_steps=1, validate_every=2, video_every=4,
+        checkpoint_every=2, log_every=1,
+        flow=FlowWorldModelConfig(latent_channels=4, widths=(8, 16), width=16, blocks=1, condition_width=16, sample_steps=2),
+    ),
+    "demo": WorldModelTrainConfig(backend="flow", steps=300, future=8, warmup_future=0.0, video_every=300, validate_every=100),
+    # Under an hour on 2 CPU cores; clips of 8 teach one step at a time (the context noise, not
+    # backpropagation through the rollout, is what keeps the rollouts from drifting).
+    "full": WorldModelTrainConfig(backend="flow", steps=4000, future=8, warmup_future=0.0, validate_every=250, video_every=1000),
+    "gpu": WorldModelTrainConfig(
+        backend="flow", steps=20000, batch_size=32, future=16, warmup_future=0.0, lr=5e-4, warmup_steps=500,
+        validate_every=1000, video_every=5000, checkpoint_every=1000, log_every=100,
+        flow=FlowWorldModelConfig(latent_channels=16, widths=(64, 128), width=256, blocks=6, condition_width=256),
+    ),
+}
+
+PRESETS = {"embedded": WM_PRESETS, "flow": FLOW_PRESETS}
+"""Backend -> its named presets."""
+
+
+def wm_preset(name: str, backend: str = "embedded") -> WorldModelTrainConfig:
+    """The preset `name` of `backend`'s training settings.
+
+    Raises:
+        ValueError: an unknown backend, or a preset the backend does not have (the message lists its presets).
+    """
+    if backend not in PRESETS:
+        raise ValueError(f"unknown world-model backend {backend!r}; choose one of {', '.join(PRESETS)}")
+    if name not in PRESETS[backend]:
+        raise ValueError(f"the {backend} backend has no preset {name!r}; choose one of {', '.join(PRESETS[backend])}")
+    return PRESETS[backend][name]
 
 _VALIDATION_CLIPS = 32
 
@@ -109,14 +158,16 @@ def train_world_model(data: Path, out: Path, config: WorldModelTrainConfig, resu
     """
     datasets = [EpisodeDataset(path, config.camera) for path in (data, *config.extra_data)]
     dataset = datasets[0]
-    if dataset.image_shape[0] != config.model.image_size:
-        config = dataclasses.replace(config, model=dataclasses.replace(config.model, image_size=dataset.image_shape[0]))
+    size = dataset.image_shape[0]
+    config = dataclasses.replace(config, model=dataclasses.replace(config.model, image_size=size),
+                                 flow=dataclasses.replace(config.flow, image_size=size))
     if config.init is not None and not resume:  # on resume the weights come from the run's own checkpoint
         config = dataclasses.replace(config, init=resolve_checkpoint(config.init))
     bank, heldout, counts = load_banks(datasets, config.heldout_fraction, progress)
-    context = config.model.context_frames
+    context = (config.flow if config.backend == "flow" else config.model).context_frames
 
-    model = build_model(config if not resume else dataclasses.replace(config, init=None))
+    device = resolve_device(config.device)
+    model = build_model(config if not resume else dataclasses.replace(config, init=None)).to(device)
     optimizer = torch.optim.AdamW(model.parameters(), lr=config.lr, weight_decay=0.0)
     schedule = torch.optim.lr_scheduler.LambdaLR(optimizer, warmup_cosine(config.warmup_steps, config.steps))
     sampler = torch.Generator().manual_seed(config.seed)
@@ -134,7 +185,12 @@ def train_world_model(data: Path, out: Path, config: WorldModelTrainConfig, resu
     for step in bar:
         model.train()
         future = future_at(step, config)
-        loss, values = clip_loss(model, bank.sample(config.batch_size, context, future, sampler), config.moving_weight)
+        clips = bank.sample(config.batch_size, context, future, sampler)
+        clips = ClipBatch(*(to_device(t, device) for t in (clips.context, clips.actions, clips.future)))
+        if config.backend == "flow":
+            loss, values = flow_clip_loss(model, clips, sampler, config.moving_weight)
+        else:
+            loss, values = clip_loss(model, clips, config.moving_weight)
         values["train/future"] = future
         values["train/grad_norm"] = gradient_step(loss, model, optimizer, schedule)
         done = step + 1
@@ -178,10 +234,10 @@ def load_banks(datasets: Sequence[EpisodeDataset], heldout_fraction: float,
 
 
 # Settings that change how the weights run, not what they are: a fine-tuning run may pick its own.
-_WEIGHT_FREE = ("bf16", "reanchor_every")
+_WEIGHT_FREE = ("bf16", "reanchor_every", "sample_steps", "context_noise", "guidance")
 
 
-def build_model(config: WorldModelTrainConfig) -> EmbeddedWorldModel:
+def build_model(config: WorldModelTrainConfig) -> EmbeddedWorldModel | FlowWorldModel:
     """The model training starts from: seeded by `config.seed`, with `config.init`'s weights when given.
 
     Raises:
@@ -189,7 +245,7 @@ def build_model(config: WorldModelTrainConfig) -> EmbeddedWorldModel:
         ValueError: `config.init`'s model spec differs from `config.model` (the message names the fields).
     """
     torch.manual_seed(config.seed)
-    model = EmbeddedWorldModel(config.model)
+    model = FlowWorldModel(config.flow) if config.backend == "flow" else EmbeddedWorldModel(config.model)
     if config.init is None:
         return model
     checkpoint = resolve_checkpoint(config.init)
@@ -247,22 +303,25 @@ def frame_loss(imagined: torch.Tensor, target: torch.Tensor, reference: torch.Te
 
 
 @torch.no_grad()
-def validate(model: EmbeddedWorldModel, clips: ClipBatch) -> dict[str, float]:
-    """PSNR of held-out clips imagined open-loop: at the first and the last future frame, and overall."""
+def validate(model: WorldModel, clips: ClipBatch) -> dict[str, float]:
+    """PSNR of held-out clips imagined open-loop: at the first and the last future frame, and overall.
+
+    A generative model samples with a fixed seed, so the figures do not depend on what ran before.
+    """
     model.eval()
-    imagined = to_unit_float(model.step(model.init_state(clips.context), clips.actions)[1])
+    imagined = to_unit_float(rollout(model, clips.context, clips.actions, torch.Generator().manual_seed(0)).frames)
     values = psnr(imagined, to_unit_float(clips.future))  # (B, F)
     return {"wm/val_psnr": values.mean().item(), "wm/val_psnr_h1": values[:, 0].mean().item(),
             f"wm/val_psnr_h{values.shape[1]}": values[:, -1].mean().item()}
 
 
 @torch.no_grad()
-def _write_video(model: EmbeddedWorldModel, heldout: EpisodeBank, path: Path, fps: int) -> None:
+def _write_video(model: WorldModel, heldout: EpisodeBank, path: Path, fps: int) -> None:
     """The longest held-out episode, imagined from its first frame under its real actions."""
     model.eval()
     k = max(range(len(heldout)), key=lambda i: len(heldout.actions[i]))
     frames, actions = heldout.frames[k], heldout.actions[k]
-    imagined = model.step(model.init_state(frames[None, :1]), actions[None])[1][0]  # (T, H, W, 3)
+    imagined = rollout(model, frames[None, :1], actions[None], torch.Generator().manual_seed(0)).frames[0]  # (T, H, W, 3)
     write_side_by_side(path, frames[1:].numpy(), imagined.numpy(), fps)
 
 
