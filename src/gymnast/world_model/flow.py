@@ -18,11 +18,14 @@ Why this shape (docs/world_model.md has the measurements):
   a 12 x 12 grid of Z channels the velocity network is a few small convolutions, and only the
   decoder runs at full resolution, once per frame (as in the embedded model).
 - Anchor features. The decoder also sees features of the last real frame (computed once per
-  rollout), so the static scene stays sharp and the latent need only carry what moves.
+  rollout), so the static scene stays sharp and the latent need only carry what moves. Trained
+  with anchors at most F + C - 1 frames old, it also copies the anchor's arm into long rollouts
+  (measured in docs/world_model.md).
 - Per-frame noise levels (diffusion forcing). In training every context latent gets noise of its
   own random level sigma (up to `max_context_noise`), which the network is told; while imagining,
   the generated context latents are noised at `context_noise`. The network thus learns not to
-  trust its context exactly, so its own slightly-off samples do not compound into drift.
+  trust its context exactly, so that its own slightly-off samples need not compound into drift
+  (at the CPU budget they still do by h32: docs/world_model.md).
 - Classifier-free guidance on actions. The action is hidden for `action_dropout` of training
   samples; guidance w != 1 samples with v_free + w (v_action - v_free), at twice the cost.
 - The autoencoder is trained by reconstruction, the velocity network by flow matching on the

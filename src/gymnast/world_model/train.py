@@ -120,8 +120,9 @@ FLOW_PRESETS: dict[str, WorldModelTrainConfig] = {
         flow=FlowWorldModelConfig(latent_channels=4, widths=(8, 16), width=16, blocks=1, condition_width=16, sample_steps=2),
     ),
     "demo": WorldModelTrainConfig(backend="flow", steps=300, future=8, warmup_future=0.0, video_every=300, validate_every=100),
-    # Under an hour on 2 CPU cores; clips of 8 teach one step at a time (the context noise, not
-    # backpropagation through the rollout, is what keeps the rollouts from drifting).
+    # 0.5-1 s a step on 2 shared CPU cores; clips of 8 teach one step at a time (the context noise, not
+    # backpropagation through the rollout, is what should keep rollouts from drifting; at 3000 steps it did not
+    # fully: results/world_model/generative/README.md).
     "full": WorldModelTrainConfig(backend="flow", steps=4000, future=8, warmup_future=0.0, validate_every=250, video_every=1000),
     "gpu": WorldModelTrainConfig(
         backend="flow", steps=20000, batch_size=32, future=16, warmup_future=0.0, lr=5e-4, warmup_steps=500,
