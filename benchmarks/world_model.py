@@ -6,10 +6,12 @@ ratio is not fooled by a busy machine: batch-64 imagination and the real env alt
 rounds and the medians are compared. The real env is also measured in as many processes as the
 world model has threads (the same cores), a stricter comparison reported beside it.
 
-    .venv/bin/python benchmarks/world_model.py [--wm RUN] [--chunk 5] [--steps 40]
+    .venv/bin/python benchmarks/world_model.py [--wm RUN] [--against RUN] [--chunk 5] [--steps 40] [--out JSON]
 
 Without --wm, an untrained model of the default architecture is timed (the speed does not depend
-on the weights). Prints and writes benchmarks/results/world_model.json.
+on the weights). With --against, a second world model (another backend, say) is timed at batch 64
+in the same rounds, so the two compare on equal terms. Prints and writes --out (default
+benchmarks/results/world_model.json).
 """
 
 from __future__ import annotations
@@ -56,6 +58,8 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=40, help="step calls per batch size")
     parser.add_argument("--real-steps", type=int, default=1500, help="real env steps per process")
     parser.add_argument("--rounds", type=int, default=3, help="alternating rounds of the batch-64 and real-env measurements")
+    parser.add_argument("--against", type=Path, default=None, help="another world-model run timed at batch 64 in the same rounds")
+    parser.add_argument("--out", type=Path, default=RESULTS, help="the JSON to write")
     args = parser.parse_args()
     from real_env import steps_per_second  # the same measurement as benchmarks/real_env.py
 
@@ -66,8 +70,11 @@ def main() -> None:
     result |= {"imagined_fps_b1": round(fps, 1), "peak_rss_mib_b1": round(peak, 1)}
     # The headline ratio: imagination at batch 64 and the real env, measured in alternation so a
     # noisy neighbour slows both alike; the medians of the rounds are reported.
-    imagined, real = [], []
+    other = load_world_model(args.against) if args.against else None
+    imagined, real, against = [], [], []
     for _ in range(args.rounds):
+        if other is not None:
+            against.append(imagined_fps(other, 64, args.chunk, args.steps)[0])
         fps, peak = imagined_fps(model, 64, args.chunk, args.steps)
         imagined.append(fps)
         real.append(steps_per_second("drawer-open-v3", args.real_steps, model.image_size, 1))
@@ -91,8 +98,12 @@ def main() -> None:
         "bf16": getattr(getattr(model, "config", None), "bf16", None),
         "machine": {"cpu_count": os.cpu_count(), "platform": platform.platform()},
     }
+    if other is not None:  # (its memory is in the peaks above from batch 64 on)
+        result |= {"against": str(args.against), "against_imagined_fps_b64": round(statistics.median(against), 1),
+                   "ratio_b64_vs_against": round(result["imagined_fps_b64"] / statistics.median(against), 2)}
+        result["rounds"]["against_imagined_fps_b64"] = [round(x, 1) for x in against]
     print(json.dumps(result, indent=2))
-    write_json(RESULTS, result)
+    write_json(args.out, result)
 
 
 if __name__ == "__main__":

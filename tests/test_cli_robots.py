@@ -50,6 +50,17 @@ def test_another_robots_dataset_trains_every_model_with_the_debug_presets(robot,
 
 
 @pytest.mark.slow
+def test_the_flow_world_model_takes_another_robots_actions_and_frames(tmp_path, capsys):
+    data = write_robot_dataset(tmp_path / "data", episodes=6, steps=10, **ROBOTS[next(iter(ROBOTS))])
+    main(["train-wm", "--backend", "flow", "--data", str(data), "--out", str(tmp_path / "wm"), "--preset", "debug"])
+    wm = load_world_model(tmp_path / "wm")
+    stats = EpisodeDataset(data).action_stats
+    assert wm.backend == "flow" and (wm.image_size, wm.action_dim) == (96, stats.dim)
+    assert wm.action_range == stats.action_range()
+    capsys.readouterr()
+
+
+@pytest.mark.slow
 def test_eval_wm_fits_the_frames_as_the_world_model_was_trained(tmp_path, capsys):
     data = write_robot_dataset(tmp_path / "data", episodes=6, steps=10, height=64, width=48)
     main(["train-wm", "--data", str(data), "--out", str(tmp_path / "wm"), "--preset", "debug", "--fit", "crop"])

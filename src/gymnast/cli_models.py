@@ -28,8 +28,10 @@ RLFlags = flags_of(RLConfig, RL_PRESETS)
 def train_wm(
     out: Path,
     data: Path | None = None,
-    preset: Preset = "full",
+    backend: Literal["embedded", "flow"] | None = None,
+    preset: Literal["debug", "demo", "full", "gpu"] = "full",
     resume: bool = False,
+    device: str | None = None,
     steps: int | None = None,
     seed: int | None = None,
     moving_weight: float | None = None,
@@ -38,13 +40,17 @@ def train_wm(
     camera: str | None = None,
     fit: Fit | None = None,
 ) -> None:
-    """Train the embedded world model on every episode of a dataset (held-out scenes excepted).
+    """Train a world model on every episode of a dataset (held-out scenes excepted).
 
     Args:
         out: run directory: checkpoints, metrics.jsonl, config.json, videos/.
         data: dataset directory (from `gymnast collect`); with --resume, the run's own.
-        preset: debug (seconds), demo (minutes) or full (the default world model, under an hour on 2 cores).
+        backend: embedded (deterministic; the default) or flow (generative: latent flow matching, one sampled
+            frame per action); with --resume, the run's own.
+        preset: debug (seconds), demo (minutes), full (under an hour on 2 cores) or gpu (flow only: a larger
+            model for a GPU).
         resume: continue the run in OUT from its last checkpoint, with the settings and data saved there.
+        device: auto (CUDA when torch sees a GPU, else the CPU), cpu, cuda or cuda:N.
         steps: override the preset's optimizer steps.
         seed: override the seed.
         moving_weight: extra loss weight of moving pixels, normalised (0 = plain mean squared error).
@@ -54,12 +60,12 @@ def train_wm(
         fit: how frames that are not the model's square size are fitted: resize (squash the whole
             frame) or crop (the central square); saved with the run.
     """
-    from gymnast.world_model.train import WM_PRESETS, saved_train_config, train_world_model
+    from gymnast.world_model.train import saved_train_config, train_world_model, wm_preset
 
     config, inputs = resolve(
-        "train-wm", out, resume, WM_PRESETS[preset], inputs={"data": data}, required=("data",),
-        overrides={"steps": steps, "seed": seed, "moving_weight": moving_weight, "init": init,
-                   "extra_data": extra_data or None, "camera": camera, "fit": fit},
+        "train-wm", out, resume, wm_preset(preset, backend or "embedded"), inputs={"data": data}, required=("data",),
+        overrides={"backend": backend, "device": device, "steps": steps, "seed": seed, "moving_weight": moving_weight,
+                   "init": init, "extra_data": extra_data or None, "camera": camera, "fit": fit},
         saved=lambda: (saved_train_config(out), saved_inputs(out, "data")))
     checkpoint = train_world_model(inputs["data"], out, config, resume=resume)
     print(f"world model: {checkpoint}")

@@ -11,13 +11,17 @@ import torch
 
 from gymnast.world_model.base import load_world_model
 from gymnast.world_model.embedded import EmbeddedWorldModel, EmbeddedWorldModelConfig
+from gymnast.world_model.flow import FlowWorldModel, FlowWorldModelConfig
 
 COMMITTED = Path(__file__).resolve().parents[2] / "results" / "world_model" / "wm"
 TINY = EmbeddedWorldModelConfig(image_size=32, action_dim=3, latent_channels=16, widths=(8, 16), blocks=1,
                                 action_width=16, bf16=False)
+TINY_FLOW = FlowWorldModelConfig(image_size=32, action_dim=3, latent_channels=4, widths=(8, 16), width=16, blocks=1,
+                                 condition_width=16, sample_steps=2, bf16=False)
+RANGE = dict(action_low=(-4.0, 0.0, 10.0), action_high=(4.0, 2.0, 20.0))
 
 
-def _weighted(model: EmbeddedWorldModel) -> EmbeddedWorldModel:
+def _weighted(model):
     for block in model.blocks:  # a fresh model's blocks ignore the action; give them weights, as training would
         torch.nn.init.normal_(block.conv2.weight, std=0.1)
     return model.eval()
@@ -26,22 +30,25 @@ def _weighted(model: EmbeddedWorldModel) -> EmbeddedWorldModel:
 def _imagine(model, actions: torch.Tensor) -> torch.Tensor:
     size = model.image_size
     context = torch.randint(0, 256, (2, 2, size, size, 3), dtype=torch.uint8, generator=torch.Generator().manual_seed(0))
-    return model.step(model.init_state(context), actions)[1]
+    return model.step(model.init_state(context), actions, torch.Generator().manual_seed(3))[1]
 
 
-def test_actions_are_mapped_from_the_datasets_range_onto_minus_one_to_one():
+@pytest.mark.parametrize("backend, tiny", [(EmbeddedWorldModel, TINY), (FlowWorldModel, TINY_FLOW)], ids=["embedded", "flow"])
+def test_actions_are_mapped_from_the_datasets_range_onto_minus_one_to_one(backend, tiny):
     torch.manual_seed(0)
-    plain = _weighted(EmbeddedWorldModel(TINY))
-    ranged = EmbeddedWorldModel(dataclasses.replace(TINY, action_low=(-4.0, 0.0, 10.0), action_high=(4.0, 2.0, 20.0)))
+    plain = _weighted(backend(tiny))
+    ranged = backend(dataclasses.replace(tiny, **RANGE))
     ranged.load_state_dict(plain.state_dict())
+    assert ranged.action_range == (RANGE["action_low"], RANGE["action_high"])
     unit = torch.rand(2, 5, 3, generator=torch.Generator().manual_seed(1)) * 2 - 1
     raw = unit * torch.tensor([4.0, 1.0, 5.0]) + torch.tensor([0.0, 1.0, 15.0])
     torch.testing.assert_close(_imagine(ranged, raw), _imagine(plain, unit), atol=1, rtol=0)  # uint8: a rounding apart
 
 
 def test_a_range_of_the_wrong_width_is_refused():
-    with pytest.raises(ValueError, match="action_low and action_high need 3 values each"):
-        dataclasses.replace(TINY, action_low=(-1.0,), action_high=(1.0,))
+    for tiny in (TINY, TINY_FLOW):
+        with pytest.raises(ValueError, match="action_low and action_high need 3 values each"):
+            dataclasses.replace(tiny, action_low=(-1.0,), action_high=(1.0,))
 
 
 @pytest.mark.skipif(not COMMITTED.exists(), reason="the committed world model is not in this checkout")

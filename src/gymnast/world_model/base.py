@@ -80,6 +80,43 @@ def pad_context(context: torch.Tensor, frames: int) -> torch.Tensor:
     return context[:, -frames:]
 
 
+def check_action_range(low: tuple[float, ...], high: tuple[float, ...], action_dim: int) -> None:
+    """Raises ValueError unless (low, high) is empty or gives every action dimension a low below its high."""
+    if len(low) != len(high) or (low and len(low) != action_dim):
+        raise ValueError(f"action_low and action_high need {action_dim} values each (action_dim) or none, "
+                         f"got {len(low)} and {len(high)}")
+    if any(h <= lo for lo, h in zip(low, high)):
+        raise ValueError(f"every action_high must exceed its action_low, got {low} / {high}")
+
+
+class ActionScale(torch.nn.Module):
+    """Maps each action dimension's [low, high] (the training data's range) onto [-1, 1], the
+    scale the network's inputs were trained at; the identity for an empty range (models saved
+    before ranges were recorded, whose actions were Meta-World's, already in [-1, 1]).
+
+    Its buffers are not saved: the range lives in the model's config, so checkpoints keep their keys.
+    """
+
+    def __init__(self, low: tuple[float, ...], high: tuple[float, ...], action_dim: int) -> None:
+        super().__init__()
+        check_action_range(low, high, action_dim)
+        self.action_dim, self.scaled = action_dim, bool(low)
+        self.low, self.high = low, high
+        if low:
+            lo, hi = torch.tensor(low), torch.tensor(high)
+            self.register_buffer("centre", (hi + lo) / 2, persistent=False)  # (A,)
+            self.register_buffer("half_range", (hi - lo) / 2, persistent=False)  # (A,)
+
+    @property
+    def bounds(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
+        """(low, high) per action dimension; [-1, 1] for the identity."""
+        return (self.low, self.high) if self.scaled else ((-1.0,) * self.action_dim, (1.0,) * self.action_dim)
+
+    def forward(self, actions: torch.Tensor) -> torch.Tensor:
+        """(..., A) actions in the data's units -> the same in [-1, 1]."""
+        return (actions - self.centre) / self.half_range if self.scaled else actions
+
+
 @dataclass(frozen=True)
 class ImaginedRollout:
     """What `rollout` returns.
@@ -111,6 +148,7 @@ def rollout(model: WorldModel, context: torch.Tensor, actions: torch.Tensor,
 
 
 BACKENDS = {"embedded": "gymnast.world_model.embedded:EmbeddedWorldModel",
+            "flow": "gymnast.world_model.flow:FlowWorldModel",
             "ensemble": "gymnast.world_model.ensemble:EnsembleWorldModel"}
 """Backend name -> "module:Class", imported only when a checkpoint (or an ensemble directory) asks for it."""
 

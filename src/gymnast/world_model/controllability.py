@@ -84,7 +84,7 @@ def check_controllability(model: WorldModel, dataset: EpisodeDataset, heldout: l
         real = torch.from_numpy(np.stack([simulate(env, info.seed, s) for s in sequences]))  # (S, T, H, W, 3)
         env.close()
         context = torch.from_numpy(start)[None, None].expand(len(sequences), 1, -1, -1, -1)
-        imagined = rollout(model, context, actions=torch.from_numpy(sequences)).frames  # (S, T, H, W, 3)
+        imagined = rollout(model, context, torch.from_numpy(sequences), torch.Generator().manual_seed(config.seed)).frames  # (S, T, H, W, 3)
         pred, target = to_unit_float(imagined), to_unit_float(real)
         # M[i, j]: imagined rollout i against real rollout j, mean PSNR over the T frames.
         matrices.append(torch.stack([psnr(pred, target[j : j + 1].expand_as(target)).mean(1) for j in range(len(target))], 1).numpy())

@@ -87,12 +87,13 @@ def evaluate_world_model(wm: Path, data: Path, out: Path, config: WorldModelEval
     rows: dict[str, list[np.ndarray]] = defaultdict(list)  # measure -> one (T,) array per rollout
     tasks, full_rollout = [], []
     video_dir = out.with_name(out.stem + "_videos")
+    generator = torch.Generator().manual_seed(0)  # a generative backend samples: one seed, one report
     for n, index in enumerate(tqdm(heldout, desc="eval-wm", disable=not progress)):
         episode = dataset.load(index)
         frames, actions = torch.from_numpy(episode.frames), torch.from_numpy(episode.actions).float()
         for start in range(0, len(actions), config.start_every):
             context = frames[max(0, start + 1 - model.context_frames) : start + 1][None]
-            state, imagined = model.step(model.init_state(context), actions[None, start:])
+            state, imagined = model.step(model.init_state(context, generator=generator), actions[None, start:], generator=generator)
             imagined = imagined[0]  # (T, H, W, 3)
             real = frames[start + 1 :]
             if ensemble:

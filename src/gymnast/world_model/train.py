@@ -1,10 +1,15 @@
-"""`gymnast train-wm`: fit the embedded world model to every episode of a dataset.
+"""`gymnast train-wm`: fit a world model (embedded or flow) to every episode of a dataset.
 
-Each step draws B clips of C real context frames followed by F future frames, imagines the F
+The embedded backend: each step draws B clips of C real context frames followed by F future frames, imagines the F
 frames open-loop from the context under the clip's real actions, and minimises the mean squared
 error of every imagined frame, backpropagating through the whole recurrence. Training on long
 open-loop clips is what keeps errors from compounding at test time: the model sees (and learns to
 correct) its own drift, never real frames it would not have in a rollout.
+
+The flow backend (`gymnast.world_model.flow`) trains on the same clips with its own loss
+(`flow_clip_loss`): its autoencoder reconstructs every frame, and its velocity network learns
+each future latent from the C before it, with noised context instead of backpropagation through
+the rollout.
 
 Three levers, all off by default: `moving_weight` makes the pixels that move (the arm, a puck) count
 more than the static table, which otherwise dominates the error and lets small objects fade;
@@ -23,6 +28,7 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Literal
 
 import torch
 from safetensors.torch import load_file
@@ -32,11 +38,14 @@ from gymnast.data.action_stats import ActionStats
 from gymnast.data.frames import Fit, model_image_size
 from gymnast.data.lerobot import EpisodeDataset
 from gymnast.utils.checkpoint import resolve_checkpoint, resume_training, save_training, write_run_config
+from gymnast.utils.device import resolve_device, to_device
 from gymnast.utils.metrics import MetricsLog
 from gymnast.utils.optim import gradient_step, warmup_cosine
 from gymnast.utils.settings import from_json, saved_settings
+from gymnast.world_model.base import WorldModel, rollout
 from gymnast.world_model.data import ClipBatch, EpisodeBank, split_episodes
 from gymnast.world_model.embedded import EmbeddedWorldModel, EmbeddedWorldModelConfig
+from gymnast.world_model.flow import FlowWorldModel, FlowWorldModelConfig, flow_clip_loss
 from gymnast.world_model.metrics import moving_mask, psnr, to_unit_float
 from gymnast.world_model.videos import write_side_by_side
 
@@ -88,11 +97,18 @@ class WorldModelTrainConfig:
     """Camera to read from the dataset (e.g. ``front``); default: the first camera whose frames exist."""
     fit: Fit = "resize"
     """How frames become the model's square image when they are not square or larger than 256 px
-    (they are then fitted to `model.image_size`): resize (the whole frame, aspect ratio not kept) or
+    (they are then fitted to the model's `image_size`): resize (the whole frame, aspect ratio not kept) or
     crop (the central square). Square frames up to 256 px, a multiple of 8, set the image size and
     are used as they are. Saved with the run, so everything reading real frames for it fits them alike."""
+    backend: Literal["embedded", "flow"] = "embedded"
+    """Which world model to train: embedded (deterministic, warp and paint) or flow (generative:
+    latent flow matching, one sampled frame per action)."""
+    device: str = "auto"
+    """Where to train: auto (CUDA when torch sees a GPU, else the CPU), cpu, cuda or cuda:N."""
     model: EmbeddedWorldModelConfig = field(default_factory=EmbeddedWorldModelConfig)
-    """Architecture."""
+    """Architecture of the embedded backend."""
+    flow: FlowWorldModelConfig = field(default_factory=FlowWorldModelConfig)
+    """Architecture of the flow backend."""
 
 
 WM_PRESETS: dict[str, WorldModelTrainConfig] = {
@@ -103,6 +119,40 @@ WM_PRESETS: dict[str, WorldModelTrainConfig] = {
     "demo": WorldModelTrainConfig(steps=600, video_every=300, validate_every=100),
     "full": WorldModelTrainConfig(),
 }
+
+FLOW_PRESETS: dict[str, WorldModelTrainConfig] = {
+    "debug": WorldModelTrainConfig(
+        backend="flow", steps=4, batch_size=2, future=4, warmup_steps=1, validate_every=2, video_every=4,
+        checkpoint_every=2, log_every=1,
+        flow=FlowWorldModelConfig(latent_channels=4, widths=(8, 16), width=16, blocks=1, condition_width=16, sample_steps=2),
+    ),
+    "demo": WorldModelTrainConfig(backend="flow", steps=300, future=8, warmup_future=0.0, video_every=300, validate_every=100),
+    # 0.5-1 s a step on 2 shared CPU cores; clips of 8 teach one step at a time (the context noise, not
+    # backpropagation through the rollout, is what should keep rollouts from drifting; at 3000 steps it did not
+    # fully: results/world_model/generative/README.md).
+    "full": WorldModelTrainConfig(backend="flow", steps=4000, future=8, warmup_future=0.0, validate_every=250, video_every=1000),
+    "gpu": WorldModelTrainConfig(
+        backend="flow", steps=20000, batch_size=32, future=16, warmup_future=0.0, lr=5e-4, warmup_steps=500,
+        validate_every=1000, video_every=5000, checkpoint_every=1000, log_every=100,
+        flow=FlowWorldModelConfig(latent_channels=16, widths=(64, 128), width=256, blocks=6, condition_width=256),
+    ),
+}
+
+PRESETS = {"embedded": WM_PRESETS, "flow": FLOW_PRESETS}
+"""Backend -> its named presets."""
+
+
+def wm_preset(name: str, backend: str = "embedded") -> WorldModelTrainConfig:
+    """The preset `name` of `backend`'s training settings.
+
+    Raises:
+        ValueError: an unknown backend, or a preset the backend does not have (the message lists its presets).
+    """
+    if backend not in PRESETS:
+        raise ValueError(f"unknown world-model backend {backend!r}; choose one of {', '.join(PRESETS)}")
+    if name not in PRESETS[backend]:
+        raise ValueError(f"the {backend} backend has no preset {name!r}; choose one of {', '.join(PRESETS[backend])}")
+    return PRESETS[backend][name]
 
 _VALIDATION_CLIPS = 32
 
@@ -124,10 +174,11 @@ def train_world_model(data: Path, out: Path, config: WorldModelTrainConfig, resu
     config, datasets, stats = fit_to_data(config, datasets, action_range=kept)
     dataset = datasets[0]
     bank, heldout, counts = load_banks(datasets, config.heldout_fraction, progress)
-    context = config.model.context_frames
+    context = architecture(config).context_frames
 
-    model = build_model(config if not resume else dataclasses.replace(config, init=None))
-    config = dataclasses.replace(config, model=model.config)  # fine-tuning keeps the action range of its weights
+    device = resolve_device(config.device)
+    model = build_model(config if not resume else dataclasses.replace(config, init=None)).to(device)
+    config = with_architecture(config, model.config)  # fine-tuning keeps the action range of its weights
     optimizer = torch.optim.AdamW(model.parameters(), lr=config.lr, weight_decay=0.0)
     schedule = torch.optim.lr_scheduler.LambdaLR(optimizer, warmup_cosine(config.warmup_steps, config.steps))
     sampler = torch.Generator().manual_seed(config.seed)
@@ -145,7 +196,12 @@ def train_world_model(data: Path, out: Path, config: WorldModelTrainConfig, resu
     for step in bar:
         model.train()
         future = future_at(step, config)
-        loss, values = clip_loss(model, bank.sample(config.batch_size, context, future, sampler), config.moving_weight)
+        clips = bank.sample(config.batch_size, context, future, sampler)
+        clips = ClipBatch(*(to_device(t, device) for t in (clips.context, clips.actions, clips.future)))
+        if config.backend == "flow":
+            loss, values = flow_clip_loss(model, clips, sampler, config.moving_weight)
+        else:
+            loss, values = clip_loss(model, clips, config.moving_weight)
         values["train/future"] = future
         values["train/grad_norm"] = gradient_step(loss, model, optimizer, schedule)
         done = step + 1
@@ -180,11 +236,22 @@ def fit_to_data(config: WorldModelTrainConfig, datasets: Sequence[EpisodeDataset
             size, wanted = "x".join(map(str, other.camera_shape[:2])), "x".join(map(str, first.camera_shape[:2]))
             raise ValueError(f"{other.root}: frames are {size}, but {first.root} has {wanted}; "
                              "every dataset of one world model needs one image size")
-    size = model_image_size(first.camera_shape, config.model.image_size)
+    size = model_image_size(first.camera_shape, architecture(config).image_size)
     stats = ActionStats.merge([d.action_stats for d in datasets])
     low, high = action_range if action_range is not None else stats.action_range()
-    model = dataclasses.replace(config.model, image_size=size, action_dim=first.action_dim, action_low=low, action_high=high)
-    return dataclasses.replace(config, model=model), [d.fitted(size, config.fit) for d in datasets], stats
+    model = dataclasses.replace(architecture(config), image_size=size, action_dim=first.action_dim, action_low=low, action_high=high)
+    return with_architecture(config, model), [d.fitted(size, config.fit) for d in datasets], stats
+
+
+def architecture(config: WorldModelTrainConfig) -> EmbeddedWorldModelConfig | FlowWorldModelConfig:
+    """The architecture of the backend `config` trains."""
+    return config.flow if config.backend == "flow" else config.model
+
+
+def with_architecture(config: WorldModelTrainConfig,
+                      model: EmbeddedWorldModelConfig | FlowWorldModelConfig) -> WorldModelTrainConfig:
+    """`config` with its backend's architecture replaced by `model`."""
+    return dataclasses.replace(config, **{"flow" if config.backend == "flow" else "model": model})
 
 
 def _saved_action_range(checkpoint: Path) -> tuple:
@@ -214,25 +281,26 @@ def load_banks(datasets: Sequence[EpisodeDataset], heldout_fraction: float,
 
 
 # Settings that change how the weights run, not what they are: a fine-tuning run may pick its own.
-_WEIGHT_FREE = ("bf16", "reanchor_every")
+_WEIGHT_FREE = ("bf16", "reanchor_every", "sample_steps", "context_noise", "guidance")
 
 
-def build_model(config: WorldModelTrainConfig) -> EmbeddedWorldModel:
+def build_model(config: WorldModelTrainConfig) -> EmbeddedWorldModel | FlowWorldModel:
     """The model training starts from: seeded by `config.seed`, with `config.init`'s weights (and
     their action range) when given.
 
     Raises:
         FileNotFoundError: `config.init` has no checkpoint.
-        ValueError: `config.init`'s model spec differs from `config.model` (the message names the fields).
+        ValueError: `config.init`'s model spec differs from the backend's architecture (the message names the fields).
     """
     torch.manual_seed(config.seed)
+    backend = FlowWorldModel if config.backend == "flow" else EmbeddedWorldModel
     if config.init is None:
-        return EmbeddedWorldModel(config.model)
+        return backend(architecture(config))
     checkpoint = resolve_checkpoint(config.init)
     source = json.loads((checkpoint / "config.json").read_text()).get("model", {})
     # The weights were trained on actions normalised by their own range: it comes with them.
     action_range = {name: tuple(source.get(name, ())) for name in ("action_low", "action_high")}
-    model = EmbeddedWorldModel(dataclasses.replace(config.model, **action_range))
+    model = backend(dataclasses.replace(architecture(config), **action_range))
     wanted = json.loads(json.dumps(model.spec()))  # tuples as JSON lists, like the saved spec
     differ = sorted(k for k in source.keys() | wanted.keys() if k not in _WEIGHT_FREE and source.get(k) != wanted.get(k))
     if differ:
@@ -286,22 +354,25 @@ def frame_loss(imagined: torch.Tensor, target: torch.Tensor, reference: torch.Te
 
 
 @torch.no_grad()
-def validate(model: EmbeddedWorldModel, clips: ClipBatch) -> dict[str, float]:
-    """PSNR of held-out clips imagined open-loop: at the first and the last future frame, and overall."""
+def validate(model: WorldModel, clips: ClipBatch) -> dict[str, float]:
+    """PSNR of held-out clips imagined open-loop: at the first and the last future frame, and overall.
+
+    A generative model samples with a fixed seed, so the figures do not depend on what ran before.
+    """
     model.eval()
-    imagined = to_unit_float(model.step(model.init_state(clips.context), clips.actions)[1])
+    imagined = to_unit_float(rollout(model, clips.context, clips.actions, torch.Generator().manual_seed(0)).frames)
     values = psnr(imagined, to_unit_float(clips.future))  # (B, F)
     return {"wm/val_psnr": values.mean().item(), "wm/val_psnr_h1": values[:, 0].mean().item(),
             f"wm/val_psnr_h{values.shape[1]}": values[:, -1].mean().item()}
 
 
 @torch.no_grad()
-def _write_video(model: EmbeddedWorldModel, heldout: EpisodeBank, path: Path, fps: int) -> None:
+def _write_video(model: WorldModel, heldout: EpisodeBank, path: Path, fps: int) -> None:
     """The longest held-out episode, imagined from its first frame under its real actions."""
     model.eval()
     k = max(range(len(heldout)), key=lambda i: len(heldout.actions[i]))
     frames, actions = heldout.frames[k], heldout.actions[k]
-    imagined = model.step(model.init_state(frames[None, :1]), actions[None])[1][0]  # (T, H, W, 3)
+    imagined = rollout(model, frames[None, :1], actions[None], torch.Generator().manual_seed(0)).frames[0]  # (T, H, W, 3)
     write_side_by_side(path, frames[1:].numpy(), imagined.numpy(), fps)
 
 
