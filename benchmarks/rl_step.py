@@ -24,6 +24,8 @@ import tempfile
 from pathlib import Path
 
 import gymnast  # noqa: F401  (sets MUJOCO_GL)
+from gymnast.envs.kinds import env_kind
+from gymnast.reward.spec import RewardSpec
 from gymnast.rl.config import RL_PRESETS, RLRun
 from gymnast.rl.train import train_rl
 from gymnast.utils.atomic import write_json
@@ -39,13 +41,17 @@ SETTINGS = {
 }
 
 
-def time_setting(env: str, reward: str, data: Path, steps: int, tasks: str) -> dict:
+def time_setting(env: str, reward: str, data: Path, steps: int, tasks: str, policy: Path = POLICY,
+                 wm: Path = WORLD_MODEL, **overrides) -> dict:
+    """Median timings of `steps` RL steps (the first not timed) of the full preset, with `overrides`
+    of its settings (e.g. starts_per_step, device)."""
     config = dataclasses.replace(
         RL_PRESETS["full"], steps=steps, tasks=tasks, max_rounds=1, keep_low=0.0, keep_high=1.0, eval_episodes=1,
-        real_eval=False, watch_every=0, video_every=10**6, checkpoint_every=10**6, tensorboard=False,
+        real_eval=False, watch_every=0, video_every=10**6, checkpoint_every=10**6, tensorboard=False, **overrides,
     )
     with tempfile.TemporaryDirectory() as out:
-        train_rl(RLRun(str(POLICY), env, reward, str(WORLD_MODEL), str(data)), Path(out), config, progress=False)
+        run = RLRun(str(policy), env_kind(env), RewardSpec.parse(reward), str(wm), str(data))
+        train_rl(run, Path(out), config, progress=False)
         lines = [m for m in read_metrics(Path(out)) if "time/step_s" in m][1:]  # the first step warms up
     median = {key: statistics.median(m[f"time/{key}"] for m in lines)
               for key in ("step_s", "rollout_s", "policy_s", "reward_s", "update_s")}

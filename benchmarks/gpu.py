@@ -1,0 +1,189 @@
+"""GPU figures: imagination through the imagined env, training steps, and one RL step with the judge.
+
+What it measures, each on the device with the library's own settings (bf16 autocast where the
+models use it):
+- ``imagined_fps_b1024`` / ``_b4096``: frames per second through `BatchedImaginedEnv` (the env RL
+  runs in, frames copied back to the host every step, not just the model) with the committed
+  world model, batches of 1024 and 4096 rollouts of random action chunks;
+- ``wm_train_step_s``: one optimizer step of `gymnast train-wm` (clips of 32 future frames,
+  backpropagated through the rollout) at batch 64, for the default model and for the larger
+  model of the embedded backend's gpu preset when it has one;
+- ``policy_train_obs_per_s``: observations per second through one SFT update (the imitation loss,
+  backward and AdamW) of the default policy at batch 4096;
+- ``rl_step_s``: one `gymnast rl --env imagined` step of 256 rollouts (32 starts x 8) of 150
+  actions with the committed judge's reward, policy update included (the median of the timed steps).
+
+Goals on one H100: imagination >= 250,000 frames/s at batch 4096, an RL step <= 2 s.
+
+    .venv/bin/python benchmarks/gpu.py [--data data/mt10]
+
+It needs a CUDA device and refuses without one: CPU figures live in the other benchmarks. With
+``--device cpu --small`` it runs every measurement at toy sizes (what the test suite does to keep
+this script working) and writes only to ``--out``. Prints and writes benchmarks/results/gpu.json.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import platform
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+import gymnast  # noqa: F401  (sets MUJOCO_GL)
+from gymnast.envs.imagined import BatchedImaginedEnv
+from gymnast.policy.vla import EmbeddedVLA, VLAConfig
+from gymnast.utils.atomic import write_json
+from gymnast.utils.device import resolve_device
+from gymnast.utils.optim import gradient_step
+from gymnast.world_model.base import load_world_model
+from gymnast.world_model.data import ClipBatch
+from gymnast.world_model.embedded import EmbeddedWorldModel, EmbeddedWorldModelConfig
+from gymnast.world_model.train import WM_PRESETS, clip_loss
+
+ROOT = Path(__file__).resolve().parents[1]
+RESULTS = Path(__file__).parent / "results" / "gpu.json"
+WORLD_MODEL, JUDGE = ROOT / "results/world_model/wm", ROOT / "results/judge/video_judge"
+
+
+@dataclasses.dataclass(frozen=True)
+class Sizes:
+    """How big each measurement is."""
+
+    imagine_batches: tuple[int, ...] = (1024, 4096)
+    imagine_steps: int = 20
+    wm_batch: int = 64
+    wm_future: int = 32
+    policy_batch: int = 4096
+    rl_starts: int = 32
+    rl_group: int = 8
+    rl_horizon: int = 150
+    rl_steps: int = 3
+    repeats: int = 5
+
+
+SMALL = Sizes(imagine_batches=(4, 8), imagine_steps=2, wm_batch=2, wm_future=4, policy_batch=4, rl_starts=2, rl_group=2,
+              rl_horizon=10, rl_steps=2, repeats=1)
+
+
+def synchronize(device: torch.device) -> None:
+    """Waits for the device's queued work (timings would otherwise end before the GPU does)."""
+    if device.type == "cuda":
+        torch.cuda.synchronize(device)
+
+
+def timed(fn, device: torch.device, repeats: int) -> float:
+    """Median seconds of `repeats` calls of `fn`, after one warm-up call."""
+    fn()
+    times = []
+    for _ in range(repeats):
+        synchronize(device)
+        started = time.perf_counter()
+        fn()
+        synchronize(device)
+        times.append(time.perf_counter() - started)
+    return sorted(times)[len(times) // 2]
+
+
+def imagined_env_fps(model, batch: int, steps: int, chunk: int = 5) -> float:
+    """Frames per second of `steps` env steps of `batch` rollouts (after one warm-up step)."""
+    rng = np.random.default_rng(0)
+    size = model.image_size
+    env = BatchedImaginedEnv(model, batch, chunk_size=chunk, horizon=(steps + 1) * chunk)
+    frames = rng.integers(0, 256, (batch, model.context_frames, size, size, 3), dtype=np.uint8)
+    env.reset(seed=0, options={"frames": frames, "instructions": ["reach the goal"] * batch})
+    low, high = env.single_action_space.low, env.single_action_space.high
+    actions = rng.uniform(low, high, (steps + 1, batch, *low.shape)).astype(np.float32)
+    env.step(actions[0])
+    started = time.perf_counter()
+    for k in range(1, steps + 1):
+        env.step(actions[k])  # returns host frames, so the device has finished
+    return batch * chunk * steps / (time.perf_counter() - started)
+
+
+def wm_train_step_s(config: EmbeddedWorldModelConfig, sizes: Sizes, device: torch.device) -> float:
+    """Seconds of one train-wm optimizer step at `sizes.wm_batch` clips of `sizes.wm_future` frames."""
+    torch.manual_seed(0)
+    model = EmbeddedWorldModel(config).to(device).train()
+    optimizer = torch.optim.AdamW(model.parameters(), lr=1e-4)
+    schedule = torch.optim.lr_scheduler.LambdaLR(optimizer, lambda step: 1.0)
+    b, c, f, size = sizes.wm_batch, config.context_frames, sizes.wm_future, config.image_size
+    clips = ClipBatch(torch.randint(0, 256, (b, c, size, size, 3), dtype=torch.uint8, device=device),
+                      torch.rand(b, f, config.action_dim, device=device) * 2 - 1,
+                      torch.randint(0, 256, (b, f, size, size, 3), dtype=torch.uint8, device=device))
+    return timed(lambda: gradient_step(clip_loss(model, clips)[0], model, optimizer, schedule), device, sizes.repeats)
+
+
+def policy_train_obs_per_s(sizes: Sizes, device: torch.device) -> float:
+    """Observations per second through one SFT update of the default policy at `sizes.policy_batch`."""
+    torch.manual_seed(0)
+    model = EmbeddedVLA(VLAConfig()).to(device).train()
+    optimizer = torch.optim.AdamW(model.parameters(), lr=1e-4)
+    schedule = torch.optim.lr_scheduler.LambdaLR(optimizer, lambda step: 1.0)
+    b, size = sizes.policy_batch, model.config.image_size
+    images = torch.randint(0, 256, (b, size, size, 3), dtype=torch.uint8)
+    texts = ["open the drawer", "push the puck to the goal"] * (b // 2) + ["reach the goal"] * (b % 2)
+    chunks = torch.rand(b, model.config.chunk_size, model.action_dim) * 2 - 1
+    valid = torch.ones(b, model.config.chunk_size, dtype=torch.bool)
+
+    def update() -> None:
+        loss, _ = model.imitation_loss(images, texts, chunks, valid, bf16=True)
+        gradient_step(loss, model, optimizer, schedule)
+
+    return b / timed(update, device, sizes.repeats)
+
+
+def rl_step(data: Path, sizes: Sizes, device: torch.device, tasks: str) -> dict:
+    """The timings of one imagined RL step with the judge's reward (benchmarks/rl_step.py's measurement)."""
+    from rl_step import time_setting
+
+    return time_setting("imagined", f"judge:{JUDGE}", data, sizes.rl_steps, tasks, starts_per_step=sizes.rl_starts,
+                        group_size=sizes.rl_group, horizon=sizes.rl_horizon, device=str(device))
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--device", default="cuda", help="cuda or cuda:N (cpu only with --small)")
+    parser.add_argument("--data", type=Path, default=ROOT / "data/mt10", help="dataset of RL start states (96 px)")
+    parser.add_argument("--tasks", default="reach-v3,push-v3,drawer-open-v3,window-open-v3")
+    parser.add_argument("--small", action="store_true", help="toy sizes: checks the script runs, measures nothing")
+    parser.add_argument("--out", type=Path, default=RESULTS)
+    args = parser.parse_args()
+    device = resolve_device(args.device)
+    if device.type != "cuda" and not args.small:
+        sys.exit(f"benchmarks/gpu.py measures a GPU, and --device {args.device} is not one; "
+                 "on the CPU run the other benchmarks (or add --small to check this script)")
+    if args.small and args.out == RESULTS:
+        sys.exit("--small measures nothing worth keeping: give --out somewhere other than " + str(RESULTS))
+    sizes = SMALL if args.small else Sizes()
+
+    world_model = load_world_model(WORLD_MODEL).to(device).eval()
+    result: dict = {f"imagined_fps_b{b}": round(imagined_env_fps(world_model, b, sizes.imagine_steps))
+                    for b in sizes.imagine_batches}
+    default_wm = dataclasses.replace(EmbeddedWorldModelConfig(), image_size=world_model.image_size)
+    result["wm_train_step_s"] = {"default": round(wm_train_step_s(default_wm, sizes, device), 4)}
+    if "gpu" in WM_PRESETS:
+        large = dataclasses.replace(WM_PRESETS["gpu"].model, image_size=world_model.image_size)
+        result["wm_train_step_s"]["gpu_preset"] = round(wm_train_step_s(large, sizes, device), 4)
+    result["policy_train_obs_per_s"] = round(policy_train_obs_per_s(sizes, device))
+    rl = rl_step(args.data, sizes, device, args.tasks)
+    result |= {"rl_step_s": round(rl["step_s"], 3), "rl_step": rl}
+    result |= {
+        "sizes": dataclasses.asdict(sizes),
+        "goals": {"imagined_fps_b4096": 250_000, "rl_step_s": 2.0},
+        "device": torch.cuda.get_device_name(device) if device.type == "cuda" else "cpu",
+        "torch": torch.__version__,
+        "platform": platform.platform(),
+        "command": " ".join(["benchmarks/gpu.py", *sys.argv[1:]]),
+    }
+    print(json.dumps(result, indent=2))
+    write_json(args.out, result)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,42 @@
+"""benchmarks/gpu.py keeps working where no GPU is: every measurement runs at toy sizes on the CPU."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from gymnast.config import EnvConfig
+from gymnast.data.collect import CollectConfig, collect
+
+ROOT = Path(__file__).resolve().parents[2]
+SCRIPT = ROOT / "benchmarks" / "gpu.py"
+
+
+def _run(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, str(SCRIPT), *args], cwd=ROOT, capture_output=True, text=True, timeout=600)
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not (ROOT / "results/world_model/wm").exists(), reason="needs the committed world model and judge")
+def test_every_measurement_runs_at_toy_sizes_on_the_cpu(tmp_path):
+    data = tmp_path / "data"  # start states at the committed models' 96 px
+    collect(CollectConfig(tasks="reach-v3", episodes_per_task=2, noise=(0.0,), workers=1,
+                          env=EnvConfig(image_size=96, horizon=100)), data, progress=False)
+    out = tmp_path / "gpu.json"
+    done = _run("--device", "cpu", "--small", "--data", str(data), "--tasks", "reach-v3", "--out", str(out))
+    assert done.returncode == 0, done.stderr[-3000:]
+    result = json.loads(out.read_text())
+    assert result["device"] == "cpu" and result["sizes"]["policy_batch"] == 4
+    assert result["imagined_fps_b4"] > 0 and result["imagined_fps_b8"] > 0
+    assert result["wm_train_step_s"]["default"] > 0 and result["policy_train_obs_per_s"] > 0
+    assert result["rl_step"]["rollouts_per_step"] == 4 and result["rl_step_s"] > 0
+
+
+def test_without_a_gpu_it_measures_nothing_and_says_why(tmp_path):
+    done = _run("--device", "cpu", "--out", str(tmp_path / "gpu.json"))
+    assert done.returncode != 0 and "measures a GPU" in done.stderr
+    assert not (tmp_path / "gpu.json").exists()
