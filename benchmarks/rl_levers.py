@@ -17,7 +17,9 @@ the runs of results/rl/, so a longer run (``--steps 15 --real-eval``) is what sa
 penalty and the KL anchor, which act through learning, matter; the stop acts from the first step.
 
 Writes runs/levers/<arm>/ and results/rl/levers/ (each arm's config, summary and metrics,
-levers.json and levers.md).
+levers.json and levers.md; ``--results`` elsewhere). ``--arms`` runs some arms only: the others
+already in ``--out`` are tabulated beside them, and the no-lever arm there still sets the stop and
+the penalty.
 """
 
 from __future__ import annotations
@@ -50,48 +52,58 @@ def main() -> None:
     parser.add_argument("--kl", type=float, default=0.1, help="KL anchor weight")
     parser.add_argument("--imitation", type=float, default=0.1, help="imitation anchor weight (VLA-RFT's auxiliary loss)")
     parser.add_argument("--out", type=Path, default=ROOT / "runs" / "levers")
+    parser.add_argument("--arms", default=",".join(ARMS), help=f"the arms to run, of {','.join(ARMS)}")
+    parser.add_argument("--results", type=Path, default=RESULTS, help="where the measurements are kept")
     parser.add_argument("--report-only", action="store_true", help="only tabulate the arms already run in --out")
     args = parser.parse_args()
+    chosen = [arm.strip() for arm in args.arms.split(",") if arm.strip()]
+    if unknown := sorted(set(chosen) - set(ARMS)):
+        parser.error(f"--arms: unknown {', '.join(unknown)}; choose from {', '.join(ARMS)}")
     if args.report_only:
-        report({"command": " ".join(sys.argv), "arms": {arm: measure(args.out / arm) for arm in ARMS
-                                                         if (args.out / arm / "summary.json").exists()}})
-        return
+        chosen = []
+    results = {"command": " ".join(sys.argv), "arms": {}}
     common = ["--policy", "results/sft/policy", "--env", "imagined", "--wm", args.wm, "--reward",
               "judge:results/judge/judge", "--data", "data/mt10", "--tasks", "reach-v3", "--steps", str(args.steps),
               "--starts-per-step", "4", "--group-size", "8", "--lr", str(args.lr), "--max-rounds", "1",
               "--eval-every", "0", "--eval-episodes", str(args.eval_episodes), "--watch-every", "1",
               "--watch-rollouts", "16", "--video-every", str(args.steps), "--checkpoint-every", str(args.steps),
               "--workers", "2", "--real-eval" if args.real_eval else "--no-real-eval"]
-    results = {"command": " ".join(sys.argv), "arms": {}}
-    first = train("none", [], common, args.out)
-    results["arms"]["none"] = first
-    stop = args.stop or first["first_step"]["rollout/disagreement_max"]
-    penalty = args.penalty or 0.5 / first["first_step"]["rollout/disagreement_mean"]
-    for arm, lever in (("stop", ["--disagreement-stop", f"{stop:.6g}"]),
-                       ("penalty", ["--disagreement-penalty", f"{penalty:.6g}"]),
-                       ("kl", ["--kl-coef", str(args.kl)]),
-                       ("imitation", ["--imitation-coef", str(args.imitation)])):
-        results["arms"][arm] = train(arm, lever, common, args.out)
-    report(results)
+    if "none" in chosen:
+        results["arms"]["none"] = train("none", [], common, args.out, args.results)
+    elif (args.out / "none" / "summary.json").exists():
+        results["arms"]["none"] = measure(args.out / "none", args.results)
+    first = results["arms"].get("none", {}).get("first_step", {})
+    levers = {"stop": lambda: ["--disagreement-stop", f"{args.stop or first['rollout/disagreement_max']:.6g}"],
+              "penalty": lambda: ["--disagreement-penalty", f"{args.penalty or 0.5 / first['rollout/disagreement_mean']:.6g}"],
+              "kl": lambda: ["--kl-coef", str(args.kl)],
+              "imitation": lambda: ["--imitation-coef", str(args.imitation)]}
+    for arm, lever in levers.items():
+        if arm in chosen:
+            if arm in ("stop", "penalty") and not first and getattr(args, arm) is None:
+                parser.error(f"--arms {arm} needs the no-lever arm in {args.out / 'none'} (or --{arm})")
+            results["arms"][arm] = train(arm, lever(), common, args.out, args.results)
+        elif (args.out / arm / "summary.json").exists() and arm not in results["arms"]:
+            results["arms"][arm] = measure(args.out / arm, args.results)
+    report(results, args.results)
 
 
-def report(results: dict) -> None:
-    write_json(RESULTS / "levers.json", results)
-    (RESULTS / "levers.md").write_text(table(results))
+def report(results: dict, kept: Path) -> None:
+    write_json(kept / "levers.json", results)
+    (kept / "levers.md").write_text(table(results))
     print(table(results))
 
 
-def train(arm: str, lever: list[str], common: list[str], out: Path) -> dict:
-    """Runs one arm (afresh) and copies what it measured to results/rl/levers/<arm>/."""
+def train(arm: str, lever: list[str], common: list[str], out: Path, kept: Path) -> dict:
+    """Runs one arm (afresh) and copies what it measured to `kept`/<arm>/."""
     run = out / arm
     shutil.rmtree(run, ignore_errors=True)
     subprocess.run([sys.executable, "-m", "gymnast.cli", "rl", *common, *lever, "--out", str(run)], check=True, cwd=ROOT)
-    return measure(run)
+    return measure(run, kept)
 
 
-def measure(run: Path) -> dict:
-    """What one arm's run measured; its config, summary and metrics are copied to results/rl/levers/<arm>/."""
-    kept = RESULTS / run.name
+def measure(run: Path, kept: Path) -> dict:
+    """What one arm's run measured; its config, summary and metrics are copied to `kept`/<arm>/."""
+    kept = kept / run.name
     kept.mkdir(parents=True, exist_ok=True)
     for name in ("config.json", "summary.json", "metrics.jsonl"):
         shutil.copy(run / name, kept / name)
