@@ -59,6 +59,17 @@ def test_resume_takes_the_saved_settings_and_inputs_and_refuses_a_flag_that_disa
         _sft(True, saved, data=Path("data/b"))
 
 
+def test_resume_may_continue_on_another_device_but_not_with_other_settings():
+    saved_config = dataclasses.replace(DEBUG, steps=9, device="cuda")
+
+    def saved():
+        return saved_config, {"data": Path("data/a")}
+
+    config, _ = _sft(True, saved, device="cpu")  # started on a GPU, finished on a CPU
+    assert config == dataclasses.replace(saved_config, device="cpu")
+    assert _sft(True, saved)[0].device == "cuda"  # without the flag, where the run said
+
+
 def test_rl_flags_are_the_fields_of_rlconfig_with_their_docstrings_and_preset_values(capsys):
     assert [f.name for f in dataclasses.fields(RLFlags)] == [f.name for f in dataclasses.fields(RLConfig)]
     flags = tyro.cli(RLFlags, args=["--steps", "3", "--fresh-scenes", "--no-real-eval", "--tasks", "reach-v3"])
@@ -67,7 +78,7 @@ def test_rl_flags_are_the_fields_of_rlconfig_with_their_docstrings_and_preset_va
     with pytest.raises(SystemExit):
         tyro.cli(RLFlags, args=["--help"])
     help_text = " ".join(capsys.readouterr().out.split())
-    assert "RL steps (one policy update each). (default: the preset's: debug 2, demo 30, full 100)" in help_text
+    assert "RL steps (one policy update each). (default: the preset's: debug 2, demo 30, full 100, gpu 400)" in help_text
     assert "--clip-low FLOAT PPO ratio clip below 1. (default: 0.2)" in help_text
 
 

@@ -90,6 +90,7 @@ def sft(
     camera: str | None = None,
     policy_type: Literal["tokens", "flow"] | None = None,
     fit: Fit | None = None,
+    device: str | None = None,
 ) -> None:
     """Behaviour-clone a VLA on N successful expert demonstrations per task.
 
@@ -108,13 +109,14 @@ def sft(
             flow-matching VLA of VLA-RFT). Saved with the checkpoint; rl and eval read it there.
         fit: how frames that are not the model's square size are fitted: resize (squash the whole
             frame) or crop (the central square); saved with the run.
+        device: auto (CUDA when torch sees a GPU, else the CPU), cpu, cuda or cuda:N; --resume may change it.
     """
     from gymnast.policy.sft import SFT_PRESETS, saved_sft_config, train_sft
 
     config, inputs = resolve(
         "sft", out, resume, SFT_PRESETS[preset], inputs={"data": data}, required=("data",),
         overrides={"demos_per_task": demos_per_task, "steps": steps, "tasks": tasks, "seed": seed,
-                   "vla.vision": vision, "camera": camera, "policy": policy_type, "fit": fit},
+                   "vla.vision": vision, "camera": camera, "policy": policy_type, "fit": fit, "device": device},
         saved=lambda: (saved_sft_config(out), saved_inputs(out, "data")))
     checkpoint = train_sft(inputs["data"], out, config, resume=resume)
     print(f"policy: {checkpoint}")

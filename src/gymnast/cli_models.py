@@ -22,6 +22,8 @@ from gymnast.reward.spec import RewardSpec
 from gymnast.rl.config import RL_PRESETS, RLConfig
 
 Preset = Literal["debug", "demo", "full"]
+GPUPreset = Literal["debug", "demo", "full", "gpu"]
+"""The presets of the commands that also have one sized for a GPU (docs/gpu.md)."""
 RLFlags = flags_of(RLConfig, RL_PRESETS)
 
 
@@ -29,7 +31,7 @@ def train_wm(
     out: Path,
     data: Path | None = None,
     backend: Literal["embedded", "flow"] | None = None,
-    preset: Literal["debug", "demo", "full", "gpu"] = "full",
+    preset: GPUPreset = "full",
     resume: bool = False,
     device: str | None = None,
     steps: int | None = None,
@@ -47,8 +49,8 @@ def train_wm(
         data: dataset directory (from `gymnast collect`); with --resume, the run's own.
         backend: embedded (deterministic; the default) or flow (generative: latent flow matching, one sampled
             frame per action); with --resume, the run's own.
-        preset: debug (seconds), demo (minutes), full (under an hour on 2 cores) or gpu (flow only: a larger
-            model for a GPU).
+        preset: debug (seconds), demo (minutes), full (under an hour on 2 cores) or gpu (a larger model
+            for one GPU; docs/gpu.md).
         resume: continue the run in OUT from its last checkpoint, with the settings and data saved there.
         device: auto (CUDA when torch sees a GPU, else the CPU), cpu, cuda or cuda:N.
         steps: override the preset's optimizer steps.
@@ -81,6 +83,7 @@ def eval_wm(
     control_scenes: int = 10,
     reanchor_every: int | None = None,
     camera: str | None = None,
+    device: str = "auto",
 ) -> None:
     """Measure a world model's open-loop fidelity and controllability on held-out episodes.
 
@@ -94,13 +97,14 @@ def eval_wm(
         control_scenes: held-out scenes for the controllability check (0 skips it).
         reanchor_every: override how often a long rollout re-encodes its own frames (0 = never).
         camera: the dataset camera to read (e.g. front); default: its first video (else image) feature.
+        device: where the world model imagines: auto (CUDA when torch sees a GPU, else the CPU), cpu, cuda or cuda:N.
     """
     from gymnast.world_model.controllability import ControllabilityConfig
     from gymnast.world_model.evaluate import WorldModelEvalConfig, evaluate_world_model, format_report
 
     config = WorldModelEvalConfig(max_episodes=max_episodes, videos=videos, gifs=gifs,
                                   controllability=ControllabilityConfig(scenes=control_scenes), reanchor_every=reanchor_every,
-                                  camera=camera)
+                                  camera=camera, device=device)
     report = evaluate_world_model(wm, data, out, config)
     print(format_report(report))
     print(f"report: {out}")
@@ -152,7 +156,7 @@ def train_judge(
     out: Path,
     data: Path | None = None,
     wm: Path | None = None,
-    preset: Preset = "full",
+    preset: GPUPreset = "full",
     resume: bool = False,
     steps: int | None = None,
     kind: Literal["frames", "video"] | None = None,
@@ -160,6 +164,7 @@ def train_judge(
     init: Path | None = None,
     camera: str | None = None,
     fit: Fit | None = None,
+    device: str | None = None,
 ) -> None:
     """Train the embedded success judge on real episodes (and their re-imaginings with --wm), choose
     its threshold on validation scenes, then report its TPR and FPR on held-out real and imagined videos.
@@ -168,7 +173,7 @@ def train_judge(
         out: run directory: checkpoints, metrics.jsonl, metrics.json (the held-out figures).
         data: dataset directory (from `gymnast collect`); with --resume, the run's own.
         wm: world-model run: also train and measure on its re-imagining of every episode.
-        preset: debug (seconds), demo (minutes) or full.
+        preset: debug (seconds), demo (minutes), full or gpu (a wider judge for one GPU; docs/gpu.md).
         resume: continue the run in OUT from its last checkpoint, with the settings, data and world model
             saved there.
         steps: override the preset's optimizer steps.
@@ -178,13 +183,15 @@ def train_judge(
         camera: the dataset camera to read (e.g. front); default: its first video (else image) feature.
         fit: how frames that are not the model's square size are fitted: resize (squash the whole
             frame) or crop (the central square); saved with the run.
+        device: auto (CUDA when torch sees a GPU, else the CPU), cpu, cuda or cuda:N; --resume may change it.
     """
     from gymnast.reward.train_judge import JUDGE_PRESETS, saved_judge_config
     from gymnast.reward.train_judge import train_judge as train
 
     config, inputs = resolve(
         "train-judge", out, resume, JUDGE_PRESETS[preset], inputs={"data": data, "wm": wm}, required=("data",),
-        overrides={"steps": steps, "kind": kind, "extra_data": extra_data or None, "init": init, "camera": camera, "fit": fit},
+        overrides={"steps": steps, "kind": kind, "extra_data": extra_data or None, "init": init, "camera": camera, "fit": fit,
+                   "device": device},
         saved=lambda: (saved_judge_config(out), saved_inputs(out, "data", "wm")))
     report = train(inputs["data"], out, config, wm=inputs["wm"], resume=resume)
     print(json.dumps({k: v for k, v in report.items() if k.startswith(("real", "imagined"))}, indent=2))
@@ -227,6 +234,7 @@ def eval_judge(
     out: Path,
     wm: Path | None = None,
     heldout_fraction: float = 0.1,
+    device: str = "auto",
 ) -> None:
     """Measure a 0/1 judge (judge:RUN or vlm:MODEL@BASE_URL) on held-out episodes: TPR and FPR on
     real videos and, with --wm, on the world model's re-imagining of the same episodes.
@@ -237,10 +245,11 @@ def eval_judge(
         out: report JSON.
         wm: world-model run whose imagined videos are judged too.
         heldout_fraction: the held-out share of scenes (the world model's, so its videos are unseen).
+        device: where a learned judge and the world model run: auto (CUDA when torch sees a GPU), cpu, cuda or cuda:N.
     """
     from gymnast.reward.select import measure_judge
 
-    report = measure_judge(RewardSpec.parse(reward), data, out, wm, heldout_fraction)
+    report = measure_judge(RewardSpec.parse(reward), data, out, wm, heldout_fraction, device)
     print(json.dumps(report, indent=2))
 
 
@@ -251,7 +260,7 @@ def rl(
     reward: str | None = None,
     wm: Path | None = None,
     data: Path | None = None,
-    preset: Preset = "full",
+    preset: GPUPreset = "full",
     resume: bool = False,
     config: Annotated[RLFlags, tyro.conf.arg(name="")] = RLFlags(),
 ) -> None:
@@ -264,7 +273,7 @@ def rl(
         reward: judge:RUN | vlm:MODEL@BASE_URL | verified | sim | sim-dense.
         wm: the world model run (needed by --env imagined and --reward verified).
         data: dataset whose scenes are the start states (default: the one the policy was trained on).
-        preset: debug (seconds), demo (minutes) or full.
+        preset: debug (seconds), demo (minutes), full or gpu (400 steps of 256 rollouts; docs/gpu.md).
         resume: continue the run in OUT from its last checkpoint, with the settings, policy, env,
             reward, world model and data saved there.
         config: the GRPO settings; each one left out keeps the preset's value.
@@ -333,12 +342,13 @@ def worldgym(
 
 def experiment(
     out: Path,
-    preset: Preset = "full",
+    preset: GPUPreset = "full",
     resume: bool = False,
     reuse: Annotated[list[str], tyro.conf.UseAppendAction] = [],  # noqa: B006 (read by tyro, never mutated)
     workers: int | None = None,
     sentences: Path | None = None,
     runner: str | None = None,
+    device: str | None = None,
 ) -> None:
     """The headline comparison: data, SFT, world model, judge, six arms, real-world evaluation and
     the WorldGym check, then OUT/report.md, OUT/summary.json and OUT/plots/. Rerunning the same
@@ -346,7 +356,8 @@ def experiment(
 
     Args:
         out: experiment directory.
-        preset: debug (a minute; tests), demo (a few tasks, what `make demo` runs) or full (MT10).
+        preset: debug (a minute; tests), demo (a few tasks, what `make demo` runs), full (MT10) or gpu
+            (MT10 at the papers' budget, for one GPU and its host's cores; docs/gpu.md).
         resume: continue the experiment in OUT with the settings saved there (whatever its preset).
         reuse: a stage to take from an earlier run instead of running it, as STAGE=DIR (collect=DATASET,
             sft=RUN, world_model=RUN, judge=RUN); repeat for several, e.g. --reuse collect=data/mt10
@@ -355,6 +366,8 @@ def experiment(
         sentences: a file of `task: sentence` lines, your own wording of the tasks: the language
             check gives the policies these instead of the held-out paraphrases.
         runner: where they run: local, ray or ray:ADDRESS (default: the preset's, local).
+        device: where the models train, imagine and judge: auto (CUDA when torch sees a GPU, else the
+            CPU), cpu, cuda or cuda:N; --resume may change it.
     """
     from gymnast.experiment.config import EXPERIMENT_PRESETS
     from gymnast.experiment.pipeline import run_experiment, saved_experiment_config
@@ -362,7 +375,7 @@ def experiment(
     from gymnast.experiment.stages import parse_reuse
 
     config, _ = resolve("experiment", out, resume, EXPERIMENT_PRESETS[preset],
-                        overrides={"workers": workers, "sentences": sentences, "runner": runner},
+                        overrides={"workers": workers, "sentences": sentences, "runner": runner, "device": device},
                         inputs={}, saved=lambda: (saved_experiment_config(out), {}))
     summary = run_experiment(config, out, parse_reuse(reuse))
     print(format_table(summary))

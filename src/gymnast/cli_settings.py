@@ -29,6 +29,11 @@ from gymnast.utils.settings import saved_settings
 C = TypeVar("C")
 
 
+WHERE_IT_RUNS = frozenset({"device", "runner", "workers"})
+"""Settings of where a run computes, not of what it computes: with --resume they may differ from
+the saved run's (a run started on a GPU can finish on a CPU) and replace its values."""
+
+
 def resolve(
     command: str,
     out: Path,
@@ -54,13 +59,16 @@ def resolve(
 
     Raises:
         ValueError: a new run misses a required input, or a flag given with --resume disagrees
-            with the run's saved value (the message names the flag and both values).
+            with the run's saved value (the message names the flag and both values); flags of
+            `WHERE_IT_RUNS` replace the saved values instead.
         FileNotFoundError: --resume, and `out` holds no run.
     """
     overrides = {name: value for name, value in overrides.items() if value is not None}
     given = {name: value for name, value in inputs.items() if value is not None}
     if resume:
         config, have_inputs = saved()
+        for name in overrides.keys() & WHERE_IT_RUNS:  # a resumed run may continue on another machine
+            config = _replace(config, name, overrides.pop(name))
         for name, value in (overrides | given).items():
             have = _field(config, name) if name in overrides else have_inputs.get(name)
             if not _same(value, have):

@@ -79,3 +79,14 @@ def test_the_imagined_env_acts_in_the_world_models_range():
     clipped = torch.tensor([[[4.0, 2.0, 20.0], [-4.0, 0.0, 10.0]]])
     expected = ranged.step(ranged.init_state(start), clipped)[1][0, -1]
     assert torch.equal(torch.from_numpy(frames[0]), expected)
+
+
+@pytest.mark.skipif(not COMMITTED.exists(), reason="the committed world model is not in this checkout")
+def test_a_checkpoint_saved_before_the_range_can_be_fine_tuned():
+    from gymnast.world_model.train import WM_PRESETS, build_model
+
+    old = load_world_model(COMMITTED)
+    from_data = dataclasses.replace(old.config, action_low=(-0.9,) * 4, action_high=(0.9,) * 4)  # what fit_to_data sets
+    model = build_model(dataclasses.replace(WM_PRESETS["full"], init=COMMITTED, model=from_data))
+    assert model.config.action_low == () and model.action_range == ((-1.0,) * 4, (1.0,) * 4)  # the weights' own
+    assert all(torch.equal(a, b) for a, b in zip(model.state_dict().values(), old.state_dict().values()))

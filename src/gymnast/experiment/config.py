@@ -80,6 +80,10 @@ class ExperimentConfig:
     ray:ADDRESS (see `gymnast eval --help`)."""
     seed: int = 0
     """Seed of every stage."""
+    device: str = "auto"
+    """Where the models train, imagine and judge (train-wm, sft, train-judge, eval-wm, rl): auto
+    (CUDA when torch sees a GPU, else the CPU), cpu, cuda or cuda:N. The real world's workers keep
+    their policies on the CPU, where the simulator is the cost."""
 
     def __post_init__(self) -> None:
         for name in ("eval_episodes", "robustness_episodes", "worldgym_episodes", "workers"):
@@ -95,13 +99,15 @@ class ExperimentConfig:
         parse_runner(self.runner)
 
     def resolved(self) -> ExperimentConfig:
-        """Every stage told the experiment's tasks, workers, runner and seed (one place to set them)."""
+        """Every stage told the experiment's tasks, workers, runner, device and seed (one place to set them)."""
         return dataclasses.replace(
             self,
             collect=dataclasses.replace(self.collect, tasks=self.tasks, workers=self.workers, runner=self.runner),
-            sft=dataclasses.replace(self.sft, tasks="", seed=self.seed),
+            sft=dataclasses.replace(self.sft, tasks="", seed=self.seed, device=self.device),
+            world_model=dataclasses.replace(self.world_model, device=self.device),
+            judge=dataclasses.replace(self.judge, device=self.device),
             rl=dataclasses.replace(self.rl, tasks=self.tasks, gap=self.gap, workers=self.workers, runner=self.runner,
-                                   seed=self.seed),
+                                   seed=self.seed, device=self.device),
         )
 
 
@@ -143,4 +149,18 @@ def _demo() -> ExperimentConfig:
     )
 
 
-EXPERIMENT_PRESETS: dict[str, ExperimentConfig] = {"debug": _debug(), "demo": _demo(), "full": ExperimentConfig()}
+def _gpu() -> ExperimentConfig:
+    # The full experiment at the papers' budget for one GPU: the gpu presets' world model, judge and
+    # RL (400 steps of 256 rollouts). The imagined arms are GPU work; the real-world and simulator
+    # arms, the evaluations and the data stay on the CPU's simulator processes (docs/gpu.md).
+    return ExperimentConfig(
+        collect=CollectConfig(episodes_per_task=50),
+        world_model=WM_PRESETS["gpu"],
+        judge=JUDGE_PRESETS["gpu"],
+        rl=dataclasses.replace(RL_PRESETS["gpu"], eval_episodes=10),
+        workers=16,
+    )
+
+
+EXPERIMENT_PRESETS: dict[str, ExperimentConfig] = {"debug": _debug(), "demo": _demo(), "full": ExperimentConfig(),
+                                                   "gpu": _gpu()}

@@ -28,6 +28,7 @@ from gymnast.experiment.arms import ARMS, PERTURBATIONS, ROBUSTNESS_ARMS, arm, r
 from gymnast.experiment.config import ExperimentConfig
 from gymnast.experiment.stages import Stages
 from gymnast.utils.atomic import write_json
+from gymnast.utils.device import resolve_device
 from gymnast.utils.settings import from_json, saved_settings
 
 
@@ -37,6 +38,7 @@ def run_experiment(config: ExperimentConfig, out: Path, reuse: dict[str, Path] |
     from gymnast.experiment.report import write_report
 
     config = config.resolved()
+    resolve_device(config.device)  # a missing GPU is said now, not after the data is recorded
     out.mkdir(parents=True, exist_ok=True)
     _save_settings(out, config)
     stages = Stages(out, reuse)
@@ -79,7 +81,7 @@ def _models(stages: Stages, config: ExperimentConfig, out: Path, progress: bool)
         return {"metrics": {k: v for k, v in report.items() if k.startswith(("real", "imagined"))}}
 
     stages.run("judge", judge_stage, out / "judge")
-    stages.run("world_model_eval", lambda: _world_model_fidelity(wm, data, out, progress), out / "world_model_eval.json")
+    stages.run("world_model_eval", lambda: _world_model_fidelity(wm, data, out, progress, config.device), out / "world_model_eval.json")
     return data, stages.path("sft"), wm, stages.path("judge")
 
 
@@ -87,7 +89,7 @@ FIDELITY_KEYS = ("psnr_h1", "psnr_h8", "psnr_h32", "copy_last_psnr_h32", "moving
                  "ssim_h32", "episodes")
 
 
-def _world_model_fidelity(wm: Path, data: Path, out: Path, progress: bool) -> dict:
+def _world_model_fidelity(wm: Path, data: Path, out: Path, progress: bool, device: str = "auto") -> dict:
     """`gymnast eval-wm` on the held-out episodes: open-loop fidelity and controllability, the
     first thing to look at when imagined practice does not carry over to the real world."""
     from gymnast.world_model.controllability import ControllabilityConfig
@@ -97,7 +99,7 @@ def _world_model_fidelity(wm: Path, data: Path, out: Path, progress: bool) -> di
     fraction = heldout_fraction(wm)  # a run's, or the smallest of an ensemble's members
     if not split_episodes(EpisodeDataset(data).episodes, fraction)[1]:  # tiny datasets may hold out no scene
         return {"skipped": f"{data} has no scene held out from the world model (held-out fraction {fraction})"}
-    settings = WorldModelEvalConfig(videos=2, controllability=ControllabilityConfig(scenes=4))
+    settings = WorldModelEvalConfig(videos=2, controllability=ControllabilityConfig(scenes=4), device=device)
     report = evaluate_world_model(wm, data, out / "world_model_eval.json", settings, progress)
     control = report.get("controllability") or {}
     return {**{key: report[key] for key in FIDELITY_KEYS if key in report},

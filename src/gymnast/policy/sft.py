@@ -22,6 +22,7 @@ import torch.nn.functional as F
 from torch import nn
 from tqdm import tqdm
 
+from gymnast.data.action_stats import ActionStats
 from gymnast.data.frames import Fit, model_image_size
 from gymnast.data.lerobot import EpisodeDataset
 from gymnast.data.schema import EpisodeInfo
@@ -30,6 +31,8 @@ from gymnast.policy.flow_vla import FlowVLA, FlowVLAConfig
 from gymnast.policy.observation import shared_architecture
 from gymnast.policy.vla import EmbeddedVLA, VLAConfig
 from gymnast.utils.checkpoint import resolve_checkpoint, resume_training, save_training, write_run_config
+from gymnast.utils.device import resolve_device
+from gymnast.utils.distributed import Parallel, data_parallel
 from gymnast.utils.metrics import MetricsLog
 from gymnast.utils.optim import gradient_step, warmup_cosine
 from gymnast.utils.settings import from_json, saved_settings
@@ -79,6 +82,9 @@ class SFTConfig:
     `vla`'s architecture and `flow_steps` integration steps; docs/policy.md)."""
     flow_steps: int = 5
     """Flow policy only: Euler steps from noise to an action chunk."""
+    device: str = "auto"
+    """Where to train: auto (CUDA when torch sees a GPU, else the CPU), cpu, cuda or cuda:N. The
+    demonstrations stay on the host; each batch is copied over (bf16 autocast on either device)."""
     vla: VLAConfig = field(default_factory=VLAConfig)
     """Model architecture."""
 
@@ -188,36 +194,64 @@ def train_sft(data: Path, out: Path, config: SFTConfig, resume: bool = False, pr
     torch.manual_seed(config.seed)
     if init is None:
         model = build_sft_policy(config, stats.action_range())
+    with data_parallel(resolve_device(config.device)) as parallel:
+        if parallel.world_size > 1 and config.policy == "flow":
+            raise ValueError("sft --policy-type flow draws its noise per sample and does not train under torchrun yet; "
+                             "run it as one process")
+        model = model.to(parallel.device)  # before the optimizer: it keeps the parameters it is given
+        return _train(out, config, model, demos, extra, _saved_inputs(data, init, extra, stats, demos),
+                      resume, progress, parallel)
+
+
+def _saved_inputs(data: Path, init: Path | None, extra: DemoSet | None, stats: ActionStats, demos: DemoSet) -> dict:
+    """What an SFT run saves beside its settings and model: its data, demonstrations and start."""
+    return {"data": str(data), "action_stats": stats.to_dict(), "demos": [info.key for info in demos.episodes],
+            "init": str(init) if init else None, "extra_samples": len(extra.images) if extra is not None else 0}
+
+
+def _train(out: Path, config: SFTConfig, model: nn.Module, demos: DemoSet, extra: DemoSet | None, inputs: dict,
+           resume: bool, progress: bool, parallel: Parallel) -> Path:
+    """`train_sft`'s loop, in this process of the run (`gymnast.utils.distributed`): every process
+    draws the global batch and trains on its share; rank 0 writes the run."""
     pool, draw = _batch_pool(demos, extra, config.batch_size)
+    share = parallel.share(config.batch_size)
+    loss_of = parallel.loss(model, lambda policy, *batch: policy.imitation_loss(*batch))
     optimizer = torch.optim.AdamW(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
     schedule = torch.optim.lr_scheduler.LambdaLR(optimizer, warmup_cosine(config.warmup_steps, config.steps))
     sampler = torch.Generator().manual_seed(config.seed)
-    resolved = {"sft": dataclasses.asdict(config), "model": model.spec(), "data": str(data),
-                "action_stats": stats.to_dict(),
-                "demos": [info.key for info in demos.episodes], "init": str(init) if init else None,
-                "extra_samples": len(extra.images) if extra is not None else 0}
+    resolved = {"sft": dataclasses.asdict(config), "model": model.spec(), **inputs}
     start = resume_training(out, model, optimizer, schedule, sampler) if resume else 0
     if resume:
         logger.info("resumed %s at step %d", out, start)
-    write_run_config(out, resolved)
-    metrics = MetricsLog(out, resume_step=start if resume else None)
+    if parallel.is_main:
+        write_run_config(out, resolved)
+    metrics = MetricsLog(out, resume_step=start if resume else None) if parallel.is_main else None
     model.train()
-    bar = tqdm(range(start, config.steps), initial=start, total=config.steps, desc="sft", disable=not progress)
+    bar = tqdm(range(start, config.steps), initial=start, total=config.steps, desc="sft",
+               disable=not (progress and parallel.is_main))
     started = time.perf_counter()
     checkpoint = None
     for step in bar:
-        batch = draw(sampler)
-        images = random_shift(pool.images[batch], config.shift_augment, sampler)
+        batch = draw(sampler)  # the global batch (and its augmentation): every process draws it
+        images = random_shift(pool.images[batch], config.shift_augment, sampler)[share]
+        batch = batch[share]
         texts = [pool.instructions[i] for i in pool.instruction[batch].tolist()]
-        loss, values = model.imitation_loss(images, texts, pool.chunks[batch], pool.valid[batch], config.bf16, sampler)
+        valid = pool.valid[batch]
+        loss, values = loss_of(images, texts, pool.chunks[batch], valid, config.bf16, sampler)
+        # The loss is a mean over valid action steps, whose count differs between the processes' shares.
+        count = valid.sum().item()
+        loss, values = parallel.global_mean(loss, count), parallel.average(values, count)
         values["train/grad_norm"] = gradient_step(loss, model, optimizer, schedule)
         done = step + 1
+        if not parallel.is_main:
+            continue
         if done % config.log_every == 0 or done == config.steps:
             values |= {"train/lr": schedule.get_last_lr()[0], "time/step_s": (time.perf_counter() - started) / (done - start)}
             metrics.log(done, values)
             bar.set_postfix(loss=f"{values['train/loss']:.3f}")
         if done % config.checkpoint_every == 0 or done == config.steps:
             checkpoint = save_training(out, done, model, resolved, optimizer, schedule, sampler)
+    parallel.barrier()  # the others return rank 0's last checkpoint once it is written
     return checkpoint or resolve_checkpoint(out)
 
 

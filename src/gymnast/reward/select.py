@@ -11,10 +11,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import torch
+
 from gymnast.data.lerobot import EpisodeDataset
 from gymnast.reward.base import Reward
 from gymnast.reward.spec import RewardSpec
 from gymnast.utils.atomic import write_json
+from gymnast.utils.device import resolve_device
 from gymnast.world_model.base import WorldModel
 
 
@@ -44,14 +47,20 @@ def make_reward(spec: RewardSpec, world_model: WorldModel | None = None) -> Rewa
     return SimSuccess() if spec.kind == "sim" else SimDense()
 
 
-def measure_judge(reward: RewardSpec, data: Path, out: Path, wm: Path | None = None, heldout_fraction: float = 0.1) -> dict:
+def measure_judge(reward: RewardSpec, data: Path, out: Path, wm: Path | None = None, heldout_fraction: float = 0.1,
+                  device: str = "auto") -> dict:
     """`evaluate_judge` of the 0/1 judge `reward` (judge:RUN or vlm:MODEL@BASE_URL) on the episodes of
-    the held-out scenes of `data`, and with `wm` on its re-imaginings of them; written to `out` (JSON)."""
+    the held-out scenes of `data`, and with `wm` on its re-imaginings of them; written to `out` (JSON).
+    A learned judge and the world model run on `device`."""
     from gymnast.reward.train_judge import evaluate_judge, heldout_videos
 
     if reward.kind not in ("judge", "vlm"):
         raise ValueError(f"eval-judge measures judges (judge:RUN or vlm:MODEL@BASE_URL), got {str(reward)!r}")
-    report = evaluate_judge(make_reward(reward), heldout_videos(EpisodeDataset(data), heldout_fraction, wm))
+    where = resolve_device(device)
+    judge = make_reward(reward)
+    if isinstance(judge, torch.nn.Module):  # a learned judge; a VLM runs wherever its server does
+        judge.to(where)
+    report = evaluate_judge(judge, heldout_videos(EpisodeDataset(data), heldout_fraction, wm, where))
     report |= {"reward": str(reward), "data": str(data), "wm": str(wm) if wm else None}
     write_json(out, report)
     return report

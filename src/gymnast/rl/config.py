@@ -151,6 +151,11 @@ RL_PRESETS: dict[str, RLConfig] = {
                       video_every=1, checkpoint_every=1, keep_low=0.0, keep_high=1.0),
     "demo": RLConfig(steps=30, tasks="reach-v3,push-v3", eval_every=10, video_every=10),
     "full": RLConfig(),
+    # Paper scale for one GPU: 400 steps of 256 rollouts (VLA-RFT's step count, World-Gymnast's
+    # batch), a larger micro-batch to fill the device. In imagination a step is estimated at 0.5-2 s
+    # on an H100 (docs/gpu.md); the real world and the simulator stay CPU-bound.
+    "gpu": RLConfig(steps=400, starts_per_step=32, group_size=8, lr=3e-5, micro_batch=2048, eval_every=100,
+                    video_every=100, watch_every=50, checkpoint_every=50),
 }
 
 

@@ -124,10 +124,12 @@ class ImaginedRollout:
     Attributes:
         frames: (B, T, H, W, 3) uint8 imagined frames; frame t follows action t.
         actions: (B, T, A) float32 the actions applied.
+        disagreement: (B, T) float of an ensemble (how far its members' frames differ), else None.
     """
 
     frames: torch.Tensor
     actions: torch.Tensor
+    disagreement: torch.Tensor | None = None
 
 
 def rollout(model: WorldModel, context: torch.Tensor, actions: torch.Tensor,
@@ -143,8 +145,9 @@ def rollout(model: WorldModel, context: torch.Tensor, actions: torch.Tensor,
     """
     device = module_device(model) if isinstance(model, torch.nn.Module) else torch.device("cpu")
     state = model.init_state(to_device(context, device), generator=generator)
-    _, frames = model.step(state, to_device(actions, device), generator=generator)
-    return ImaginedRollout(frames.cpu(), actions.float())
+    state, frames = model.step(state, to_device(actions, device), generator=generator)
+    disagreement = getattr(state, "disagreement", None)  # only ensembles know how far to trust a frame
+    return ImaginedRollout(frames.cpu(), actions.float(), None if disagreement is None else disagreement.float().cpu())
 
 
 BACKENDS = {"embedded": "gymnast.world_model.embedded:EmbeddedWorldModel",

@@ -35,7 +35,8 @@ from gymnast.data.frames import Fit, model_image_size
 from gymnast.data.lerobot import EpisodeDataset
 from gymnast.utils.atomic import write_json
 from gymnast.utils.checkpoint import resolve_checkpoint
-from gymnast.world_model.base import load_world_model
+from gymnast.utils.device import resolve_device
+from gymnast.world_model.base import load_world_model, rollout
 from gymnast.world_model.controllability import ControllabilityConfig, check_controllability
 from gymnast.world_model.data import split_episodes
 from gymnast.world_model.ensemble import EnsembleWorldModel, is_ensemble, member_paths
@@ -65,6 +66,8 @@ class WorldModelEvalConfig:
     """Override the embedded model's re-anchoring period (0 = never; None = as trained)."""
     camera: str | None = None
     """Camera to read from the dataset (e.g. ``front``); default: its first video (else image) feature."""
+    device: str = "auto"
+    """Where the world model imagines: auto (CUDA when torch sees a GPU, else the CPU), cpu, cuda or cuda:N."""
 
 
 def evaluate_world_model(wm: Path, data: Path, out: Path, config: WorldModelEvalConfig = WorldModelEvalConfig(),
@@ -72,6 +75,7 @@ def evaluate_world_model(wm: Path, data: Path, out: Path, config: WorldModelEval
     """Measures `wm` on the held-out episodes of `data`; writes the report to `out` and returns it."""
     started = time.perf_counter()
     model = load_world_model(wm, **({} if config.reanchor_every is None else {"reanchor_every": config.reanchor_every}))
+    model = model.to(resolve_device(config.device))
     fraction = heldout_fraction(Path(wm))
     ensemble = isinstance(model, EnsembleWorldModel)
     dataset = EpisodeDataset(data, config.camera)
@@ -93,11 +97,11 @@ def evaluate_world_model(wm: Path, data: Path, out: Path, config: WorldModelEval
         frames, actions = torch.from_numpy(episode.frames), torch.from_numpy(episode.actions).float()
         for start in range(0, len(actions), config.start_every):
             context = frames[max(0, start + 1 - model.context_frames) : start + 1][None]
-            state, imagined = model.step(model.init_state(context, generator=generator), actions[None, start:], generator=generator)
-            imagined = imagined[0]  # (T, H, W, 3)
+            imagination = rollout(model, context, actions[None, start:], generator)
+            imagined = imagination.frames[0]  # (T, H, W, 3)
             real = frames[start + 1 :]
             if ensemble:
-                rows["disagreement"].append(state.disagreement[0].numpy())
+                rows["disagreement"].append(imagination.disagreement[0].numpy())
             for name, values in _measure(imagined, real, context[0], perceptual).items():
                 rows[name].append(values)
             for name, values in _measure(context[0, -1:].expand_as(real), real, context[0], perceptual).items():

@@ -37,6 +37,7 @@ from gymnast.data.lerobot import EpisodeDataset
 from gymnast.envs.tasks import check_task
 from gymnast.policy.vision import to_float_image
 from gymnast.utils.atomic import write_json
+from gymnast.utils.device import module_device, to_device
 from gymnast.world_model.base import WorldModel, load_world_model, rollout
 from gymnast.world_model.data import split_episodes
 
@@ -128,12 +129,12 @@ class ObjectProbe(nn.Module):
     @torch.no_grad()
     def locate(self, frames: torch.Tensor, task: int, bf16: bool = True, batch: int = 256) -> torch.Tensor:
         """(N, H, W, 3) uint8 frames of one task -> (N, 3) float32 object positions in metres."""
-        out = []
+        out, device = [], module_device(self)
         for chunk in frames.split(batch):
-            index = torch.full((len(chunk),), task, dtype=torch.long)
-            with torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
-                out.append(self(to_float_image(chunk), index).float())
-        return torch.cat(out) * self.scale[task] + self.mean[task]
+            index = torch.full((len(chunk),), task, dtype=torch.long, device=device)
+            with torch.autocast(device.type, dtype=torch.bfloat16, enabled=bf16):
+                out.append(self(to_float_image(to_device(chunk, device)), index).float())
+        return (torch.cat(out) * self.scale[task] + self.mean[task]).cpu()
 
 
 def load_object_episodes(roots: Sequence[Path], tasks: Sequence[str], heldout_fraction: float, image_size: int,
@@ -187,7 +188,7 @@ def train_probe(episodes: Sequence[ObjectEpisode], tasks: Sequence[str], config:
         images = to_float_image(frames[index])  # (B, 3, H, W)
         blur = torch.rand(len(index), generator=generator) < config.blur_fraction
         images = torch.where(blur[:, None, None, None], F.avg_pool2d(images, 3, 1, 1, count_include_pad=False), images)
-        with torch.autocast("cpu", dtype=torch.bfloat16, enabled=config.bf16):
+        with torch.autocast(module_device(probe).type, dtype=torch.bfloat16, enabled=config.bf16):
             prediction = probe(images, task[index])
         loss = F.mse_loss(prediction.float(), probe.normalise(xyz[index], task[index]))
         optimizer.zero_grad(set_to_none=True)

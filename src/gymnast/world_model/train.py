@@ -39,6 +39,7 @@ from gymnast.data.frames import Fit, model_image_size
 from gymnast.data.lerobot import EpisodeDataset
 from gymnast.utils.checkpoint import resolve_checkpoint, resume_training, save_training, write_run_config
 from gymnast.utils.device import resolve_device, to_device
+from gymnast.utils.distributed import Parallel, data_parallel
 from gymnast.utils.metrics import MetricsLog
 from gymnast.utils.optim import gradient_step, warmup_cosine
 from gymnast.utils.settings import from_json, saved_settings
@@ -118,6 +119,13 @@ WM_PRESETS: dict[str, WorldModelTrainConfig] = {
     ),
     "demo": WorldModelTrainConfig(steps=600, video_every=300, validate_every=100),
     "full": WorldModelTrainConfig(),
+    # 26x the parameters (9.9 M) at 8x the batch for one GPU: about 0.25 s a step on an H100 at
+    # batch 64, so about 50 minutes (docs/gpu.md).
+    "gpu": WorldModelTrainConfig(
+        steps=12000, batch_size=64, lr=5e-4, warmup_steps=500, validate_every=1000, video_every=4000,
+        checkpoint_every=1000, log_every=100,
+        model=EmbeddedWorldModelConfig(latent_channels=256, widths=(64, 128), blocks=6, action_width=256),
+    ),
 }
 
 FLOW_PRESETS: dict[str, WorldModelTrainConfig] = {
@@ -160,6 +168,9 @@ _VALIDATION_CLIPS = 32
 def train_world_model(data: Path, out: Path, config: WorldModelTrainConfig, resume: bool = False, progress: bool = True) -> Path:
     """Trains (or resumes) a world-model run in `out`; returns the final checkpoint directory.
 
+    Under torchrun, the processes train one model together (`gymnast.utils.distributed`):
+    `config.batch_size` is the global batch, and rank 0 writes the run.
+
     Raises:
         ValueError: the datasets' image sizes or action dimensions differ, or `config.init`'s model
             spec differs from this run's.
@@ -172,13 +183,23 @@ def train_world_model(data: Path, out: Path, config: WorldModelTrainConfig, resu
     # A resumed run keeps the action range its weights were trained with, whatever `config` says.
     kept = _saved_action_range(resolve_checkpoint(out)) if resume else None
     config, datasets, stats = fit_to_data(config, datasets, action_range=kept)
-    dataset = datasets[0]
-    bank, heldout, counts = load_banks(datasets, config.heldout_fraction, progress)
-    context = architecture(config).context_frames
+    with data_parallel(resolve_device(config.device)) as parallel:
+        return _train(data, out, config, datasets, stats, resume, progress, parallel)
 
-    device = resolve_device(config.device)
+
+def _train(data: Path, out: Path, config: WorldModelTrainConfig, datasets: list[EpisodeDataset], stats: ActionStats,
+           resume: bool, progress: bool, parallel: Parallel) -> Path:
+    """`train_world_model` from the fitted datasets on, in this process of the run."""
+    if parallel.world_size > 1 and config.backend == "flow":
+        raise ValueError("train-wm --backend flow draws its noise per clip and does not train under torchrun yet; "
+                         "run it as one process")
+    dataset = datasets[0]
+    bank, heldout, counts = load_banks(datasets, config.heldout_fraction, progress and parallel.is_main)
+    context = architecture(config).context_frames
+    share, device = parallel.share(config.batch_size), parallel.device
     model = build_model(config if not resume else dataclasses.replace(config, init=None)).to(device)
     config = with_architecture(config, model.config)  # fine-tuning keeps the action range of its weights
+    loss_of = parallel.loss(model, flow_clip_loss if config.backend == "flow" else clip_loss)
     optimizer = torch.optim.AdamW(model.parameters(), lr=config.lr, weight_decay=0.0)
     schedule = torch.optim.lr_scheduler.LambdaLR(optimizer, warmup_cosine(config.warmup_steps, config.steps))
     sampler = torch.Generator().manual_seed(config.seed)
@@ -188,23 +209,28 @@ def train_world_model(data: Path, out: Path, config: WorldModelTrainConfig, resu
     start = resume_training(out, model, optimizer, schedule, sampler) if resume else 0
     if resume:
         logger.info("resumed %s at step %d", out, start)
-    write_run_config(out, resolved)
-    metrics = MetricsLog(out, resume_step=start if resume else None)
-    bar = tqdm(range(start, config.steps), initial=start, total=config.steps, desc="train-wm", disable=not progress)
+    if parallel.is_main:
+        write_run_config(out, resolved)
+    metrics = MetricsLog(out, resume_step=start if resume else None) if parallel.is_main else None
+    bar = tqdm(range(start, config.steps), initial=start, total=config.steps, desc="train-wm",
+               disable=not (progress and parallel.is_main))
     started = time.perf_counter()
     checkpoint = None
     for step in bar:
         model.train()
         future = future_at(step, config)
-        clips = bank.sample(config.batch_size, context, future, sampler)
-        clips = ClipBatch(*(to_device(t, device) for t in (clips.context, clips.actions, clips.future)))
-        if config.backend == "flow":
-            loss, values = flow_clip_loss(model, clips, sampler, config.moving_weight)
-        else:
-            loss, values = clip_loss(model, clips, config.moving_weight)
+        clips = bank.sample(config.batch_size, context, future, sampler)  # the global batch: every process draws it
+        clips = ClipBatch(*(to_device(t[share], device) for t in (clips.context, clips.actions, clips.future)))
+        extra = (sampler,) if config.backend == "flow" else ()
+        loss, values = loss_of(clips, *extra, config.moving_weight)
+        # Equal slices: the mean of the processes' means is the global batch's (with moving_weight,
+        # each process weighs its pixels by its own mean weight, a slight difference).
+        values = parallel.average(values)
         values["train/future"] = future
         values["train/grad_norm"] = gradient_step(loss, model, optimizer, schedule)
         done = step + 1
+        if not parallel.is_main:
+            continue
         if validation is not None and (done % config.validate_every == 0 or done == config.steps):
             values |= validate(model, validation)
         if done % config.log_every == 0 or done == config.steps:
@@ -215,6 +241,7 @@ def train_world_model(data: Path, out: Path, config: WorldModelTrainConfig, resu
             _write_video(model, heldout, out / "videos" / f"step_{done:06d}.mp4", dataset.fps)
         if done % config.checkpoint_every == 0 or done == config.steps:
             checkpoint = save_training(out, done, model, resolved, optimizer, schedule, sampler)
+    parallel.barrier()  # the others return rank 0's last checkpoint once it is written
     return checkpoint or resolve_checkpoint(out)
 
 
@@ -297,7 +324,9 @@ def build_model(config: WorldModelTrainConfig) -> EmbeddedWorldModel | FlowWorld
     if config.init is None:
         return backend(architecture(config))
     checkpoint = resolve_checkpoint(config.init)
-    source = json.loads((checkpoint / "config.json").read_text()).get("model", {})
+    # A field the checkpoint predates (say, the action range) had its default value then.
+    defaults = json.loads(json.dumps(dataclasses.asdict(type(architecture(config))())))
+    source = defaults | json.loads((checkpoint / "config.json").read_text()).get("model", {})
     # The weights were trained on actions normalised by their own range: it comes with them.
     action_range = {name: tuple(source.get(name, ())) for name in ("action_low", "action_high")}
     model = backend(dataclasses.replace(architecture(config), **action_range))
