@@ -19,7 +19,7 @@ policy chooses each chunk from the imagined frames (RL, plans made in imaginatio
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from importlib import import_module
 from pathlib import Path
 from typing import Any, Protocol
@@ -115,6 +115,50 @@ class ActionScale(torch.nn.Module):
     def forward(self, actions: torch.Tensor) -> torch.Tensor:
         """(..., A) actions in the data's units -> the same in [-1, 1]."""
         return (actions - self.centre) / self.half_range if self.scaled else actions
+
+
+class ConfiguredWorldModel(torch.nn.Module):
+    """What every backend built from a frozen config dataclass shares: its sizes and action range
+    read off the config, bfloat16 autocast, and a JSON spec that rebuilds it (`load_world_model`).
+
+    A subclass names its `backend` and `config_class`, sets `self.config` and builds
+    `self.scale_actions` (an `ActionScale` of the config's range).
+    """
+
+    backend: str
+    config_class: type
+    _TUPLES = ("widths", "action_low", "action_high")  # config fields that JSON keeps as lists
+
+    @property
+    def context_frames(self) -> int:
+        return self.config.context_frames
+
+    @property
+    def image_size(self) -> int:
+        return self.config.image_size
+
+    @property
+    def action_dim(self) -> int:
+        return self.config.action_dim
+
+    @property
+    def action_range(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
+        """(low, high) per action dimension: the range the training data's actions spanned (what
+        the imagined env's action space allows), [-1, 1] for models saved before it was recorded."""
+        return self.scale_actions.bounds
+
+    def autocast(self):
+        """bfloat16 autocast on the model's device when the config asks for it (else a no-op context)."""
+        return torch.autocast(next(self.parameters()).device.type, dtype=torch.bfloat16, enabled=self.config.bf16)
+
+    def spec(self) -> dict:
+        """JSON-able description that `from_spec` rebuilds the model from."""
+        return {"backend": self.backend, **asdict(self.config)}
+
+    @classmethod
+    def from_spec(cls, spec: dict):
+        fields = {k: tuple(v) if k in cls._TUPLES else v for k, v in spec.items() if k != "backend"}
+        return cls(cls.config_class(**fields))
 
 
 @dataclass(frozen=True)

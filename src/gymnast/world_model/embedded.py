@@ -35,7 +35,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from gymnast.world_model.base import ActionScale, check_action_range, check_actions, check_context, pad_context
+from gymnast.world_model.base import ActionScale, ConfiguredWorldModel, check_action_range, check_actions, check_context, pad_context
 
 
 @dataclass(frozen=True)
@@ -129,10 +129,11 @@ class ActionBlock(nn.Module):
         return x + self.conv2(F.silu(hidden * (1 + scale) + shift))
 
 
-class EmbeddedWorldModel(nn.Module):
+class EmbeddedWorldModel(ConfiguredWorldModel):
     """See the module docstring; implements `gymnast.world_model.base.WorldModel`."""
 
     backend = "embedded"
+    config_class = EmbeddedWorldModelConfig
 
     def __init__(self, config: EmbeddedWorldModelConfig) -> None:
         super().__init__()
@@ -163,24 +164,6 @@ class EmbeddedWorldModel(nn.Module):
         self.register_buffer("identity_grid", torch.stack([xs, ys], dim=-1)[None], persistent=False)  # (1, H, W, 2)
 
     # The protocol -------------------------------------------------------------------------------
-
-    @property
-    def context_frames(self) -> int:
-        return self.config.context_frames
-
-    @property
-    def image_size(self) -> int:
-        return self.config.image_size
-
-    @property
-    def action_dim(self) -> int:
-        return self.config.action_dim
-
-    @property
-    def action_range(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
-        """(low, high) per action dimension: the range the training data's actions spanned (what
-        the imagined env's action space allows), [-1, 1] for models saved before it was recorded."""
-        return self.scale_actions.bounds
 
     @torch.inference_mode()
     def init_state(self, context: torch.Tensor, generator: torch.Generator | None = None) -> LatentState:
@@ -236,21 +219,3 @@ class EmbeddedWorldModel(nn.Module):
         moved = F.grid_sample(state.background.float(), self.identity_grid + flow.permute(0, 2, 3, 1), mode="bilinear",
                               padding_mode="border", align_corners=True)  # (B, 3, H, W)
         return alpha * rgb + (1 - alpha) * moved.to(rgb.dtype)
-
-    def autocast(self):
-        """bfloat16 autocast on the model's device when the config asks for it (else a no-op context)."""
-        return torch.autocast(next(self.parameters()).device.type, dtype=torch.bfloat16, enabled=self.config.bf16)
-
-    # Saving -------------------------------------------------------------------------------------
-
-    def spec(self) -> dict:
-        """JSON-able description that `from_spec` rebuilds the model from."""
-        return {"backend": self.backend, **dataclasses.asdict(self.config)}
-
-    @classmethod
-    def from_spec(cls, spec: dict) -> EmbeddedWorldModel:
-        fields = {k: v for k, v in spec.items() if k != "backend"}
-        for name in ("widths", "action_low", "action_high"):  # JSON lists back to tuples
-            if name in fields:
-                fields[name] = tuple(fields[name])
-        return cls(EmbeddedWorldModelConfig(**fields))

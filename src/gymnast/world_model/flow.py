@@ -44,7 +44,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from gymnast.world_model.base import ActionScale, check_action_range, check_actions, check_context, pad_context
+from gymnast.world_model.base import ActionScale, ConfiguredWorldModel, check_action_range, check_actions, check_context, pad_context
 from gymnast.world_model.data import ClipBatch
 from gymnast.world_model.embedded import ActionBlock, pixel_shuffle_2x
 from gymnast.world_model.metrics import moving_mask, to_unit_float
@@ -122,10 +122,11 @@ class FlowState:
         return FlowState(self.latents[index], self.skip_fine[index], self.skip_coarse[index])
 
 
-class FlowWorldModel(nn.Module):
+class FlowWorldModel(ConfiguredWorldModel):
     """See the module docstring; implements `gymnast.world_model.base.WorldModel`."""
 
     backend = "flow"
+    config_class = FlowWorldModelConfig
 
     def __init__(self, config: FlowWorldModelConfig) -> None:
         super().__init__()
@@ -154,23 +155,6 @@ class FlowWorldModel(nn.Module):
         self.register_buffer("frequencies", math.pi * 2.0 ** torch.arange(_TIME_FREQUENCIES), persistent=False)
 
     # The protocol -------------------------------------------------------------------------------
-
-    @property
-    def context_frames(self) -> int:
-        return self.config.context_frames
-
-    @property
-    def image_size(self) -> int:
-        return self.config.image_size
-
-    @property
-    def action_dim(self) -> int:
-        return self.config.action_dim
-
-    @property
-    def action_range(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
-        """(low, high) per action dimension: the range the training data's actions spanned."""
-        return self.scale_actions.bounds
 
     @torch.inference_mode()
     def init_state(self, context: torch.Tensor, generator: torch.Generator | None = None) -> FlowState:
@@ -251,24 +235,6 @@ class FlowWorldModel(nn.Module):
                 v = hidden + config.guidance * (shown - hidden)
             x = x + v.float() / config.sample_steps
         return x.clamp(-1, 1)
-
-    def autocast(self):
-        """bfloat16 autocast on the model's device when the config asks for it (else a no-op context)."""
-        return torch.autocast(next(self.parameters()).device.type, dtype=torch.bfloat16, enabled=self.config.bf16)
-
-    # Saving -------------------------------------------------------------------------------------
-
-    def spec(self) -> dict:
-        """JSON-able description that `from_spec` rebuilds the model from."""
-        return {"backend": self.backend, **dataclasses.asdict(self.config)}
-
-    @classmethod
-    def from_spec(cls, spec: dict) -> FlowWorldModel:
-        fields = {k: v for k, v in spec.items() if k != "backend"}
-        for name in ("widths", "action_low", "action_high"):  # JSON lists back to tuples
-            if name in fields:
-                fields[name] = tuple(fields[name])
-        return cls(FlowWorldModelConfig(**fields))
 
 
 def _normal(shape: torch.Size, generator: torch.Generator | None, device: torch.device) -> torch.Tensor:
