@@ -1,4 +1,4 @@
-"""`gymnast dyna --preset debug`: two rounds end to end on tiny models, resumed without redoing a
+"""`gymnast dyna --preset debug`: three rounds end to end on tiny models, resumed without redoing a
 round, with the real interactions counted exactly."""
 
 from __future__ import annotations
@@ -43,28 +43,30 @@ def dyna_run(models, tmp_path_factory) -> Path:
     return out
 
 
-def test_two_rounds_report_real_success_against_counted_real_interactions(dyna_run: Path):
+def test_rounds_report_real_success_against_counted_real_interactions(dyna_run: Path):
     summary = json.loads((dyna_run / "summary.json").read_text())
-    assert [row["round"] for row in summary["rounds"]] == [0, 1, 2]
+    assert [row["round"] for row in summary["rounds"]] == [0, 1, 2, 3]
     spent = 0
     for row in summary["rounds"]:
         assert 0 <= row["ci_low"] <= row["success"] <= row["ci_high"] <= 1 and row["episodes"] == 1
-        if row["round"]:
+        if row["round"] in (1, 2):
             # Exactly the actions of the round's recorded episodes, and nothing measured on the side.
             dataset = EpisodeDataset(dyna_run / f"round_{row['round']}" / "rollouts")
             assert len(dataset) == row["rollout_episodes"] == 1
             spent += sum(len(dataset.load(i).actions) for i in range(len(dataset)))
         assert row["real_interactions"] == spent
     assert summary["dyna_real_interactions"] == spent > 0
+    # Nothing would learn from the last round's rollouts, so none are taken.
+    assert summary["rounds"][-1]["rollout_episodes"] == 0 and not (dyna_run / "round_3" / "rollouts").exists()
     # Each round records new scenes, from data seeds no dataset of the test used.
     scenes = [[info.seed for info in EpisodeDataset(dyna_run / f"round_{k}" / "rollouts").episodes] for k in (1, 2)]
     first = DYNA_PRESETS["debug"].first_rollout_seed
     assert scenes == [[first], [first + 1]]
     curve = summary["real_rl"]["curve"]
-    assert [point["step"] for point in curve] == [0, 2, 4]  # evaluated at every round's boundary
+    assert [point["step"] for point in curve] == [0, 2, 4, 6]  # evaluated at every round's boundary
     assert curve[-1]["real_interactions"] == summary["real_rl_real_interactions"] > 0
     assert (dyna_run / "dyna.png").stat().st_size > 0
-    assert (dyna_run / "dyna.md").read_text().count("| Dyna |") == 3
+    assert (dyna_run / "dyna.md").read_text().count("| Dyna |") == 4
 
 
 def test_each_round_fine_tunes_from_the_last_and_learns_from_every_recorded_rollout(dyna_run: Path, models):
@@ -76,6 +78,9 @@ def test_each_round_fine_tunes_from_the_last_and_learns_from_every_recorded_roll
     assert judge["train"]["extra_data"] == second["extra_data"]
     rl = json.loads((dyna_run / "round_2" / "rl" / "config.json").read_text())["run"]
     assert rl["policy"] == str(dyna_run / "round_1" / "rl") and rl["reward"] == f"judge:{dyna_run / 'round_1' / 'judge'}"
+    last = json.loads((dyna_run / "round_3" / "rl" / "config.json").read_text())["run"]
+    assert last["wm"] == str(dyna_run / "round_2" / "world_model") and last["reward"] == f"judge:{dyna_run / 'round_2' / 'judge'}"
+    assert not (dyna_run / "round_3" / "world_model").exists()  # the last round fine-tunes nothing
 
 
 def test_a_rerun_skips_finished_rounds_and_a_changed_setting_is_refused(dyna_run: Path, models, monkeypatch):
@@ -91,7 +96,7 @@ def test_a_rerun_skips_finished_rounds_and_a_changed_setting_is_refused(dyna_run
     assert after["rounds"] == before["rounds"] and after["real_rl"] == before["real_rl"]
     inputs = DynaInputs(POLICY, models["wm"], models["judge"], models["data"])
     with pytest.raises(ValueError, match="other settings"):
-        run_dyna(dataclasses.replace(DYNA_PRESETS["debug"], rounds=3), inputs, dyna_run, progress=False)
+        run_dyna(dataclasses.replace(DYNA_PRESETS["debug"], rounds=4), inputs, dyna_run, progress=False)
 
 
 def test_bad_inputs_are_refused_before_anything_runs(models, tmp_path):

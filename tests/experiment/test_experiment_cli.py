@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import json
+import shutil
 import time
 from pathlib import Path
 
 import pytest
 
 from gymnast.cli import main
+from gymnast.data.lerobot import EpisodeDataset
 from gymnast.experiment.arms import ARM_NAMES
 
 pytestmark = pytest.mark.slow
@@ -36,9 +38,35 @@ def test_the_summary_has_every_arm_with_its_interval_cost_and_time(experiment: P
         assert row["real_interactions"] >= 0 and row["wall_s"] > 0, name
         report = json.loads((experiment / "eval" / f"{name}.json").read_text())
         assert row["success"] == report["success"] and row["episodes"] == report["episodes"] == 2, name
-    # Only the real-world arm spends real interactions on training.
-    assert summary["arms"]["rl_real"]["real_interactions"] > 0
-    assert all(summary["arms"][name]["real_interactions"] == 0 for name in ARM_NAMES if name != "rl_real")
+    # Only the real-world arm and Dyna's recorded rollouts spend real interactions on training.
+    assert summary["arms"]["rl_real"]["real_interactions"] > 0 and summary["arms"]["dyna"]["real_interactions"] > 0
+    assert all(summary["arms"][name]["real_interactions"] == 0 for name in ARM_NAMES if name not in ("rl_real", "dyna"))
+    assert summary["real_rl_real_interactions"] == summary["arms"]["rl_real"]["real_interactions"]
+
+
+def test_dyna_counts_its_rollouts_and_is_watched_every_round(experiment: Path):
+    summary = json.loads((experiment / "summary.json").read_text())
+    rounds = sorted((experiment / "arms" / "dyna").glob("round_[1-9]"))
+    assert [path.name for path in rounds] == ["round_1", "round_2"]  # debug: 2 steps in 2 rounds
+    assert [(path / "rollouts").exists() for path in rounds] == [True, False]  # only between rounds
+    recorded = sum(EpisodeDataset(rounds[0] / "rollouts").lengths)
+    assert summary["dyna_real_interactions"] == summary["arms"]["dyna"]["real_interactions"] == recorded
+    # The arm's policy is its last round's; the learning curve has the start and every round's end.
+    assert json.loads((experiment / "stages" / "arm_dyna.json").read_text())["path"] == str(rounds[-1] / "rl")
+    assert [point["step"] for point in summary["curves"]["dyna"]] == [0, 1, 2]
+    assert [row["step"] for row in summary["watch"]["dyna"]] == [1, 2]
+    assert set(summary["watch_false_success"]) == {"rl_wm_judge", "rl_wm_verified", "dyna"}
+    weak = summary["weak_tasks"]
+    assert weak["tasks"] == ["reach-v3"] and set(weak["arms"]) == set(ARM_NAMES)
+    assert weak["arms"]["dyna"]["success"] == summary["arms"]["dyna"]["per_task"]["reach-v3"]["success"]
+    assert set(summary["goals"]) >= {"wm_rl_2x_sft_on_weak_tasks", "dyna_reaches_real_rl_with_10pct",
+                                     "watch_false_success_at_most_10pct"}
+    # One table and one plot: Dyna's real success against its real interactions, beside real-world RL's.
+    assert [row["round"] for row in summary["dyna"]["rounds"]] == [0, 1, 2]
+    assert summary["dyna"]["real_rl"]["curve"][-1]["real_interactions"] == summary["real_rl_real_interactions"]
+    report = (experiment / "report.md").read_text()
+    assert "## Dyna against RL in the real world" in report and "](plots/dyna.png)" in report
+    assert (experiment / "plots" / "dyna.png").read_bytes()[:4] == b"\x89PNG"
 
 
 def test_robustness_language_and_worldgym_are_measured(experiment: Path):
@@ -86,6 +114,24 @@ def test_a_rerun_skips_every_finished_stage_and_prints_the_table(experiment: Pat
     assert {path.name: path.read_text() for path in (experiment / "stages").glob("*.json")} == records
     out = capsys.readouterr().out
     assert "RL in the real world" in out and "WorldGym Pearson r" in out
+
+
+def test_an_experiment_from_before_an_arm_existed_trains_only_that_arm(experiment: Path, tmp_path: Path):
+    older = tmp_path / "older"
+    shutil.copytree(experiment, older)
+    for stage in ("arm_dyna", "eval_dyna"):  # as if Dyna had not been an arm yet
+        (older / "stages" / f"{stage}.json").unlink()
+    shutil.rmtree(older / "arms" / "dyna")
+    settings = json.loads((older / "config.json").read_text())
+    del settings["dyna"], settings["weak_tasks"]
+    (older / "config.json").write_text(json.dumps(settings))
+    records = {path.name: path.read_text() for path in (older / "stages").glob("*.json")}
+    main(["experiment", "--preset", "debug", "--out", str(older), "--workers", "1", "--sentences",
+          str(experiment.parent / "sentences.txt")])
+    now = {path.name: path.read_text() for path in (older / "stages").glob("*.json")}
+    assert set(now) - set(records) == {"arm_dyna.json", "eval_dyna.json"}
+    assert {name: now[name] for name in records} == records
+    assert "dyna" in json.loads((older / "summary.json").read_text())["arms"]
 
 
 def test_resume_continues_with_the_saved_settings_whatever_the_preset(experiment: Path, capsys):

@@ -37,8 +37,34 @@ class IterSFTConfig:
 
 
 @dataclass(frozen=True)
+class DynaArmConfig:
+    """The Dyna arm: the RL arms' step budget split into rounds; between rounds, a few real rollouts
+    of the current policy, on which the world model and the judge are fine-tuned."""
+
+    rounds: int = 2
+    """Rounds of imagined RL; each takes ``rl.steps / rounds`` of the shared steps, and only the
+    rounds before the last record real rollouts."""
+    rollouts_per_task: int = 8
+    """Real episodes of the current policy recorded per task after each round: the arm's only
+    real interactions for training, counted."""
+    wm_steps: int = 300
+    """Fine-tuning steps of the world model per round."""
+    judge_steps: int = 200
+    """Fine-tuning steps of the judge per round."""
+
+    def __post_init__(self) -> None:
+        for name in ("rounds", "rollouts_per_task", "wm_steps", "judge_steps"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"DynaArmConfig.{name} must be at least 1, got {getattr(self, name)}")
+
+
+WEAK_TASKS = "reach-v3,push-v3,pick-place-v3,peg-insert-side-v3"
+"""MT10's tasks where the SFT policy is weakest (10-24% real success, results/sft/)."""
+
+
+@dataclass(frozen=True)
 class ExperimentConfig:
-    """The whole pipeline: data, models, the six arms and how they are measured."""
+    """The whole pipeline: data, models, the seven arms and how they are measured."""
 
     tasks: str = "mt10"
     """Tasks of every stage (names or sets, comma-separated)."""
@@ -56,6 +82,11 @@ class ExperimentConfig:
     (``eval_episodes`` per task at each of them)."""
     iter_sft: IterSFTConfig = field(default_factory=IterSFTConfig)
     """The Iter-SFT arm."""
+    dyna: DynaArmConfig = field(default_factory=DynaArmConfig)
+    """The Dyna arm (its RL settings are the shared `rl`)."""
+    weak_tasks: str = WEAK_TASKS
+    """Tasks whose pooled success summary.json reports per arm (``weak_tasks``), the ones RL should
+    help most; those of them not in `tasks` are left out."""
     gap: str = "mild"
     """The software simulator's sim-to-real gap."""
     eval_episodes: int = 50
@@ -96,6 +127,11 @@ class ExperimentConfig:
         if not all(0 < noise < math.inf for noise in self.worldgym_noise):
             raise ValueError(f"ExperimentConfig.worldgym_noise must be finite and positive (noise 0 is the SFT arm, "
                              f"random actions are worldgym_random), got {self.worldgym_noise}")
+        if self.weak_tasks:
+            resolve_tasks(self.weak_tasks)  # an unknown name is said now
+        if self.rl.steps % self.dyna.rounds:
+            raise ValueError(f"ExperimentConfig.dyna.rounds ({self.dyna.rounds}) must divide rl.steps "
+                             f"({self.rl.steps}): Dyna spends the RL arms' step budget in equal rounds")
         parse_runner(self.runner)
 
     def resolved(self) -> ExperimentConfig:
@@ -121,6 +157,7 @@ def _debug() -> ExperimentConfig:
         judge=JUDGE_PRESETS["debug"],
         rl=rl,
         iter_sft=IterSFTConfig(group_size=2, steps=2),
+        dyna=DynaArmConfig(rounds=2, rollouts_per_task=1, wm_steps=2, judge_steps=2),
         eval_episodes=2,
         robustness_episodes=1,
         worldgym_episodes=1,
@@ -140,6 +177,7 @@ def _demo() -> ExperimentConfig:
         rl=RLConfig(steps=2, starts_per_step=4, group_size=4, lr=3e-5, eval_every=2, eval_episodes=4,
                     watch_every=2, watch_rollouts=8, video_every=2, checkpoint_every=2),
         iter_sft=IterSFTConfig(group_size=2, steps=100),
+        dyna=DynaArmConfig(rounds=2, rollouts_per_task=2, wm_steps=20, judge_steps=20),
         eval_episodes=10,
         robustness_episodes=4,
         worldgym_episodes=4,
@@ -158,6 +196,7 @@ def _gpu() -> ExperimentConfig:
         world_model=WM_PRESETS["gpu"],
         judge=JUDGE_PRESETS["gpu"],
         rl=dataclasses.replace(RL_PRESETS["gpu"], eval_episodes=10),
+        dyna=DynaArmConfig(rounds=4, rollouts_per_task=16, wm_steps=1000, judge_steps=500),
         workers=16,
     )
 

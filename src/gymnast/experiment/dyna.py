@@ -6,7 +6,8 @@ Each round k (1..rounds), from the policy, world model and judge that round k-1 
    (`gymnast.rl.train.train_rl`), from the original dataset's scenes.
 2. Real rollouts: `rollouts_per_task` episodes per task of the new policy in the real world
    (`gymnast.eval.record.record_policy`), from data seeds only. These are the only real
-   interactions Dyna spends on training, and they are counted from the recorded dataset.
+   interactions Dyna spends on training, and they are counted from the recorded dataset. The
+   last round takes none (and skips step 3): nothing after it would learn from them.
 3. Fine-tuning: the world model and the judge each continue from their last weights on their own
    original data plus every round's recorded rollouts (``init`` and ``extra_data`` of
    `train_world_model` and `train_judge`). The rollouts carry Meta-World's per-step success flags,
@@ -98,7 +99,7 @@ def _imagined_rl(**changes) -> RLConfig:
 
 
 DYNA_PRESETS: dict[str, DynaConfig] = {
-    "debug": DynaConfig(rounds=2, rollouts_per_task=1, wm_steps=2, judge_steps=2, eval_episodes=1, workers=1,
+    "debug": DynaConfig(rounds=3, rollouts_per_task=1, wm_steps=2, judge_steps=2, eval_episodes=1, workers=1,
                         rl=dataclasses.replace(RL_PRESETS["debug"], real_eval=False, eval_every=0, watch_every=0,
                                                tensorboard=False)),
     # Minutes on 2 cores: one refill-free round of 32 rollouts per step.
@@ -166,7 +167,7 @@ def run_dyna(config: DynaConfig, inputs: DynaInputs, out: Path, progress: bool =
         rounds.append(row)
         logger.info("dyna round %d: real success %.1f%% [%.1f, %.1f]; its rollouts took %d real actions", k,
                     100 * row["success"], 100 * row["ci_low"], 100 * row["ci_high"],
-                    row["rollouts"]["real_interactions"])
+                    row.get("rollouts", {}).get("real_interactions", 0))
     real_rl = stages.run("real_rl", lambda: run_real_rl(config, inputs, out / "real_rl", progress),
                          out / "real_rl") if config.real_rl else None
     summary = summarise(config, rounds, real_rl)
@@ -189,15 +190,18 @@ def run_round(k: int, config: DynaConfig, inputs: DynaInputs, policy: Path, wm: 
     spec = RLRun(str(policy), IMAGINED, RewardSpec.judge(str(judge)), wm=str(wm), data=_str(inputs.data))
     trained = stages.run("rl", lambda: _rl_record(train_rl(spec, rl_run, config.rl, resume=_started(rl_run),
                                                            progress=progress)), rl_run)
-    collected = stages.run("rollouts", lambda: record_rollouts(k, rl_run, judge, config, rollouts, progress), rollouts)
-    recorded.append(rollouts)
-    stages.run("world_model", lambda: fine_tune_world_model(inputs.wm, wm, recorded, config, new_wm, progress), new_wm)
-    judged = stages.run("judge", lambda: fine_tune_judge(inputs.judge, judge, new_wm, recorded, config, new_judge,
-                                                         progress), new_judge)
+    row = {"round": k, "rl_steps": k * config.rl.steps, "rl": trained}
+    if k < config.rounds:  # the last round's rollouts could no longer change the policy: none are taken
+        row["rollouts"] = stages.run("rollouts", lambda: record_rollouts(k, rl_run, judge, config, rollouts, progress),
+                                     rollouts)
+        recorded.append(rollouts)
+        stages.run("world_model", lambda: fine_tune_world_model(inputs.wm, wm, recorded, config, new_wm, progress),
+                   new_wm)
+        row["judge"] = stages.run("judge", lambda: fine_tune_judge(inputs.judge, judge, new_wm, recorded, config,
+                                                                   new_judge, progress), new_judge)
+        wm, judge = new_wm, new_judge
     evaluated = stages.run("eval", lambda: _evaluate(rl_run, config, here / "eval.json"))
-    row = {**evaluated, "round": k, "rl_steps": k * config.rl.steps, "rollouts": collected, "judge": judged,
-           "rl": trained}
-    return rl_run, new_wm, new_judge, row
+    return rl_run, wm, judge, {**evaluated, **row}
 
 
 def record_rollouts(k: int, policy: Path, judge: Path, config: DynaConfig, out: Path, progress: bool) -> dict:
@@ -260,17 +264,23 @@ def run_real_rl(config: DynaConfig, inputs: DynaInputs, out: Path, progress: boo
     from gymnast.reward.spec import RewardSpec
     from gymnast.rl.config import RLRun
     from gymnast.rl.train import train_rl
-    from gymnast.utils.metrics import read_metrics
 
     spec = RLRun(str(inputs.policy), REAL, RewardSpec.parse(config.real_reward), data=_str(inputs.data))
     summary = train_rl(spec, out, config.real_rl_config, resume=_started(out), progress=progress)
-    spent = {row["step"]: row["rollout/real_interactions"] for row in read_metrics(out)
-             if "rollout/real_interactions" in row}
-    points = [{"step": point["step"], "success": point["eval/own_success"], "ci_low": point["eval/own_ci_low"],
-               "ci_high": point["eval/own_ci_high"], "episodes": point["eval/own_episodes"],
-               "real_interactions": spent.get(point["step"], 0)} for point in summary["curve"]]
-    return {"curve": points, "real_interactions": summary["real_interactions"],
+    return {"curve": real_rl_curve(out, summary["curve"]), "real_interactions": summary["real_interactions"],
             "eval_real_interactions": summary["eval_real_interactions"], "wall_s": summary["wall_s"]}
+
+
+def real_rl_curve(run: Path, curve: list[dict]) -> list[dict]:
+    """A real-world RL run's learning curve (its summary's ``curve``) as Dyna's rows: real success
+    with its interval and the real interactions spent on training by then (from its metrics)."""
+    from gymnast.utils.metrics import read_metrics
+
+    spent = {row["step"]: row["rollout/real_interactions"] for row in read_metrics(run)
+             if "rollout/real_interactions" in row}
+    return [{"step": point["step"], "success": point["eval/own_success"], "ci_low": point["eval/own_ci_low"],
+             "ci_high": point["eval/own_ci_high"], "episodes": point["eval/own_episodes"],
+             "real_interactions": spent.get(point["step"], 0)} for point in curve]
 
 
 def summarise(config: DynaConfig, rounds: list[dict], real_rl: dict | None) -> dict:

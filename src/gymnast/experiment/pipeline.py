@@ -8,7 +8,7 @@ Stages, in order, each done once (`gymnast.experiment.stages`; a rerun skips fin
    real and re-imagined episodes) and the world model's fidelity on held-out episodes.
    ``imagination``: the SFT policy's judged imagined rollouts against the same actions replayed
    in the real world (`gymnast.experiment.imagination`).
-4. ``arm_<name>``: Iter-SFT and the four RL arms (`gymnast.experiment.arms`).
+4. ``arm_<name>``: Iter-SFT, the four RL arms and Dyna (`gymnast.experiment.arms`).
 5. ``eval_<name>``: every arm in the real world, ``eval_episodes`` per task from the evaluation
    seeds, Wilson intervals; then the SFT and world-model-RL policies under minor and major
    perturbations and with held-out instruction paraphrases.
@@ -24,7 +24,7 @@ from pathlib import Path
 
 from gymnast.config import EnvConfig
 from gymnast.data.lerobot import EpisodeDataset
-from gymnast.experiment.arms import ARMS, PERTURBATIONS, ROBUSTNESS_ARMS, arm, rl_setup
+from gymnast.experiment.arms import ARMS, PERTURBATIONS, ROBUSTNESS_ARMS, arm, dyna_setup, rl_setup
 from gymnast.experiment.config import ExperimentConfig
 from gymnast.experiment.stages import Stages
 from gymnast.utils.atomic import write_json
@@ -130,7 +130,8 @@ def _has_checkpoint(run: Path) -> bool:
 
 def _train_arm(stages: Stages, name: str, config: ExperimentConfig, out: Path, sft: Path, wm: Path, judge: Path,
                data: Path, progress: bool) -> Path:
-    """Trains one arm (Iter-SFT or an RL arm) in ``out/arms/<name>``; returns its run directory."""
+    """Trains one arm (Iter-SFT, an RL arm or Dyna) in ``out/arms/<name>``; returns the directory of
+    its final policy (Dyna's: its last round's RL run)."""
     from gymnast.experiment.iter_sft import train_iter_sft
     from gymnast.rl.train import train_rl
 
@@ -138,6 +139,8 @@ def _train_arm(stages: Stages, name: str, config: ExperimentConfig, out: Path, s
     spec = arm(name)
 
     def work() -> dict:
+        if spec.dyna:
+            return _dyna_arm(config, sft, wm, judge, data, target, progress)
         if not spec.is_rl:
             return {"imagined": train_iter_sft(sft, wm, judge, data, target, config, progress), "real_interactions": 0}
         run, rl = rl_setup(spec, config, sft, wm, judge, data)
@@ -145,8 +148,22 @@ def _train_arm(stages: Stages, name: str, config: ExperimentConfig, out: Path, s
         summary.pop("curve")
         return summary
 
-    stages.run(f"arm_{name}", work, target)
+    final = target / f"round_{config.dyna.rounds}" / "rl" if spec.dyna else target
+    stages.run(f"arm_{name}", work, final)
     return stages.path(f"arm_{name}")
+
+
+def _dyna_arm(config: ExperimentConfig, sft: Path, wm: Path, judge: Path, data: Path, target: Path,
+              progress: bool) -> dict:
+    """`gymnast dyna` in ``target``; its record counts the real interactions as the RL arms' do:
+    the recorded rollouts train, the per-round evaluations and the watch only measure."""
+    from gymnast.experiment.dyna import run_dyna
+
+    settings, inputs = dyna_setup(config, sft, wm, judge, data)
+    summary = run_dyna(settings, inputs, target, progress)
+    last = summary["rounds"][-1]
+    return {"run": str(target), "steps": config.rl.steps, "real_interactions": summary["dyna_real_interactions"],
+            "eval_real_interactions": last["measurement_real_interactions"], "wall_s": summary["wall_s"]}
 
 
 def _evaluate(stages: Stages, stage: str, policy: Path, config: ExperimentConfig, out: Path, episodes: int,
@@ -196,15 +213,35 @@ def _worldgym(stages: Stages, config: ExperimentConfig, out: Path, policies: dic
 
 def _save_settings(out: Path, config: ExperimentConfig) -> None:
     """DIR/config.json: the resolved settings. A rerun with other settings would mix two
-    experiments in one table, so it is refused."""
+    experiments in one table, so it is refused. Settings an older version did not have yet (a new
+    arm's) are taken from this run's, so an experiment started before an upgrade continues,
+    running only what it lacks."""
     import json
 
-    settings = json.loads(json.dumps(dataclasses.asdict(config), default=str))  # paths as strings
+    def as_json(settings: ExperimentConfig) -> dict:
+        return json.loads(json.dumps(dataclasses.asdict(settings), default=str))  # paths as strings
+
     path = out / "config.json"
-    if path.exists() and json.loads(path.read_text()) != settings:
-        raise ValueError(f"{out} holds an experiment with other settings ({path}); use a new --out, the same "
-                         f"preset or --resume")
-    write_json(path, settings)
+    if path.exists():
+        try:
+            saved = as_json(from_json(ExperimentConfig, _filled(json.loads(path.read_text()), as_json(config))))
+        except (TypeError, ValueError) as error:
+            raise ValueError(f"{path}: not an experiment's settings this version can read ({error})") from error
+        if saved != as_json(config):
+            raise ValueError(f"{out} holds an experiment with other settings ({path}); use a new --out, the same "
+                             f"preset or --resume")
+    write_json(path, as_json(config))
+
+
+def _filled(saved: dict, current: dict) -> dict:
+    """`saved` with the settings it lacks (at any depth) taken from `current`."""
+    filled = dict(saved)
+    for key, value in current.items():
+        if key not in saved:
+            filled[key] = value
+        elif isinstance(value, dict) and isinstance(saved[key], dict):
+            filled[key] = _filled(saved[key], value)
+    return filled
 
 
 def saved_experiment_config(out: Path) -> ExperimentConfig:

@@ -10,7 +10,7 @@ import json
 import logging
 from pathlib import Path
 
-from gymnast.experiment.arms import ARMS, PERTURBATIONS, ROBUSTNESS_ARMS, WM_ARMS
+from gymnast.experiment.arms import ARMS, PERTURBATIONS, ROBUSTNESS_ARMS, WM_ARMS, arm
 from gymnast.experiment.config import ExperimentConfig
 from gymnast.experiment.stages import Stages
 from gymnast.utils.atomic import write_bytes, write_json
@@ -21,6 +21,10 @@ GOAL_OVER_SFT = 2.0
 """World-Gymnast's claim we test: world-model RL at least doubles SFT's real success."""
 GOAL_WORLDGYM_R = 0.9
 """The WorldGym correlation we aim for (World-Gymnast reports 0.78)."""
+GOAL_WATCH_FALSE_SUCCESS = 0.1
+"""At most this share of a world-model arm's judged successes may fail when replayed for real."""
+GOAL_DYNA_SHARE = 0.1
+"""Dyna should match RL in the real world with at most this share of its real interactions."""
 
 
 def _ratio(top: float | None, bottom: float | None) -> float | None:
@@ -52,10 +56,14 @@ def _logged_wall_s(run: Path) -> float | None:
 
 def _curves(stages: Stages) -> dict[str, list[dict]]:
     """Real success at each learning-curve evaluation of every RL arm, with the imagined
-    (judged) success beside it for the world-model arms."""
+    (judged) success beside it for the world-model arms; Dyna's at the end of each round."""
     curves = {}
     for spec in ARMS:
-        if not spec.is_rl:
+        if not spec.is_rl or not stages.done(f"arm_{spec.name}"):
+            continue
+        if spec.dyna:
+            curves[spec.name] = [{"step": row["rl_steps"], "real": row["success"], "real_ci": [row["ci_low"], row["ci_high"]],
+                                  "own": None} for row in _dyna_summary(stages)["rounds"]]
             continue
         summary = json.loads((stages.path(f"arm_{spec.name}") / "summary.json").read_text())
         where = "own" if spec.env.real_interactions else "real"
@@ -65,25 +73,79 @@ def _curves(stages: Stages) -> dict[str, list[dict]]:
     return curves
 
 
+def _dyna_summary(stages: Stages) -> dict:
+    return json.loads((Path(stages.record("arm_dyna")["run"]) / "summary.json").read_text())
+
+
 def _watch(stages: Stages) -> dict[str, list[dict]]:
-    """The reward-hacking watch of each world-model arm: imagined verdicts replayed in the real world."""
+    """The reward-hacking watch of each world-model arm: imagined verdicts replayed in the real
+    world, by step (Dyna's steps counted over its rounds)."""
     watch = {}
     for name in WM_ARMS:
-        rows = []
-        for line in (stages.path(f"arm_{name}") / "metrics.jsonl").read_text().splitlines():
-            values = json.loads(line)
-            if "eval/watch_real_success" in values:
-                rows.append({"step": values["step"], **{key.removeprefix("eval/watch_"): value for key, value in values.items()
-                                                        if key.startswith("eval/watch_") and "interactions" not in key}})
-        watch[name] = rows
+        if not stages.done(f"arm_{name}"):
+            continue
+        if arm(name).dyna:
+            summary = _dyna_summary(stages)
+            steps = summary["settings"]["rl"]["steps"]
+            runs = [(Path(stages.record("arm_dyna")["run"]) / f"round_{row['round']}" / "rl", (row["round"] - 1) * steps)
+                    for row in summary["rounds"] if row["round"]]
+        else:
+            runs = [(stages.path(f"arm_{name}"), 0)]
+        watch[name] = [row for run, offset in runs for row in _watch_rows(run, offset)]
     return watch
+
+
+def _watch_rows(run: Path, offset: int) -> list[dict]:
+    rows = []
+    for line in (run / "metrics.jsonl").read_text().splitlines():
+        values = json.loads(line)
+        if "eval/watch_real_success" in values:
+            rows.append({"step": values["step"] + offset,
+                         **{key.removeprefix("eval/watch_"): value for key, value in values.items()
+                            if key.startswith("eval/watch_") and "interactions" not in key}})
+    return rows
+
+
+def _dyna_against_real_rl(stages: Stages, config: ExperimentConfig) -> dict | None:
+    """Dyna's rounds beside the real-world RL arm's learning curve, both with the real interactions
+    spent on training by then (the shape `gymnast dyna` reports in, for its table and plot)."""
+    from gymnast.experiment.dyna import real_rl_curve
+
+    if not stages.done("arm_dyna"):
+        return None
+    dyna = _dyna_summary(stages)
+    real = stages.path("arm_rl_real")
+    curve = real_rl_curve(real, json.loads((real / "summary.json").read_text())["curve"])
+    keep = ("round", "rl_steps", "success", "ci_low", "ci_high", "episodes", "rollout_episodes", "rollout_successes",
+            "judge_fpr_on_rollouts", "judge_heldout_real_fpr", "real_interactions", "measurement_real_interactions")
+    return {"tasks": config.tasks, "eval_episodes_per_task": config.rl.eval_episodes,
+            "rounds": [{key: row.get(key) for key in keep} for row in dyna["rounds"]], "real_rl": {"curve": curve}}
+
+
+def _weak_tasks(arms: dict[str, dict], config: ExperimentConfig) -> dict | None:
+    """Each arm's success pooled over the weak tasks this experiment has, with a Wilson interval
+    (every task has the same number of evaluation episodes)."""
+    from gymnast.envs.tasks import resolve_tasks
+    from gymnast.eval.stats import wilson_interval
+
+    tasks = [task for task in resolve_tasks(config.weak_tasks) if task in arms["sft"]["per_task"]] if config.weak_tasks else []
+    if not tasks:
+        return None
+    episodes = config.eval_episodes * len(tasks)
+    pooled = {}
+    for name, row in arms.items():
+        successes = round(sum(row["per_task"][task]["success"] for task in tasks) * config.eval_episodes)
+        low, high = wilson_interval(successes, episodes)
+        pooled[name] = {"success": successes / episodes, "ci_low": low, "ci_high": high, "episodes": episodes}
+    return {"tasks": tasks, "arms": pooled}
 
 
 def build_summary(stages: Stages, config: ExperimentConfig) -> dict:
     """summary.json's content, from the finished stages."""
     from gymnast.data.lerobot import EpisodeDataset
 
-    arms = {spec.name: _arm_row(stages, spec.name, spec.title) for spec in ARMS}
+    # An experiment older than an arm (Dyna) reports without it until a rerun has trained it.
+    arms = {spec.name: _arm_row(stages, spec.name, spec.title) for spec in ARMS if stages.done(f"eval_{spec.name}")}
     success = {name: row["success"] for name, row in arms.items()}
     worldgym = stages.record("worldgym")
     judge = stages.record("judge")
@@ -109,7 +171,12 @@ def build_summary(stages: Stages, config: ExperimentConfig) -> dict:
         "language": language,
         "language_sentences": str(config.sentences) if config.sentences is not None else None,
         "curves": _curves(stages),
-        "watch": _watch(stages),
+        "watch": (watch := _watch(stages)),
+        "watch_false_success": {name: rows[-1].get("false_success") if rows else None for name, rows in watch.items()},
+        "weak_tasks": (weak := _weak_tasks(arms, config)),
+        "dyna_real_interactions": arms["dyna"]["real_interactions"] if "dyna" in arms else None,
+        "real_rl_real_interactions": arms["rl_real"]["real_interactions"],
+        "dyna": _dyna_against_real_rl(stages, config),
         "judge": {k: v for k, v in (judge_metrics or {}).items() if k.startswith(("real_", "imagined_"))},
         "world_model": _without_bookkeeping(stages.record("world_model_eval")) if stages.done("world_model_eval") else None,
         "imagination_agreement": imagination["agreement"] if imagination else None,
@@ -121,14 +188,32 @@ def build_summary(stages: Stages, config: ExperimentConfig) -> dict:
         "stage_wall_s": {path.stem: json.loads(path.read_text()).get("wall_s")
                          for path in sorted((stages.out / "stages").glob("*.json"))},
     }
-    best_wm = max(success[name] for name in WM_ARMS)
+    best_wm = max(success[name] for name in WM_ARMS if name in success)
     summary["goals"] = {
         "wm_rl_at_least_2x_sft": summary["wm_rl_over_sft"] is not None and summary["wm_rl_over_sft"] >= GOAL_OVER_SFT,
         "wm_rl_beats_sim_rl": success["rl_wm_judge"] > success["rl_sim"],
         "any_wm_arm_beats_sft": best_wm > success["sft"],
         "worldgym_r_at_least_0.9": worldgym["pearson"] is not None and worldgym["pearson"] >= GOAL_WORLDGYM_R,
+        "wm_rl_2x_sft_on_weak_tasks": _doubles_separately(weak["arms"]["rl_wm_judge"], weak["arms"]["sft"]) if weak else None,
+        "dyna_reaches_real_rl_with_10pct": _dyna_goal(arms),
+        "watch_false_success_at_most_10pct": {name: value is not None and value <= GOAL_WATCH_FALSE_SUCCESS
+                                              for name, value in summary["watch_false_success"].items()},
     }
     return summary
+
+
+def _doubles_separately(arm_row: dict, sft: dict) -> bool:
+    """At least twice SFT's success, with 95% intervals that do not overlap."""
+    return arm_row["success"] >= GOAL_OVER_SFT * sft["success"] and arm_row["ci_low"] > sft["ci_high"]
+
+
+def _dyna_goal(arms: dict[str, dict]) -> bool | None:
+    """Dyna's final real success at least RL in the real world's, with at most 10% of its real
+    interactions for training."""
+    if "dyna" not in arms:
+        return None
+    dyna, real = arms["dyna"], arms["rl_real"]
+    return dyna["success"] >= real["success"] and dyna["real_interactions"] <= GOAL_DYNA_SHARE * real["real_interactions"]
 
 
 def _without_bookkeeping(record: dict) -> dict:
@@ -153,6 +238,10 @@ def write_report(out: Path, stages: Stages, config: ExperimentConfig) -> dict:
     plots = {"per_task": plot_per_task(summary, out / "plots" / "per_task.png"),
              "curves": plot_curves(summary, out / "plots" / "learning_curves.png"),
              "worldgym": plot_worldgym(summary, out / "plots" / "worldgym.png")}
+    if summary["dyna"]:
+        from gymnast.experiment.dyna_report import plot_dyna
+
+        plots["dyna"] = plot_dyna(summary["dyna"], out / "plots" / "dyna.png")
     markdown = report_markdown(summary, {name: path.relative_to(out).as_posix() for name, path in plots.items()})
     write_bytes(out / "report.md", markdown.encode())
     logger.info("report: %s", out / "report.md")

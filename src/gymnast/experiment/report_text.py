@@ -49,7 +49,42 @@ def _verdict(summary: dict) -> list[str]:
          f"reached {_pct(arms['rl_real']['success'])} ({_significance(arms['rl_real'], sft)} with SFT)."),
         (f"- WorldGym: Pearson r = {_num(summary['worldgym_pearson'])}, Spearman = {_num(summary['worldgym_spearman'])} over "
          f"{len(summary['worldgym'])} policies. Goal r >= 0.9: **{met[goals['worldgym_r_at_least_0.9']]}**."),
+        *_weak_tasks_verdict(summary), *_dyna_verdict(summary), *_watch_verdict(summary),
     ]
+
+
+def _weak_tasks_verdict(summary: dict) -> list[str]:
+    weak = summary.get("weak_tasks")  # None in experiments from before the field, or without weak tasks
+    if not weak:
+        return []
+    pooled, met = weak["arms"], {True: "met", False: "not met"}
+    rows = ", ".join(f"{summary['arms'][name]['title'].split(' (')[0]} {_pct(row['success'])}" for name, row in pooled.items())
+    return [(f"- On the weak tasks ({', '.join(task.removesuffix('-v3') for task in weak['tasks'])}; "
+             f"{pooled['sft']['episodes']} episodes per arm): {rows}. World-model RL (judge) at least 2x SFT with separate "
+             f"intervals: **{met[summary['goals']['wm_rl_2x_sft_on_weak_tasks']]}**.")]
+
+
+def _dyna_verdict(summary: dict) -> list[str]:
+    arms = summary["arms"]
+    if "dyna" not in arms:
+        return []
+    dyna, real = arms["dyna"], arms["rl_real"]
+    share = dyna["real_interactions"] / real["real_interactions"] if real["real_interactions"] else None
+    met = {True: "met", False: "not met"}
+    return [(f"- Dyna reached {_pct(dyna['success'])} with {dyna['real_interactions']:,} real interactions for training "
+             f"({_pct(share)} of RL in the real world's {real['real_interactions']:,}, which reached {_pct(real['success'])}; "
+             f"{_significance(dyna, real)}). Goal of matching it with at most 10% of its interactions: "
+             f"**{met[summary['goals']['dyna_reaches_real_rl_with_10pct']]}**.")]
+
+
+def _watch_verdict(summary: dict) -> list[str]:
+    judged = {name: value for name, value in summary.get("watch_false_success", {}).items() if value is not None}
+    if not judged:
+        return []
+    rows = ", ".join(f"{summary['arms'][name]['title'].split(' (')[0]} {_pct(value)}" for name, value in judged.items())
+    held = all(summary["goals"]["watch_false_success_at_most_10pct"][name] for name in judged)
+    return [(f"- Reward-hacking watch at the end of training, judged successes that failed when replayed for real: {rows}. "
+             f"Goal of at most 10%: **{'met' if held else 'not met'}**.")]
 
 
 def _significance(a: dict, b: dict) -> str:
@@ -162,6 +197,21 @@ def _evidence(summary: dict) -> list[str]:
     return lines
 
 
+def _dyna_section(summary: dict, plots: dict[str, str]) -> list[str]:
+    """Dyna's rounds beside RL in the real world: real success against real interactions spent."""
+    from gymnast.experiment.dyna_report import dyna_table
+
+    dyna = summary.get("dyna")  # None in experiments without the Dyna arm
+    if not dyna:
+        return []
+    lines = ["## Dyna against RL in the real world", "", dyna_table(dyna), ""]
+    fprs = [row["judge_fpr_on_rollouts"] for row in dyna["rounds"] if row.get("judge_fpr_on_rollouts") is not None]
+    if fprs:
+        lines += [(f"Before fine-tuning on them, the judge passed {', '.join(_pct(v) for v in fprs)} of the failures among "
+                   "the real rollouts recorded between rounds (its false-positive rate on whole failures)."), ""]
+    return [*lines, f"![Dyna against RL in the real world]({plots['dyna']})", ""]
+
+
 def report_markdown(summary: dict, plots: dict[str, str]) -> str:
     """The report, from summary.json's content and the plots' paths (relative to the report)."""
     dataset = summary["dataset"]
@@ -178,6 +228,7 @@ def report_markdown(summary: dict, plots: dict[str, str]) -> str:
         f"![per-task success]({plots['per_task']})", "",
         f"![learning curves]({plots['curves']})", "",
         "## Per task", "", *_per_task_table(summary), "",
+        *_dyna_section(summary, plots),
         "## Robustness and language", "", *_robustness_tables(summary), "",
         "## WorldGym: does the world model rank policies like the real world?", "", *_worldgym_table(summary), "",
         f"![WorldGym]({plots['worldgym']})", "",
