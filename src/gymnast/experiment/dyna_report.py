@@ -6,7 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from gymnast.experiment.plots import _figure, _save
-from gymnast.experiment.report_text import _ci, _pct
+from gymnast.experiment.formatting import ci, pct
 from gymnast.utils.atomic import atomic_path, write_json
 
 
@@ -29,10 +29,10 @@ def dyna_table(summary: dict) -> str:
              "| arm | round | RL steps | real success | 95% CI | real interactions (training) | "
              "real interactions (measurement) |", "|---|---|---|---|---|---|---|"]
     for row in summary["rounds"]:
-        lines.append(f"| Dyna | {row['round']} | {row['rl_steps']} | {_pct(row['success'])} | {_ci(row)} | "
+        lines.append(f"| Dyna | {row['round']} | {row['rl_steps']} | {pct(row['success'])} | {ci(row)} | "
                      f"{row['real_interactions']:,} | {row['measurement_real_interactions']:,} |")
     for point in (summary["real_rl"] or {}).get("curve", []):
-        lines.append(f"| RL in the real world | - | {point['step']} | {_pct(point['success'])} | {_ci(point)} | "
+        lines.append(f"| RL in the real world | - | {point['step']} | {pct(point['success'])} | {ci(point)} | "
                      f"{point['real_interactions']:,} | - |")
     return "\n".join(lines)
 

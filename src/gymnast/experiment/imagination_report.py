@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from gymnast.experiment.formatting import pct
 from gymnast.utils.atomic import write_bytes, write_json
 
 logger = logging.getLogger(__name__)
@@ -67,10 +68,6 @@ def plot_psnr(report: dict, path: Path) -> Path:
     return _save(plt, figure, path)
 
 
-def _pct(value: float | None) -> str:
-    return "-" if value is None else f"{100 * value:.1f}%"
-
-
 def _db(value: float | None) -> str:
     return "-" if value is None else f"{value:.1f}"
 
@@ -78,7 +75,7 @@ def _db(value: float | None) -> str:
 def _rate(rate: dict) -> str:
     if rate["success"] is None:
         return "-"
-    return f"{_pct(rate['success'])} [{_pct(rate['ci_low'])}, {_pct(rate['ci_high'])}] ({rate['successes']}/{rate['episodes']})"
+    return f"{pct(rate['success'])} [{pct(rate['ci_low'])}, {pct(rate['ci_high'])}] ({rate['successes']}/{rate['episodes']})"
 
 
 def _overall(block: dict) -> list[str]:
@@ -88,11 +85,11 @@ def _overall(block: dict) -> list[str]:
         f"| imagined success (judged), 95% CI | {_rate(block['imagined_success'])} |",
         f"| real replay of the imagined actions | {_rate(block['replay_success'])} |",
         f"| policy closed loop in the real world | {_rate(block['real_success'])} |",
-        f"| agreement of the imagined verdict with the replay | **{_pct(block['agreement'])}** ({block['judged']} judged) |",
-        f"| false success (judged successes that failed on replay) | {_pct(block['false_success'])} |",
-        f"| missed success (replay successes judged failures) | {_pct(block['missed_success'])} |",
-        (f"| the judge on the closed-loop real videos | agreement {_pct(judge['agreement'])}, TPR {_pct(judge['tpr'])}, "
-         f"FPR {_pct(judge['fpr'])} ({judge['judged']} judged) |"),
+        f"| agreement of the imagined verdict with the replay | **{pct(block['agreement'])}** ({block['judged']} judged) |",
+        f"| false success (judged successes that failed on replay) | {pct(block['false_success'])} |",
+        f"| missed success (replay successes judged failures) | {pct(block['missed_success'])} |",
+        (f"| the judge on the closed-loop real videos | agreement {pct(judge['agreement'])}, TPR {pct(judge['tpr'])}, "
+         f"FPR {pct(judge['fpr'])} ({judge['judged']} judged) |"),
         "", "| imagined verdict \\ real replay | success | failure |", "|---|---|---|",
         f"| judged success | {counts['tp']} (tp) | {counts['fp']} (fp) |",
         f"| judged failure | {counts['fn']} (fn) | {counts['tn']} (tn) |",
@@ -105,9 +102,9 @@ def _per_task(report: dict) -> list[str]:
     for task, block in report["per_task"].items():
         counts = block["confusion"]
         lines.append(f"| {task} | {block['episodes']} | {counts['tp']} | {counts['fp']} | {counts['fn']} | {counts['tn']} | "
-                     f"{_pct(block['agreement'])} | {_pct(block['imagined_success']['success'])} | "
-                     f"{_pct(block['replay_success']['success'])} | {_pct(block['real_success']['success'])} | "
-                     f"{_pct(block['judge_on_real']['agreement'])} | {_db(block['psnr_full'])} |")
+                     f"{pct(block['agreement'])} | {pct(block['imagined_success']['success'])} | "
+                     f"{pct(block['replay_success']['success'])} | {pct(block['real_success']['success'])} | "
+                     f"{pct(block['judge_on_real']['agreement'])} | {_db(block['psnr_full'])} |")
     return lines
 
 
@@ -153,15 +150,15 @@ def format_imagination(report: dict) -> str:
     rows = [("task", "scenes", "agreement", "tp/fp/fn/tn", "imagined", "replay", "closed loop", "false success")]
     for task, block in [*report["per_task"].items(), ("overall", report["overall"])]:
         counts = block["confusion"]
-        rows.append((task, str(block["episodes"]), _pct(block["agreement"]),
-                     f"{counts['tp']}/{counts['fp']}/{counts['fn']}/{counts['tn']}", _pct(block["imagined_success"]["success"]),
-                     _pct(block["replay_success"]["success"]), _pct(block["real_success"]["success"]),
-                     _pct(block["false_success"])))
+        rows.append((task, str(block["episodes"]), pct(block["agreement"]),
+                     f"{counts['tp']}/{counts['fp']}/{counts['fn']}/{counts['tn']}", pct(block["imagined_success"]["success"]),
+                     pct(block["replay_success"]["success"]), pct(block["real_success"]["success"]),
+                     pct(block["false_success"])))
     widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]))]
     lines = ["  ".join(cell.ljust(width) for cell, width in zip(row, widths)).rstrip() for row in rows]
     lines.insert(1, "  ".join("-" * width for width in widths))
     figures, judge = report["psnr"], report["overall"]["judge_on_real"]
     lines += ["", (f"PSNR vs real replay: {_db(figures['psnr_h1'])} dB at step 1, {_db(figures['psnr_h32'])} at 32, "
                    f"{_db(figures['psnr_full'])} over the rollout (moving pixels: {_db(figures['moving_psnr_full'])}); "
-                   f"judge on real videos: TPR {_pct(judge['tpr'])}, FPR {_pct(judge['fpr'])}")]
+                   f"judge on real videos: TPR {pct(judge['tpr'])}, FPR {pct(judge['fpr'])}")]
     return "\n".join(lines)

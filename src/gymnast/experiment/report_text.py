@@ -5,13 +5,8 @@ Every sentence is computed from summary.json; nothing here is written in advance
 
 from __future__ import annotations
 
-
-def _pct(value: float | None) -> str:
-    return "-" if value is None else f"{100 * value:.1f}%"
-
-
-def _ci(row: dict) -> str:
-    return f"[{_pct(row['ci_low'])}, {_pct(row['ci_high'])}]"
+from gymnast.experiment.dyna_report import dyna_table
+from gymnast.experiment.formatting import ci, pct
 
 
 def _ratio(value: float | None) -> str:
@@ -28,7 +23,7 @@ def _arms_table(summary: dict) -> list[str]:
     lines = ["| arm | real success | 95% CI | real interactions (training) | real interactions (evaluations, watch) | wall time |",
              "|---|---|---|---|---|---|"]
     for row in summary["arms"].values():
-        lines.append(f"| {row['title']} | **{_pct(row['success'])}** | {_ci(row)} | {row['real_interactions']:,} | "
+        lines.append(f"| {row['title']} | **{pct(row['success'])}** | {ci(row)} | {row['real_interactions']:,} | "
                      f"{row['eval_real_interactions'] + row['watch_real_interactions']:,} | {_minutes(row)} |")
     return lines
 
@@ -38,15 +33,15 @@ def _verdict(summary: dict) -> list[str]:
     sft, wm, sim, verified = arms["sft"], arms["rl_wm_judge"], arms["rl_sim"], arms["rl_wm_verified"]
     met = {True: "met", False: "not met"}
     return [
-        (f"- World-model RL with the judge (World-Gymnast) reached {_pct(wm['success'])} against SFT's "
-         f"{_pct(sft['success'])}: {_ratio(summary['wm_rl_over_sft'])} SFT ({_significance(wm, sft)}). "
+        (f"- World-model RL with the judge (World-Gymnast) reached {pct(wm['success'])} against SFT's "
+         f"{pct(sft['success'])}: {_ratio(summary['wm_rl_over_sft'])} SFT ({_significance(wm, sft)}). "
          f"Goal of at least 2x: **{met[goals['wm_rl_at_least_2x_sft']]}**."),
-        (f"- Against RL in the software simulator ({_pct(sim['success'])}): {_ratio(summary['wm_rl_over_sim_rl'])} "
+        (f"- Against RL in the software simulator ({pct(sim['success'])}): {_ratio(summary['wm_rl_over_sim_rl'])} "
          f"({_significance(wm, sim)}). Goal of beating it: **{met[goals['wm_rl_beats_sim_rl']]}**."),
-        (f"- World-model RL with the verified reward (VLA-RFT) reached {_pct(verified['success'])}: "
+        (f"- World-model RL with the verified reward (VLA-RFT) reached {pct(verified['success'])}: "
          f"{_ratio(summary['wm_rl_verified_over_sft'])} SFT ({_significance(verified, sft)})."),
         (f"- RL in the real world, which spent {arms['rl_real']['real_interactions']:,} real interactions on training, "
-         f"reached {_pct(arms['rl_real']['success'])} ({_significance(arms['rl_real'], sft)} with SFT)."),
+         f"reached {pct(arms['rl_real']['success'])} ({_significance(arms['rl_real'], sft)} with SFT)."),
         (f"- WorldGym: Pearson r = {_num(summary['worldgym_pearson'])}, Spearman = {_num(summary['worldgym_spearman'])} over "
          f"{len(summary['worldgym'])} policies. Goal r >= 0.9: **{met[goals['worldgym_r_at_least_0.9']]}**."),
         *_weak_tasks_verdict(summary), *_dyna_verdict(summary), *_watch_verdict(summary),
@@ -58,7 +53,7 @@ def _weak_tasks_verdict(summary: dict) -> list[str]:
     if not weak:
         return []
     pooled, met = weak["arms"], {True: "met", False: "not met"}
-    rows = ", ".join(f"{summary['arms'][name]['title'].split(' (')[0]} {_pct(row['success'])}" for name, row in pooled.items())
+    rows = ", ".join(f"{summary['arms'][name]['title'].split(' (')[0]} {pct(row['success'])}" for name, row in pooled.items())
     return [(f"- On the weak tasks ({', '.join(task.removesuffix('-v3') for task in weak['tasks'])}; "
              f"{pooled['sft']['episodes']} episodes per arm): {rows}. World-model RL (judge) at least 2x SFT with separate "
              f"intervals: **{met[summary['goals']['wm_rl_2x_sft_on_weak_tasks']]}**.")]
@@ -71,8 +66,8 @@ def _dyna_verdict(summary: dict) -> list[str]:
     dyna, real = arms["dyna"], arms["rl_real"]
     share = dyna["real_interactions"] / real["real_interactions"] if real["real_interactions"] else None
     met = {True: "met", False: "not met"}
-    return [(f"- Dyna reached {_pct(dyna['success'])} with {dyna['real_interactions']:,} real interactions for training "
-             f"({_pct(share)} of RL in the real world's {real['real_interactions']:,}, which reached {_pct(real['success'])}; "
+    return [(f"- Dyna reached {pct(dyna['success'])} with {dyna['real_interactions']:,} real interactions for training "
+             f"({pct(share)} of RL in the real world's {real['real_interactions']:,}, which reached {pct(real['success'])}; "
              f"{_significance(dyna, real)}). Goal of matching it with at most 10% of its interactions: "
              f"**{met[summary['goals']['dyna_reaches_real_rl_with_10pct']]}**.")]
 
@@ -81,7 +76,7 @@ def _watch_verdict(summary: dict) -> list[str]:
     judged = {name: value for name, value in summary.get("watch_false_success", {}).items() if value is not None}
     if not judged:
         return []
-    rows = ", ".join(f"{summary['arms'][name]['title'].split(' (')[0]} {_pct(value)}" for name, value in judged.items())
+    rows = ", ".join(f"{summary['arms'][name]['title'].split(' (')[0]} {pct(value)}" for name, value in judged.items())
     held = all(summary["goals"]["watch_false_success_at_most_10pct"][name] for name in judged)
     return [(f"- Reward-hacking watch at the end of training, judged successes that failed when replayed for real: {rows}. "
              f"Goal of at most 10%: **{'met' if held else 'not met'}**.")]
@@ -102,7 +97,7 @@ def _per_task_table(summary: dict) -> list[str]:
     tasks = list(next(iter(arms.values()))["per_task"])
     lines = ["| task | " + " | ".join(name for name in arms) + " |", "|---|" + "---|" * len(arms)]
     for task in tasks:
-        lines.append(f"| {task} | " + " | ".join(_pct(row["per_task"][task]["success"]) for row in arms.values()) + " |")
+        lines.append(f"| {task} | " + " | ".join(pct(row["per_task"][task]["success"]) for row in arms.values()) + " |")
     return lines
 
 
@@ -113,9 +108,9 @@ def _robustness_tables(summary: dict) -> list[str]:
              "|---|---|---|---|---|---|"]
     for name, row in summary["robustness"].items():
         language = summary["language"][name]
-        lines.append(f"| {summary['arms'][name]['title']} | {_pct(row['none']['success'])} | "
-                     f"{_pct(row['minor']['success'])} {_ci(row['minor'])} | {_pct(row['major']['success'])} {_ci(row['major'])} | "
-                     f"{_pct(language['train']['success'])} | {_pct(language['heldout']['success'])} {_ci(language['heldout'])} |")
+        lines.append(f"| {summary['arms'][name]['title']} | {pct(row['none']['success'])} | "
+                     f"{pct(row['minor']['success'])} {ci(row['minor'])} | {pct(row['major']['success'])} {ci(row['major'])} | "
+                     f"{pct(language['train']['success'])} | {pct(language['heldout']['success'])} {ci(language['heldout'])} |")
     episodes = next(iter(summary["robustness"].values()))["minor"]["episodes"]
     lines += ["", (f"Perturbed and held-out-instruction evaluations use {episodes} episodes in all per policy; "
               "the unperturbed column is the main evaluation.")]
@@ -125,8 +120,8 @@ def _robustness_tables(summary: dict) -> list[str]:
 def _worldgym_table(summary: dict) -> list[str]:
     lines = ["| policy | imagined (judged) success | real success |", "|---|---|---|"]
     for row in summary["worldgym"]:
-        lines.append(f"| {row['policy']} | {_pct(row['imagined'])} ({row['imagined_episodes']} ep.) | "
-                     f"{_pct(row['real'])} ({row['real_episodes']} ep.) |")
+        lines.append(f"| {row['policy']} | {pct(row['imagined'])} ({row['imagined_episodes']} ep.) | "
+                     f"{pct(row['real'])} ({row['real_episodes']} ep.) |")
     return lines
 
 
@@ -137,7 +132,7 @@ def _imagination(summary: dict) -> list[str]:
         return ["Not measured in this experiment (it predates the `imagination` stage).", ""]
 
     def rate(row: dict) -> str:
-        return f"{_pct(row['success'])} {_ci(row)}"
+        return f"{pct(row['success'])} {ci(row)}"
 
     counts, judge = figures["confusion"], figures["judge_on_real"]
     return [
@@ -147,9 +142,9 @@ def _imagination(summary: dict) -> list[str]:
         "false success | tp / fp / fn / tn | judge on the real videos (TPR / FPR) | PSNR at 8 / 32 steps (dB) |",
         "|---|---|---|---|---|---|---|---|",
         (f"| {rate(figures['imagined_success'])} | {rate(figures['replay_success'])} | {rate(figures['real_success'])} | "
-         f"**{_pct(figures['agreement'])}** | {_pct(figures['false_success'])} | "
+         f"**{pct(figures['agreement'])}** | {pct(figures['false_success'])} | "
          f"{counts['tp']} / {counts['fp']} / {counts['fn']} / {counts['tn']} | "
-         f"{_pct(judge['tpr'])} / {_pct(judge['fpr'])} | {_num(figures['psnr_h8'])} / {_num(figures['psnr_h32'])} |"), "",
+         f"{pct(judge['tpr'])} / {pct(judge['fpr'])} | {_num(figures['psnr_h8'])} / {_num(figures['psnr_h32'])} |"), "",
         "Per task, PSNR per step and side-by-side videos: [imagination/imagination.md](imagination/imagination.md).", "",
     ]
 
@@ -167,7 +162,7 @@ def _fidelity(model: dict | None) -> list[str]:
     if control.get("matched_psnr") is not None:
         lines.append(f"Controllability: its rollout matches the real rollout of the same actions at {_num(control['matched_psnr'])} dB "
                      f"and of other actions at {_num(control['mismatched_psnr'])} dB; it picks the right real rollout "
-                     f"{_pct(control['identification_accuracy'])} of the time.")
+                     f"{pct(control['identification_accuracy'])} of the time.")
     return [" ".join(lines), ""]
 
 
@@ -185,29 +180,27 @@ def _evidence(summary: dict) -> list[str]:
                   "| step | imagined success | real success of the same actions | agreement | judged successes that failed for real |",
                   "|---|---|---|---|---|"]
         for row in rows:
-            lines.append(f"| {row['step']} | {_pct(row.get('imagined_success'))} | {_pct(row.get('real_success'))} | "
-                         f"{_pct(row.get('agreement'))} | {_pct(row.get('false_success'))} |")
+            lines.append(f"| {row['step']} | {pct(row.get('imagined_success'))} | {pct(row.get('real_success'))} | "
+                         f"{pct(row.get('agreement'))} | {pct(row.get('false_success'))} |")
         lines.append("")
     curve = summary["curves"].get("rl_wm_judge", [])
     if curve:
         lines += ["**Imagined against real success during world-model RL (judge)**, greedy, on the evaluation seeds:", "",
                   "| step | judged in the world model | real world |", "|---|---|---|"]
-        lines += [f"| {p['step']} | {_pct(p['own'])} | {_pct(p['real'])} |" for p in curve]
+        lines += [f"| {p['step']} | {pct(p['own'])} | {pct(p['real'])} |" for p in curve]
         lines.append("")
     return lines
 
 
 def _dyna_section(summary: dict, plots: dict[str, str]) -> list[str]:
     """Dyna's rounds beside RL in the real world: real success against real interactions spent."""
-    from gymnast.experiment.dyna_report import dyna_table
-
     dyna = summary.get("dyna")  # None in experiments without the Dyna arm
     if not dyna:
         return []
     lines = ["## Dyna against RL in the real world", "", dyna_table(dyna), ""]
     fprs = [row["judge_fpr_on_rollouts"] for row in dyna["rounds"] if row.get("judge_fpr_on_rollouts") is not None]
     if fprs:
-        lines += [(f"Before fine-tuning on them, the judge passed {', '.join(_pct(v) for v in fprs)} of the failures among "
+        lines += [(f"Before fine-tuning on them, the judge passed {', '.join(pct(v) for v in fprs)} of the failures among "
                    "the real rollouts recorded between rounds (its false-positive rate on whole failures)."), ""]
     return [*lines, f"![Dyna against RL in the real world]({plots['dyna']})", ""]
 
