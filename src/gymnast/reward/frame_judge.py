@@ -24,7 +24,7 @@ from torch import nn
 from gymnast.policy.text import EMBEDDING_DIM, InstructionEncoder
 from gymnast.policy.vision import to_float_image
 from gymnast.reward.judge import JudgeConfig, ThresholdJudge, check_videos, labelled_loss
-from gymnast.utils.device import to_device
+from gymnast.utils.device import bf16_autocast, to_device
 
 FRAMES_PER_PASS = 512  # frames through the CNN at once: bounds memory on long batches of videos
 
@@ -66,7 +66,7 @@ class FrameJudge(ThresholdJudge, nn.Module):
             device = self.text.weight.device
             pair = torch.cat([to_float_image(to_device(first[part], device)),
                               to_float_image(to_device(frames[part], device))], dim=1) * 2.0 - 1.0
-            with torch.autocast(device.type, dtype=torch.bfloat16):  # ~2x faster convolutions
+            with bf16_autocast(device):  # ~2x faster convolutions where bf16 is native
                 image = self.vision(pair).float()
             logits.append(self.head(torch.cat([image, self.text(to_device(text[part], device))], dim=1)).squeeze(1))
         return torch.cat(logits)

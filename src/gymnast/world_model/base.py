@@ -27,7 +27,7 @@ from typing import Any, Protocol
 import torch
 
 from gymnast.utils.checkpoint import load_model
-from gymnast.utils.device import module_device, to_device
+from gymnast.utils.device import bf16_autocast, module_device, to_device
 
 
 class WorldModel(Protocol):
@@ -148,8 +148,9 @@ class ConfiguredWorldModel(torch.nn.Module):
         return self.scale_actions.bounds
 
     def autocast(self):
-        """bfloat16 autocast on the model's device when the config asks for it (else a no-op context)."""
-        return torch.autocast(next(self.parameters()).device.type, dtype=torch.bfloat16, enabled=self.config.bf16)
+        """bfloat16 autocast on the model's device when the config asks for it and the device computes
+        bfloat16 natively (else a no-op context)."""
+        return bf16_autocast(next(self.parameters()).device, self.config.bf16)
 
     def spec(self) -> dict:
         """JSON-able description that `from_spec` rebuilds the model from."""

@@ -37,7 +37,7 @@ from gymnast.data.lerobot import EpisodeDataset
 from gymnast.envs.tasks import check_task
 from gymnast.policy.vision import to_float_image
 from gymnast.utils.atomic import write_json
-from gymnast.utils.device import module_device, to_device
+from gymnast.utils.device import bf16_autocast, module_device, to_device
 from gymnast.world_model.base import WorldModel, load_world_model, rollout
 from gymnast.world_model.data import split_episodes
 
@@ -132,7 +132,7 @@ class ObjectProbe(nn.Module):
         out, device = [], module_device(self)
         for chunk in frames.split(batch):
             index = torch.full((len(chunk),), task, dtype=torch.long, device=device)
-            with torch.autocast(device.type, dtype=torch.bfloat16, enabled=bf16):
+            with bf16_autocast(device, bf16):
                 out.append(self(to_float_image(to_device(chunk, device)), index).float())
         return (torch.cat(out) * self.scale[task] + self.mean[task]).cpu()
 
@@ -188,7 +188,7 @@ def train_probe(episodes: Sequence[ObjectEpisode], tasks: Sequence[str], config:
         images = to_float_image(frames[index])  # (B, 3, H, W)
         blur = torch.rand(len(index), generator=generator) < config.blur_fraction
         images = torch.where(blur[:, None, None, None], F.avg_pool2d(images, 3, 1, 1, count_include_pad=False), images)
-        with torch.autocast(module_device(probe).type, dtype=torch.bfloat16, enabled=config.bf16):
+        with bf16_autocast(module_device(probe), config.bf16):
             prediction = probe(images, task[index])
         loss = F.mse_loss(prediction.float(), probe.normalise(xyz[index], task[index]))
         optimizer.zero_grad(set_to_none=True)
