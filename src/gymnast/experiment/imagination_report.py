@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gymnast.experiment.formatting import pct
+from gymnast.experiment.formatting import ci, pct
 from gymnast.utils.atomic import write_bytes, write_json
 
 logger = logging.getLogger(__name__)
@@ -75,7 +75,7 @@ def _db(value: float | None) -> str:
 def _rate(rate: dict) -> str:
     if rate["success"] is None:
         return "-"
-    return f"{pct(rate['success'])} [{pct(rate['ci_low'])}, {pct(rate['ci_high'])}] ({rate['successes']}/{rate['episodes']})"
+    return f"{pct(rate['success'])} {ci(rate)} ({rate['successes']}/{rate['episodes']})"
 
 
 def _overall(block: dict) -> list[str]:

@@ -54,7 +54,7 @@ def bf16_is_native(device_type: str) -> bool:
     """Whether `device_type` ("cpu" or "cuda") computes bfloat16 natively: a CUDA GPU that supports
     it, or an x86 CPU with AVX512-BF16 or AMX. On other CPUs (AVX2 only, as many AMD and laptop
     CPUs are) torch emulates bfloat16 and autocast makes a small CNN about 8x slower than float32
-    (benchmarks/bf16_autocast.py), where native support makes it about 2x faster."""
+    (benchmarks/bf16_autocast.py), where native support makes it faster."""
     if device_type == "cuda":
         return torch.cuda.is_available() and torch.cuda.is_bf16_supported()
     if device_type == "cpu":
