@@ -184,6 +184,36 @@ def test_a_saved_vla_run_is_loaded_once_per_process_and_evaluated(tmp_path: Path
     assert report["episodes"] == 2 and report["real_interactions"] <= 2 * SHORT.horizon
 
 
+def test_a_temperature_samples_the_policy_seeded_by_each_episode(tmp_path: Path):
+    class SamplingSpy(ZeroPolicy):
+        def __init__(self) -> None:
+            super().__init__()
+            self.draws: list[tuple[float, float]] = []
+
+        def sample(self, obs, instructions, temperature=1.0, generator=None) -> ActionSample:
+            self.draws.append((temperature, torch.rand(1, generator=generator).item()))
+            return super().sample(obs, instructions, temperature, generator)
+
+    def draws(temperature: float, name: str) -> list[tuple[float, float]]:
+        policy = SamplingSpy()
+        config = EvalConfig(tasks="reach-v3", episodes=2, workers=1, videos_per_task=0, env=SHORT,
+                            temperature=temperature)
+        report = evaluate(policy, config, tmp_path / f"{name}.json", progress=False)
+        assert report["config"]["temperature"] == temperature
+        return policy.draws
+
+    assert draws(0.0, "greedy") == []  # greedy decoding never samples
+    sampled = draws(1.3, "a")
+    first_of_episode = [torch.rand(1, generator=torch.Generator().manual_seed(eval_seed(i))).item() for i in range(2)]
+    assert {temperature for temperature, _ in sampled} == {1.3}
+    assert [draw for _, draw in sampled if draw in first_of_episode] == first_of_episode  # each episode's own seed
+    assert draws(1.3, "b") == sampled  # the same evaluation repeats exactly
+    with pytest.raises(ValueError, match="temperature must be a finite number >= 0"):
+        EvalConfig(temperature=-1.0)
+    with pytest.raises(ValueError, match="scripted expert has no action tokens"):
+        evaluate("expert", EvalConfig(tasks="reach-v3", episodes=1, temperature=1.0), tmp_path / "e.json")
+
+
 def test_a_policy_with_the_wrong_chunk_shape_is_a_clear_error(tmp_path: Path):
     class WrongShape(ZeroPolicy):
         def act(self, obs, instructions):

@@ -17,6 +17,7 @@ import dataclasses
 import functools
 import json
 import logging
+import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -88,6 +89,9 @@ class EvalConfig:
     """Episodes of each task (the first ones) saved as mp4 videos; 0 saves none."""
     first_eval_index: int = 0
     """Index of the first evaluation seed; episode i uses eval_seed(first_eval_index + i)."""
+    temperature: float = 0.0
+    """0 acts greedily (the policy as deployed); above 0 samples every action token at this
+    temperature, seeded by the episode's seed, as RL's rollouts do (`gymnast rl` samples at 1.0)."""
     env: EnvConfig = field(default_factory=EnvConfig)
     """Camera, image size and horizon."""
 
@@ -98,6 +102,8 @@ class EvalConfig:
             raise ValueError(f"EvalConfig.workers must be at least 1, got {self.workers}")
         if self.videos_per_task < 0:
             raise ValueError(f"EvalConfig.videos_per_task must be >= 0, got {self.videos_per_task}")
+        if not (self.temperature >= 0 and math.isfinite(self.temperature)):  # also refuses NaN
+            raise ValueError(f"EvalConfig.temperature must be a finite number >= 0, got {self.temperature}")
         if self.instruction_split not in SPLITS:
             raise ValueError(f"EvalConfig.instruction_split must be one of {SPLITS}, got {self.instruction_split!r}")
         if self.videos_per_task and self.env.image_size % 2:
@@ -161,6 +167,7 @@ class EvalJob:
     video_path: str | None = None
     instruction: str | None = None
     device: str = "cpu"
+    temperature: float = 0.0
 
 
 def plan_episodes(config: EvalConfig, policy: str, video_dir: Path) -> list[EvalJob]:
@@ -171,7 +178,7 @@ def plan_episodes(config: EvalConfig, policy: str, video_dir: Path) -> list[Eval
             video = str(video_dir / f"{task}_{seed}.mp4") if i < config.videos_per_task else None
             instruction = pick_sentence(own[task], task, seed) if own else config.instruction
             jobs.append(EvalJob(task, seed, policy, config.env, config.gap, config.perturb,
-                                config.instruction_split, video, instruction, config.device))
+                                config.instruction_split, video, instruction, config.device, config.temperature))
     return jobs
 
 
@@ -188,12 +195,11 @@ def run_episode(job: EvalJob, policy: Policy | None = None) -> dict:
     """
     env = cached_env(job.task, job.env, gap=job.gap, perturbation=job.perturb,
                      instruction_split=job.instruction_split)
-    if policy is not None:
-        actor = PolicyActor(policy)
-    elif job.policy == EXPERT:
+    if job.policy == EXPERT and policy is None:
         actor = ScriptedActor(ScriptedExpert(job.task))
     else:
-        actor = PolicyActor(load_run_policy(job.policy, job.device))
+        policy = policy if policy is not None else load_run_policy(job.policy, job.device)
+        actor = PolicyActor(policy, temperature=job.temperature, seed=job.seed)
     run = play_episode(env, actor, job.seed, record=("frames",) if job.video_path else (), instruction=job.instruction)
     if job.video_path:
         with atomic_path(job.video_path) as tmp:
@@ -221,10 +227,13 @@ def evaluate(policy: str | Policy, config: EvalConfig, out: str | Path, progress
 
     Raises:
         FileNotFoundError: `policy` is neither ``expert`` nor an existing directory.
-        ValueError: a `Policy` object with more than one worker.
+        ValueError: a `Policy` object with more than one worker, or the expert with a temperature.
     """
     out = Path(out)
     label, in_process = _resolve_policy(policy, config)
+    if label == EXPERT and config.temperature > 0:
+        raise ValueError(f"the scripted expert has no action tokens to sample; temperature={config.temperature} "
+                         f"is for learned policies (leave it at 0 with --policy expert)")
     video_dir = out.parent / f"{out.stem}{VIDEO_DIR_SUFFIX}"
     jobs = plan_episodes(config, label, video_dir)
     run = run_episode if in_process is None else functools.partial(run_episode, policy=in_process)

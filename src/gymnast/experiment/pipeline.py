@@ -24,6 +24,7 @@ from pathlib import Path
 
 from gymnast.config import EnvConfig
 from gymnast.data.lerobot import EpisodeDataset
+from gymnast.envs.parallel import kept_workers
 from gymnast.experiment.arms import ARMS, PERTURBATIONS, ROBUSTNESS_ARMS, arm, dyna_setup, rl_setup
 from gymnast.experiment.config import ExperimentConfig
 from gymnast.experiment.stages import Stages
@@ -49,15 +50,17 @@ def run_experiment(config: ExperimentConfig, out: Path, reuse: dict[str, Path] |
         policies[spec.name] = _train_arm(stages, spec.name, config, out, sft, wm, judge, data, progress)
     # The real world as the dataset saw it (a reused dataset may have its own image size).
     env = EnvConfig(image_size=EpisodeDataset(data).image_shape[0], horizon=config.rl.horizon)
-    for name, policy in policies.items():
-        _evaluate(stages, f"eval_{name}", policy, config, out, config.eval_episodes, env, progress)
-    for name in ROBUSTNESS_ARMS:
-        for perturb in PERTURBATIONS:
-            _evaluate(stages, f"eval_{name}_{perturb}", policies[name], config, out, config.robustness_episodes, env,
-                      progress, perturb=perturb)
-        _evaluate(stages, f"eval_{name}_heldout", policies[name], config, out, config.robustness_episodes, env,
-                  progress, instruction_split="heldout", sentences=config.sentences)
-    stages.run("worldgym", lambda: _worldgym(stages, config, out, policies, wm, judge, env, progress))
+    # The arms are trained: their evaluations share one set of simulator processes.
+    with kept_workers(config.workers, config.runner):
+        for name, policy in policies.items():
+            _evaluate(stages, f"eval_{name}", policy, config, out, config.eval_episodes, env, progress)
+        for name in ROBUSTNESS_ARMS:
+            for perturb in PERTURBATIONS:
+                _evaluate(stages, f"eval_{name}_{perturb}", policies[name], config, out, config.robustness_episodes,
+                          env, progress, perturb=perturb)
+            _evaluate(stages, f"eval_{name}_heldout", policies[name], config, out, config.robustness_episodes, env,
+                      progress, instruction_split="heldout", sentences=config.sentences)
+        stages.run("worldgym", lambda: _worldgym(stages, config, out, policies, wm, judge, env, progress))
     return write_report(out, stages, config)
 
 
