@@ -12,7 +12,7 @@ import tyro
 
 import gymnast  # noqa: F401  (sets MUJOCO_GL before anything imports mujoco)
 from gymnast.cli_models import (Preset, eval_judge, eval_wm, experiment, imagination, make_ensemble, object_fidelity,
-                                rl, serve_judge, train_judge, train_wm, worldgym)
+                                rl, rl_signal, serve_judge, train_judge, train_wm, worldgym)
 from gymnast.cli_settings import resolve, saved_inputs
 from gymnast.config import EnvConfig
 from gymnast.data.frames import Fit
@@ -293,6 +293,7 @@ COMMANDS = {
     "experiment": experiment,
     "dyna": dyna,
     "imagination": imagination,
+    "rl-signal": rl_signal,
     "worldgym": worldgym,
     "contact-sheet": contact_sheet,
     "gap-report": gap_report,

@@ -159,7 +159,7 @@ def train_judge(
     preset: GPUPreset = "full",
     resume: bool = False,
     steps: int | None = None,
-    kind: Literal["frames", "video"] | None = None,
+    kind: Literal["frames", "video", "progress"] | None = None,
     extra_data: tuple[Path, ...] = (),
     init: Path | None = None,
     camera: str | None = None,
@@ -177,7 +177,8 @@ def train_judge(
         resume: continue the run in OUT from its last checkpoint, with the settings, data and world model
             saved there.
         steps: override the preset's optimizer steps.
-        kind: frames (judge every frame; the default) or video (four frames of the whole video).
+        kind: frames (judge every frame; the default), video (four frames of the whole video) or progress
+            (every frame's dense reward; a video scores its mean: a continuous reward, no threshold).
         extra_data: more datasets to train and measure on (e.g. a policy's recorded rollouts).
         init: a judge run (or checkpoint) to fine-tune instead of starting from random weights.
         camera: the dataset camera to read (e.g. front); default: its first video (else image) feature.
@@ -423,3 +424,46 @@ def imagination(
     report = measure_imagination_runs(policy, wm, RewardSpec.parse(reward), config, out)
     print(format_imagination(report))
     print(f"report: {out / 'imagination.md'}")
+
+
+def rl_signal(
+    policy: Path,
+    wm: Path,
+    reward: str,
+    out: Path,
+    tasks: str = "reach-v3,push-v3,pick-place-v3,peg-insert-side-v3",
+    starts_per_task: int = 8,
+    group_size: int = 8,
+    temperature: float = 1.0,
+    horizons: tuple[int, ...] = (50, 100, 150),
+    batch: int = 64,
+    workers: int = 2,
+    runner: str = "local",
+    seed: int = 0,
+) -> None:
+    """Measure whether RL in imagination would push the policy where the real world would: GRPO
+    groups sampled in the world model and judged, their actions replayed in the real world, and the
+    correlation of the imagined advantages with the real ones by horizon; writes OUT/signal.json
+    and OUT/signal.md.
+
+    Args:
+        policy: SFT/RL run (or checkpoint) directory.
+        wm: world-model run (or checkpoint) directory.
+        reward: a reward of the video alone: judge:RUN or vlm:MODEL@BASE_URL (key from OPENAI_API_KEY).
+        out: report directory.
+        tasks: task names and/or sets, comma-separated (default: the four weak tasks).
+        starts_per_task: fresh scenes (GRPO groups) per task.
+        group_size: rollouts per scene.
+        temperature: the policy's sampling temperature.
+        horizons: horizons read out (the largest is the rollouts' length).
+        batch: rollouts stepped together (a multiple of the group size).
+        workers: simulator processes for the real-world replays.
+        runner: where they run: local, ray or ray:ADDRESS (see `gymnast eval --help`).
+        seed: seed of the scenes and of the policy's samples.
+    """
+    from gymnast.experiment.practice_signal import SignalConfig, measure_signal_runs
+
+    config = SignalConfig(tasks=tasks, starts_per_task=starts_per_task, group_size=group_size, temperature=temperature,
+                          horizons=tuple(horizons), batch=batch, workers=workers, runner=runner, seed=seed)
+    measure_signal_runs(policy, wm, RewardSpec.parse(reward), config, out)
+    print((out / "signal.md").read_text())

@@ -152,16 +152,21 @@ def test_replaying_a_real_rollout_reproduces_its_outcome_and_frames(models):
                          "none", workers=1)
     try:
         rollouts = collect_rollouts(envs.get(REAL, 2), policy, starts, 0.0, torch.Generator())
-        success, frames, interactions = replay_actions(replays.get(REAL, 2), rollouts.starts, rollouts.actions,
-                                                       rollouts.lengths)
+        replay = replay_actions(replays.get(REAL, 2), rollouts.starts, rollouts.actions, rollouts.lengths)
     finally:
         envs.close()
         replays.close()
+    success, frames, interactions = replay.success, replay.frames, replay.interactions
     assert success.tolist() == rollouts.success.tolist()
     assert frames.shape == rollouts.frames.shape and frames.dtype == torch.uint8
     for i, length in enumerate(rollouts.lengths.tolist()):
         assert torch.equal(frames[i, : length + 1], rollouts.frames[i, : length + 1])
         assert torch.equal(frames[i, length:], frames[i, length:length + 1].expand_as(frames[i, length:]))
+    # Per step: success from the chunk that reached it on, the simulator's rewards up to the end.
+    assert replay.success_by_step.any(dim=1).tolist() == success.tolist()
+    for i, length in enumerate(rollouts.lengths.tolist()):
+        assert torch.allclose(replay.rewards[i, :length], rollouts.env_rewards[i, :length].float())
+        assert torch.isnan(replay.rewards[i, length:]).all() and not replay.success_by_step[i, length:].any()
     # Whole chunks are executed, in every episode, until the longest replay's last one.
     chunk = policy.chunk_size
     assert interactions == 2 * min(-(-int(rollouts.lengths.max()) // chunk) * chunk, 30)

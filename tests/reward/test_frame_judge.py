@@ -20,7 +20,8 @@ def video(shows: list[bool], value: int = 0) -> Video:
     """A (T+1)-frame video whose frames are filled with `value` + their index, with per-frame success."""
     shows_t = torch.tensor([False, *shows])
     frames = (torch.arange(len(shows_t)) + value).clamp(max=255).to(torch.uint8)[:, None, None, None].expand(-1, 8, 8, 3)
-    return Video(frames.contiguous(), shows_t.cummax(0).values, shows_t, "reach the goal", imagined=False)
+    return Video(frames.contiguous(), shows_t.cummax(0).values, shows_t, "reach the goal", imagined=False,
+                 progress=shows_t.float())
 
 
 class Brightness:

@@ -188,8 +188,9 @@ def _measure_batch(batch: Sequence[Start], size: int, policy: Policy, reward: Re
                                                          torch.Generator(), seed))
     imagined_scores = timed("judge", lambda: score_groups(reward, imagined, 1))  # (R,)
     verdict = verdicts(imagined, imagined_scores, reward)  # (R,) 0/1, NaN where unjudged
-    replay_success, replayed, replay_steps = timed("replay", lambda: replay_actions(
-        replays.get(REAL, size), imagined.starts, imagined.actions, imagined.lengths))
+    replay = timed("replay", lambda: replay_actions(replays.get(REAL, size), imagined.starts, imagined.actions,
+                                                    imagined.lengths))
+    replay_success, replayed, replay_steps = replay.success, replay.frames, replay.interactions
     real = timed("real", lambda: collect_rollouts(envs.get(REAL, size), policy, batch, 0.0, torch.Generator(), seed))
     real_scores = timed("judge", lambda: score_groups(reward, real, 1))  # (R,)
     # The padding rollouts' interactions are not counted (`gymnast eval` would not run them). Every

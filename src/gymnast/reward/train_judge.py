@@ -1,8 +1,10 @@
 """`gymnast train-judge`: fit the learned judge on real (and imagined) episodes, then measure it.
 
-Two judges train here: the per-frame judge (`kind="frames"`, `gymnast.reward.frame_judge`), which
-learns from every frame with Meta-World's per-step success flag, and the video judge
-(`kind="video"`, `gymnast.reward.judge`), which learns from whole videos and their prefixes.
+Three judges train here: the per-frame judge (`kind="frames"`, `gymnast.reward.frame_judge`), which
+learns from every frame with Meta-World's per-step success flag; the video judge (`kind="video"`,
+`gymnast.reward.judge`), which learns from whole videos and their prefixes; and the progress judge
+(`kind="progress"`, `gymnast.reward.progress_judge`), which learns every frame's dense reward and
+scores a video by degree, with no threshold (its report has correlations, not TPR/FPR).
 
 Scenes are split three ways by a fixed hash: held-out scenes are the world model's
 (`gymnast.world_model.data`), so their imagined versions come from scenes the world model never
@@ -31,6 +33,7 @@ from gymnast.data.frames import Fit, model_image_size
 from gymnast.data.lerobot import EpisodeDataset
 from gymnast.reward.base import Reward, RewardContext
 from gymnast.reward.frame_judge import FrameJudge, frame_loss
+from gymnast.reward.progress_judge import ProgressJudge, evaluate_progress, progress_loss, progress_targets
 from gymnast.reward.judge import JudgeConfig, LearnedJudge, judge_loss, judged_frame_indices
 from gymnast.utils.atomic import write_json
 from gymnast.utils.checkpoint import load_model, resume_training, save_training, write_run_config
@@ -44,7 +47,7 @@ from gymnast.world_model.data import split_episodes
 logger = logging.getLogger(__name__)
 
 NEAR_MISS_STEPS = 10  # a held-out negative: a successful episode cut this many steps before its success
-JUDGES = {"frames": FrameJudge, "video": LearnedJudge}
+JUDGES = {"frames": FrameJudge, "video": LearnedJudge, "progress": ProgressJudge}
 """Judge kinds by name; a checkpoint names its class by `backend`."""
 
 
@@ -54,7 +57,8 @@ class JudgeTrainConfig:
 
     kind: str = "frames"
     """frames: the per-frame judge (every frame a labelled example; a video succeeds where any frame
-    does); video: the judge of four frames of a whole video, trained on videos and their prefixes."""
+    does); video: the judge of four frames of a whole video, trained on videos and their prefixes;
+    progress: every frame's dense reward, a video scored by its mean (a continuous reward)."""
     steps: int = 1000
     """Optimizer steps."""
     batch_size: int = 32
@@ -126,6 +130,8 @@ class Video:
             knocked off its goal again undoes it); frame 0 never.
         instruction: the task in words.
         imagined: re-imagined by a world model under the episode's real actions.
+        progress: (T+1,) float32 the dense reward that led to frame t, scaled to [0, 1] (0 at the
+            start frame): the progress judge's targets.
     """
 
     frames: torch.Tensor
@@ -133,6 +139,7 @@ class Video:
     shows: torch.Tensor
     instruction: str
     imagined: bool
+    progress: torch.Tensor
 
 
 IMAGINE_BATCH = 32  # episodes re-imagined together: one world-model call per step for all of them
@@ -147,7 +154,8 @@ def load_videos(dataset: EpisodeDataset, indices: list[int], wm: Path | None, pr
         episode = dataset.load(i)
         frames = torch.from_numpy(episode.frames)
         shows = torch.cat([torch.zeros(1, dtype=torch.bool), torch.from_numpy(episode.successes).bool()])
-        videos.append(Video(frames, shows.cummax(0).values, shows, episode.info.instruction, imagined=False))
+        videos.append(Video(frames, shows.cummax(0).values, shows, episode.info.instruction, imagined=False,
+                            progress=progress_targets(episode.rewards)))
         episodes.append(torch.from_numpy(episode.actions).float())
     if wm is None:
         return videos
@@ -165,7 +173,7 @@ def load_videos(dataset: EpisodeDataset, indices: list[int], wm: Path | None, pr
         for n, video in zip(batch, frames):
             real = videos[n]
             video = torch.cat([real.frames[:1], video[: len(episodes[n])]])
-            imagined[n] = Video(video, real.success, real.shows, real.instruction, imagined=True)
+            imagined[n] = dataclasses.replace(real, frames=video, imagined=True)
     return [video for n, real in enumerate(videos) for video in (real, imagined[n])]
 
 
@@ -191,10 +199,12 @@ class FramePool:
 
     Frames `ambiguous` steps or fewer before a video's first success are left out: they barely
     differ from the success frame, and as negatives they teach the judge to doubt real successes.
+    With `progress`, the labels are the frames' progress targets instead of 0/1 (the same balanced
+    draw, so that the rare success frames are learned too).
     """
 
-    def __init__(self, videos: list[Video], ambiguous: int) -> None:
-        self.videos = videos
+    def __init__(self, videos: list[Video], ambiguous: int, progress: bool = False) -> None:
+        self.videos, self.progress = videos, progress
         positives, negatives = [], []
         for v, video in enumerate(videos):
             steps = torch.arange(1, len(video.frames))
@@ -215,12 +225,13 @@ class FramePool:
         count = batch // 2
         pick = [self.positives[torch.randint(len(self.positives), (count,), generator=generator)],
                 self.negatives[torch.randint(len(self.negatives), (batch - count,), generator=generator)]]
-        firsts, frames, texts = [], [], []
+        firsts, frames, texts, progress = [], [], [], []
         for v, t in torch.cat(pick).tolist():
             firsts.append(self.videos[v].frames[0])
             frames.append(self.videos[v].frames[t])
             texts.append(self.videos[v].instruction)
-        labels = torch.arange(batch) < count
+            progress.append(self.videos[v].progress[t])
+        labels = torch.stack(progress) if self.progress else torch.arange(batch) < count
         return torch.stack(firsts), torch.stack(frames), texts, labels
 
 
@@ -274,13 +285,14 @@ def train_judge(data: Path, out: Path, config: JudgeTrainConfig, wm: Path | None
     start = resume_training(out, judge, optimizer, schedule, sampler) if resume else 0
     write_run_config(out, resolved)
     metrics = MetricsLog(out, resume_step=start if resume else None)
-    pool = FramePool(train_videos, config.ambiguous_steps) if config.kind == "frames" else None
+    pool = FramePool(train_videos, config.ambiguous_steps, config.kind == "progress") if config.kind != "video" else None
+    per_frame_loss = progress_loss if config.kind == "progress" else frame_loss
     judge.train()
     bar = tqdm(range(start, config.steps), initial=start, total=config.steps, desc="train-judge", disable=not progress)
     for step in bar:
         if pool is not None:
             first, frames, texts, labels = pool.sample(config.batch_size, sampler)
-            loss, values = frame_loss(judge, first, frames, judge.encoder(texts), labels)
+            loss, values = per_frame_loss(judge, first, frames, judge.encoder(texts), labels)
         else:
             frames, texts, labels = _sample(train_videos, config.batch_size, config.whole_share, config.ambiguous_steps, sampler)
             loss, values = judge_loss(judge, frames, judge.encoder(texts), labels)
@@ -288,17 +300,21 @@ def train_judge(data: Path, out: Path, config: JudgeTrainConfig, wm: Path | None
         done = step + 1
         if done % config.log_every == 0 or done == config.steps:
             metrics.log(done, values)
-            bar.set_postfix(loss=f"{values['train/loss']:.3f}", acc=f"{values['train/accuracy']:.2f}")
+            bar.set_postfix({name.removeprefix("train/"): f"{value:.3f}" for name, value in values.items()
+                             if name in ("train/loss", "train/accuracy", "train/mae")})
         if done % config.checkpoint_every == 0 and done < config.steps:
             save_training(out, done, judge, resolved, optimizer, schedule, sampler)
     del train_videos, pool  # the held-out and validation videos take their place in memory
     judge.eval()
-    threshold = choose_threshold(judge, videos(validation_ids, show=False))
-    judge.config = dataclasses.replace(judge.config, threshold=threshold["threshold"])
+    threshold = {}  # a progress judge scores by degree: no threshold to choose
+    if judge.binary:
+        threshold = choose_threshold(judge, videos(validation_ids, show=False))
+        judge.config = dataclasses.replace(judge.config, threshold=threshold["threshold"])
     resolved["model"] = judge.spec()
     write_run_config(out, resolved)
     save_training(out, config.steps, judge, resolved, optimizer, schedule, sampler)
-    report = evaluate_judge(judge, videos(heldout_ids, show=False))
+    measure = evaluate_judge if judge.binary else evaluate_progress
+    report = measure(judge, videos(heldout_ids, show=False))
     report |= {"kind": config.kind, **{f"validation_{k}": v for k, v in threshold.items()},
                "data": [str(path) for path in (data, *config.extra_data)], "wm": str(wm) if wm else None,
                "heldout_episodes": sum(map(len, heldout_ids)), "validation_episodes": sum(map(len, validation_ids)),

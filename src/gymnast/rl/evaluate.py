@@ -14,6 +14,7 @@ with it.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import torch
 from gymnasium.vector import VectorEnv
@@ -68,8 +69,28 @@ def evaluate_in_env(envs: EnvFactory, kind: EnvKind, policy, reward: Reward, sta
     return values
 
 
-def replay_actions(env: VectorEnv, starts: Sequence[Start], actions: torch.Tensor, lengths: torch.Tensor
-                   ) -> tuple[torch.Tensor, torch.Tensor, int]:
+@dataclass(frozen=True)
+class Replay:
+    """R rollouts' actions replayed in a simulator (`replay_actions`).
+
+    Attributes:
+        success: (R,) bool whether the simulator reported success at any step of the replay.
+        frames: (R, T + 1, H, W, 3) uint8 the start frame, then one frame per action, the frame at
+            a rollout's end repeating after it (as in `Rollouts.frames`).
+        success_by_step: (R, T) bool success at any step up to the end of the chunk holding action
+            t (the simulator reports success once per chunk); False after the replay's end.
+        rewards: (R, T) float32 the simulator's reward for each action (NaN after the replay's end).
+        interactions: actions the simulator executed (real interactions in the real world).
+    """
+
+    success: torch.Tensor
+    frames: torch.Tensor
+    success_by_step: torch.Tensor
+    rewards: torch.Tensor
+    interactions: int
+
+
+def replay_actions(env: VectorEnv, starts: Sequence[Start], actions: torch.Tensor, lengths: torch.Tensor) -> Replay:
     """Replays R rollouts' actions, action for action, in a simulator from the same start states.
 
     The env steps whole chunks, so the chunk holding a rollout's last action is executed in full
@@ -84,12 +105,6 @@ def replay_actions(env: VectorEnv, starts: Sequence[Start], actions: torch.Tenso
         starts: the R start states (their task and seed fix the scene).
         actions: (R, T, A) float32 the actions to replay (0 after each rollout's end).
         lengths: (R,) int64 actions each rollout executed.
-
-    Returns:
-        ``(success, frames, interactions)``: (R,) bool whether the simulator reported success at
-        any step of the replay; (R, T + 1, H, W, 3) uint8 the start frame, then one frame per
-        action, the frame at a rollout's end repeating after it (as in `Rollouts.frames`); and the
-        actions the simulator executed (real interactions in the real world).
     """
     count, steps = actions.shape[:2]
     if env.num_envs != count or len(starts) != count or lengths.shape != (count,):
@@ -101,7 +116,8 @@ def replay_actions(env: VectorEnv, starts: Sequence[Start], actions: torch.Tenso
     planned = torch.zeros(count, calls * chunk, actions.shape[2])  # zero actions after the end
     planned[:, : min(steps, calls * chunk)] = actions[:, : calls * chunk].float()
     plan = iter(planned.split(chunk, dim=1))  # (R, K, A) each
-    frames, success, interactions = [], torch.zeros(count, dtype=torch.bool), 0
+    frames, by_chunk, rewards, interactions = [], [], [], 0
+    success = torch.zeros(count, dtype=torch.bool)
     for index, result in enumerate(run_batch(env, lambda images, instructions: next(plan).numpy(),
                                              start_options(starts), seed=0, max_calls=calls)):
         if not frames:
@@ -109,10 +125,22 @@ def replay_actions(env: VectorEnv, starts: Sequence[Start], actions: torch.Tenso
         frames.append(torch.from_numpy(result.frames))  # (R, K, H, W, 3)
         interactions += int(result.executed.sum())
         success = torch.where(last_chunk >= index, torch.from_numpy(result.success), success)  # only accumulates
+        by_chunk.append(success[:, None].expand(-1, chunk))  # (R, K)
+        rewards.append(torch.from_numpy(result.rewards))  # (R, K) NaN where not executed
     video = torch.cat(frames, dim=1)[:, : steps + 1]  # (R, <= T + 1, H, W, 3)
     ends = lengths.clamp(max=video.shape[1] - 1)  # (R,) the frame at each rollout's end
     index = torch.minimum(torch.arange(steps + 1)[None], ends[:, None])  # (R, T + 1): the end frame repeats
-    return success, video[torch.arange(count)[:, None], index], interactions
+    after_end = torch.arange(steps)[None] >= lengths[:, None]  # (R, T)
+    success_by_step = _to_steps(torch.cat(by_chunk, dim=1), steps, False) & ~after_end
+    step_rewards = _to_steps(torch.cat(rewards, dim=1), steps, float("nan")).masked_fill(after_end, float("nan"))
+    return Replay(success, video[torch.arange(count)[:, None], index], success_by_step, step_rewards, interactions)
+
+
+def _to_steps(values: torch.Tensor, steps: int, fill) -> torch.Tensor:
+    """(R, calls * K) per-action values cut or padded with `fill` to (R, steps)."""
+    if values.shape[1] >= steps:
+        return values[:, :steps]
+    return torch.cat([values, torch.full((len(values), steps - values.shape[1]), fill, dtype=values.dtype)], dim=1)
 
 
 def watch_hacking(envs: EnvFactory, rollouts: Rollouts, scores: torch.Tensor, verdict: torch.Tensor,
@@ -134,7 +162,8 @@ def watch_hacking(envs: EnvFactory, rollouts: Rollouts, scores: torch.Tensor, ve
     count = min(count, len(rollouts.starts))
     pick = torch.linspace(0, len(rollouts.starts) - 1, count).round().long()
     chosen = rollouts.select(pick)
-    real, _, interactions = replay_actions(envs.get(REAL, count), chosen.starts, chosen.actions, chosen.lengths)
+    replay = replay_actions(envs.get(REAL, count), chosen.starts, chosen.actions, chosen.lengths)
+    real, interactions = replay.success, replay.interactions
     values = {"eval/watch_real_success": real.float().mean().item(), "eval/watch_interactions": interactions}
     judged = torch.isfinite(verdict[pick])
     if judged.any():

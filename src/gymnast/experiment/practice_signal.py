@@ -1,0 +1,354 @@
+"""Does practice in imagination push the policy where the real world would? The GRPO signal of a
+world model and a reward, held against the real outcome of the same actions.
+
+Legend: B start states (groups), G rollouts per start, R = B x G rollouts, T actions, H/W image size.
+
+Verdict agreement (`gymnast imagination`) mixes two errors that matter very differently to RL.
+Imagination can be wrong about *how often* a policy succeeds, a calibration error that GRPO does
+not see, since it normalises rewards within each group; or wrong about *which* of a group's
+rollouts succeed, a ranking error that sends the update the wrong way. GRPO's step is the sum of
+each rollout's log-probability gradient weighted by its group-normalised advantage, so a step in
+imagination is a step forward in the real world as far as the imagined advantages agree with the
+advantages the real outcomes would have given the same rollouts.
+
+For B fresh scenes (new data seeds, as `gymnast rl --fresh-scenes` draws them) the policy samples
+G rollouts each at the rollout temperature in the world model, closed loop on the imagined frames;
+the same actions are replayed in the real world, and each rollout's real outcome at horizon h is
+success within its first h actions. Every *readout* scores the imagined rollouts: the reward's own
+score (a judge's verdict) and, for a learned judge, its probability (the largest over the frames,
+a continuous score), each on the video cut after h actions. Two references are read out too: the
+same readouts of the real replay's video, which separates the reward's own error from the world
+model's (the judge sees what really happened), and the real world's dense reward of the replay
+(Meta-World's, with which RL in the real world did learn, results/rl/reach_real), a signal known
+to teach. Per readout and horizon:
+
+- ``advantage_correlation``: sum(A_read * A_real) / sqrt(sum(A_read^2) * sum(A_real^2)) over the R
+  rollouts, A being GRPO's group advantage (`gymnast.rl.grpo.group_advantages`, 0 in a group
+  without spread): 1 when every group is ranked as reality ranks it, 0 when the updates are noise
+  with respect to the real outcome, negative when they point away from it; with a 95% interval
+  from resampling the groups.
+- ``reinforced_real_success`` and ``discouraged_real_success``: the real success of the rollouts GRPO
+  would make more likely (positive advantage) and less likely (negative).
+- ``signal_groups``: the share of groups the readout ranks at all (the others give no gradient).
+- for a binary readout, ``agreement`` with the real outcome and ``false_success`` (the share of
+  its successes that fail in the real world).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from gymnast.config import EnvConfig
+from gymnast.envs.kinds import IMAGINED, REAL
+from gymnast.envs.starts import Start, scene_starts
+from gymnast.envs.tasks import DATA_SEEDS
+from gymnast.envs.workers import parse_runner
+from gymnast.policy.base import Policy
+from gymnast.reward.base import Reward, RewardContext, RewardNeeds
+from gymnast.reward.sim import META_WORLD_MAX_STEP_REWARD
+from gymnast.reward.spec import RewardSpec
+from gymnast.rl.grpo import group_advantages
+from gymnast.utils.atomic import write_bytes, write_json
+from gymnast.world_model.base import WorldModel
+
+logger = logging.getLogger(__name__)
+
+WEAK_TASKS = "reach-v3,push-v3,pick-place-v3,peg-insert-side-v3"
+"""The tasks the SFT policy fails most (10-24% real success), where practice has most to gain."""
+SCORE = "score"
+"""The readout of the reward's own score (a judge's verdict), as RL trains on it."""
+PROBABILITY = "probability"
+"""The readout of a learned judge's probability of success (its largest over the frames)."""
+ON_REAL_VIDEO = ", real video (reference)"
+"""Suffix of the readouts of the real replay's video: the reward's own error, without imagination's."""
+REAL_DENSE = "real dense reward (reference)"
+"""The readout of the replay's own dense reward: a real-world signal, not imagination's."""
+BOOTSTRAP = 1000
+"""Resamplings of the groups behind each correlation's interval."""
+
+
+@dataclass(frozen=True)
+class SignalConfig:
+    """Which scenes, how many rollouts, and the horizons read out."""
+
+    tasks: str = WEAK_TASKS
+    """Task names and/or task sets (mt10, mt50), comma-separated."""
+    starts_per_task: int = 8
+    """Fresh scenes (groups) per task."""
+    group_size: int = 8
+    """Rollouts G per scene, as GRPO samples them."""
+    temperature: float = 1.0
+    """The policy's sampling temperature (the rollout temperature of `gymnast rl`)."""
+    horizons: tuple[int, ...] = (50, 100, 150)
+    """Horizons h read out (the video cut after h actions, the replay's success by then); the
+    largest is the rollouts' horizon. Multiples of the policy's chunk are exact: the simulator
+    reports success once per chunk."""
+    batch: int = 64
+    """Rollouts stepped together (a multiple of the group size)."""
+    workers: int = 2
+    """Simulator processes for the real-world replays."""
+    runner: str = "local"
+    """Where the simulator processes run: local, ray or ray:ADDRESS (see `gymnast eval --help`)."""
+    seed: int = 0
+    """Seed of the scenes drawn and of the policy's samples."""
+
+    def __post_init__(self) -> None:
+        for name in ("starts_per_task", "group_size", "batch", "workers"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"SignalConfig.{name} must be at least 1, got {getattr(self, name)}")
+        if self.group_size < 2:
+            raise ValueError(f"SignalConfig.group_size must be at least 2 (a group of one ranks nothing), got {self.group_size}")
+        if self.batch % self.group_size:
+            raise ValueError(f"SignalConfig.batch ({self.batch}) must be a multiple of group_size ({self.group_size})")
+        if self.temperature <= 0:
+            raise ValueError(f"SignalConfig.temperature must be > 0 (GRPO samples), got {self.temperature}")
+        if not self.horizons or min(self.horizons) < 1:
+            raise ValueError(f"SignalConfig.horizons must be positive, got {self.horizons}")
+        parse_runner(self.runner)
+
+    @property
+    def horizon(self) -> int:
+        return max(self.horizons)
+
+
+def measure_signal(policy: Policy, world_model: WorldModel, reward: Reward, config: SignalConfig,
+                   out: Path | None = None, progress: bool = True, labels: dict[str, str] | None = None) -> dict:
+    """Measures the GRPO signal of imagination under `policy` (see the module docstring).
+
+    Args:
+        policy: the policy practice would start from; sampled at ``config.temperature``.
+        world_model: imagines the rollouts.
+        reward: scores the imagined videos (a learned judge also gives its probability).
+        config: scenes, group size, temperature, horizons and batching.
+        out: directory for signal.json and signal.md (None: nothing written).
+        progress: show a progress bar over the batches.
+        labels: what the objects are (e.g. run paths), recorded in the settings.
+
+    Returns:
+        signal.json's content: ``settings``; ``readouts`` (a row per readout and horizon, see
+        `signal_table`); ``per_task`` (the same rows for each task's groups); ``interactions`` (real
+        actions of the replays); ``seconds``; ``rollouts`` (one record per rollout: task, seed,
+        group, the real outcome and every readout by horizon).
+    """
+    from gymnast.envs.factory import EnvFactory
+    from gymnast.envs.tasks import resolve_tasks
+    from gymnast.rl.evaluate import replay_actions
+    from gymnast.rl.rollout import collect_rollouts
+
+    began = time.perf_counter()
+    tasks = resolve_tasks(config.tasks)
+    env_config = EnvConfig(image_size=world_model.image_size, horizon=config.horizon)
+    starts = fresh_starts(tasks, config.starts_per_task, env_config, config.seed)
+    rollout_starts = [start for start in starts for _ in range(config.group_size)]  # groups are contiguous
+    size = min(config.batch, len(rollout_starts))
+    envs = EnvFactory(IMAGINED, policy.chunk_size, env_config, "none", config.workers, world_model)
+    # Replays go on after success, so every horizon's outcome is read from the same replay.
+    replays = EnvFactory(REAL, policy.chunk_size, dataclasses.replace(env_config, terminate_on_success=False), "none",
+                         config.workers, runner=config.runner)
+    generator = torch.Generator().manual_seed(config.seed)
+    records, seconds, interactions = [], dict.fromkeys(("imagine", "score", "replay"), 0.0), 0
+
+    def timed(name: str, work):
+        clock = time.perf_counter()
+        result = work()
+        seconds[name] += time.perf_counter() - clock
+        return result
+
+    try:
+        for first in tqdm(range(0, len(rollout_starts), size), desc="signal", unit="batch", disable=not progress):
+            batch = rollout_starts[first: first + size]
+            imagined = timed("imagine", lambda: collect_rollouts(envs.get(IMAGINED, len(batch)), policy, batch,
+                                                                 config.temperature, generator, config.seed))
+            readouts = timed("score", lambda: read_out(reward, imagined.frames, imagined.instructions, config.horizons))
+            replay = timed("replay", lambda: replay_actions(replays.get(REAL, len(batch)), imagined.starts,
+                                                            imagined.actions, imagined.lengths))
+            interactions += replay.interactions
+            on_real = timed("score", lambda: read_out(reward, replay.frames, imagined.instructions, config.horizons))
+            readouts |= {f"{name}{ON_REAL_VIDEO}": values for name, values in on_real.items()}
+            readouts[REAL_DENSE] = {h: dense_return(replay.rewards[:, :h], replay.success_by_step[:, :h])
+                                    for h in config.horizons}
+            for i, start in enumerate(batch):
+                records.append({"task": start.task, "seed": start.seed, "group": (first + i) // config.group_size,
+                                "real": {str(h): bool(replay.success_by_step[i, h - 1]) for h in config.horizons},
+                                "readouts": {name: {str(h): float(values[h][i]) for h in config.horizons}
+                                             for name, values in readouts.items()}})
+    finally:
+        envs.close()
+        replays.close()
+    seconds["total"] = time.perf_counter() - began
+    binary = {name: name in (SCORE, SCORE + ON_REAL_VIDEO) and reward.binary for name in records[0]["readouts"]}
+    report = {
+        "settings": {**dataclasses.asdict(config), **(labels or {}), "task_list": list(tasks),
+                     "reward_type": type(reward).__name__, "policy_type": type(policy).__name__,
+                     "binary_readouts": [name for name, is_binary in binary.items() if is_binary]},
+        "readouts": signal_table(records, config, binary),
+        "per_task": {task: signal_table([r for r in records if r["task"] == task], config, binary) for task in tasks},
+        "interactions": interactions,
+        "seconds": seconds,
+        "rollouts": records,
+    }
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
+        write_json(out / "signal.json", report)
+        write_bytes(out / "signal.md", format_signal(report).encode())
+    return report
+
+
+def fresh_starts(tasks: Sequence[str], per_task: int, config: EnvConfig, seed: int) -> list[Start]:
+    """`per_task` new scenes of each task from random data seeds (drawn from `seed`), as `gymnast rl
+    --fresh-scenes` starts its groups: real first frames, rendered by a reset (no interaction)."""
+    draw = np.random.default_rng(seed)
+    seeds = draw.choice(DATA_SEEDS.stop - DATA_SEEDS.start, size=per_task * len(tasks), replace=False) + DATA_SEEDS.start
+    return scene_starts([(task, int(seeds[i * per_task + j])) for i, task in enumerate(tasks) for j in range(per_task)],
+                        config)
+
+
+def read_out(reward: Reward, frames: torch.Tensor, instructions: Sequence[str], horizons: Sequence[int]
+             ) -> dict[str, dict[int, torch.Tensor]]:
+    """Every readout of (R, T + 1, H, W, 3) videos cut after each horizon's h actions: ``score`` (the
+    reward as RL reads it) and, for a per-frame 0/1 judge, ``probability``; (R,) each.
+
+    A per-frame judge is run once for all horizons. The reward reads only the video here (a judge's
+    input): a reward that needs more (a reference, a simulator) cannot be read out.
+    """
+    per_frame = getattr(reward, "frame_probabilities", None)
+    if per_frame is None:  # a reward of whole videos: score each cut
+        return {SCORE: {h: reward.score(frames[:, : h + 1], instructions, RewardContext()).float() for h in horizons}}
+    frame_values = per_frame(frames, instructions)  # (R, T + 1): one pass serves every horizon
+    if not reward.binary:  # a progress judge: the mean over the frames after the first, as its score is
+        return {SCORE: {h: frame_values[:, 1: h + 1].mean(dim=1) for h in horizons}}
+    best = {h: frame_values[:, : h + 1].max(dim=1).values for h in horizons}  # as FrameJudge.probability
+    return {SCORE: {h: (p >= reward.config.threshold).float() for h, p in best.items()},  # as ThresholdJudge.score
+            PROBABILITY: best}
+
+
+def dense_return(rewards: torch.Tensor, success_by_step: torch.Tensor) -> torch.Tensor:
+    """(R,) Meta-World's dense reward as `gymnast.reward.sim.SimDense` scores a rollout, for (R, h)
+    per-step rewards and success of a replay that goes on after success: from the success on, each
+    step counts as the maximum reward, as the early-ending episode of RL in the real world does."""
+    held = torch.where(success_by_step, torch.full_like(rewards, META_WORLD_MAX_STEP_REWARD), rewards)
+    return torch.nanmean(held.float(), dim=1).nan_to_num(0.0) / META_WORLD_MAX_STEP_REWARD
+
+
+def signal_table(records: list[dict], config: SignalConfig, binary: dict[str, bool]) -> list[dict]:
+    """One row per readout and horizon: ``readout``, ``horizon`` and `signal_figures` over `records`
+    (whole groups, in order)."""
+    rows = []
+    for name, is_binary in binary.items():
+        for h in map(str, config.horizons):
+            values = torch.tensor([r["readouts"][name][h] for r in records]).view(-1, config.group_size)  # (B, G)
+            real = torch.tensor([r["real"][h] for r in records]).view(-1, config.group_size)  # (B, G)
+            rows.append({"readout": name, "horizon": int(h), **signal_figures(values, real, is_binary)})
+    return rows
+
+
+def signal_figures(values: torch.Tensor, real: torch.Tensor, binary: bool, seed: int = 0) -> dict:
+    """How a readout's GRPO advantages agree with the real outcomes' (see the module docstring).
+
+    Args:
+        values: (B, G) the readout of each group's rollouts.
+        real: (B, G) bool the real outcome of the same rollouts.
+        binary: the readout is a 0/1 verdict (agreement and false successes are reported too).
+        seed: of the resampling behind the interval.
+
+    Returns:
+        ``advantage_correlation`` with ``correlation_ci_low`` / ``_high``, ``reinforced_real_success``,
+        ``discouraged_real_success``, ``signal_groups``, ``real_signal_groups``, ``groups``,
+        ``real_success``, ``mean_readout``, and for binary readouts ``agreement``, ``imagined_success``
+        and ``false_success``; None where a share has nothing to divide by.
+    """
+    read, _ = group_advantages(values.float())  # (B, G)
+    truth, _ = group_advantages(real.float())  # (B, G)
+    groups = len(values)
+    draws = np.random.default_rng(seed).integers(0, groups, size=(BOOTSTRAP, groups))  # resampled groups
+    resampled = [_correlation(read[d], truth[d]) for d in torch.from_numpy(draws)]
+    resampled = [c for c in resampled if c is not None]
+    figures = {
+        "groups": groups,
+        "advantage_correlation": _correlation(read, truth),
+        "correlation_ci_low": float(np.percentile(resampled, 2.5)) if resampled else None,
+        "correlation_ci_high": float(np.percentile(resampled, 97.5)) if resampled else None,
+        "reinforced_real_success": _mean(real[read > 0]),
+        "discouraged_real_success": _mean(real[read < 0]),
+        "signal_groups": _mean((read != 0).any(dim=1)),
+        "real_signal_groups": _mean((truth != 0).any(dim=1)),
+        "real_success": _mean(real),
+        "mean_readout": _mean(values),
+    }
+    if binary:
+        said = values > 0.5
+        figures |= {"agreement": _mean(said == real), "imagined_success": _mean(said),
+                    "false_success": _mean(~real[said])}
+    return figures
+
+
+def _correlation(read: torch.Tensor, truth: torch.Tensor) -> float | None:
+    """Cosine of two advantage vectors; None where either is all zero (no group has spread)."""
+    norm = float(read.square().sum().sqrt() * truth.square().sum().sqrt())
+    return float((read * truth).sum()) / norm if norm > 0 else None
+
+
+def _mean(values: torch.Tensor) -> float | None:
+    return float(values.float().mean()) if values.numel() else None
+
+
+def format_signal(report: dict) -> str:
+    """signal.md: every readout's figures by horizon, then each task's at the longest horizon."""
+    from gymnast.experiment.formatting import pct
+
+    settings = report["settings"]
+    lines = [
+        "# Does practice in imagination push the policy where the real world would?", "",
+        f"{settings['starts_per_task']} fresh scenes per task x {settings['group_size']} rollouts at temperature "
+        f"{settings['temperature']}, imagined closed loop and replayed action for action in the real world "
+        f"({report['interactions']:,} real interactions, {report['seconds']['total'] / 60:.1f} min). Tasks: "
+        f"{', '.join(settings['task_list'])}. Advantage correlation: 1 = GRPO's update in imagination is the one the "
+        "real outcomes would give; 0 = noise with respect to them (gymnast.experiment.practice_signal).", "",
+        "| readout | horizon | advantage correlation [95% CI] | real success: reinforced / discouraged rollouts "
+        "| groups ranked | agreement | false successes |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for row in report["readouts"]:
+        lines.append(f"| {row['readout']} | {row['horizon']} | {_signed(row['advantage_correlation'])} "
+                     f"[{_signed(row['correlation_ci_low'])}, {_signed(row['correlation_ci_high'])}] | "
+                     f"{pct(row['reinforced_real_success'])} / {pct(row['discouraged_real_success'])} | "
+                     f"{pct(row['signal_groups'])} | {pct(row.get('agreement'))} | {pct(row.get('false_success'))} |")
+    horizon = max(settings["horizons"])
+    names = list(dict.fromkeys(row["readout"] for row in report["readouts"]))
+    lines += ["", f"Per task at horizon {horizon}: the replays' real success and each readout's advantage correlation.",
+              "", "| task | real success | " + " | ".join(names) + " |", "|---|---|" + "---|" * len(names)]
+    for task, rows in report["per_task"].items():
+        longest = {row["readout"]: row for row in rows if row["horizon"] == horizon}
+        cells = [_signed(longest[name]["advantage_correlation"]) for name in names]
+        lines.append(f"| {task} | {pct(longest[names[0]]['real_success'])} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def _signed(value: float | None) -> str:
+    return "-" if value is None else f"{value:+.2f}"
+
+
+def measure_signal_runs(policy: str | Path, wm: str | Path, reward: RewardSpec, config: SignalConfig,
+                        out: Path | None = None, progress: bool = True) -> dict:
+    """`measure_signal` of saved runs: a policy run, a world-model run and a reward spec that reads
+    only the video (``judge:RUN`` or ``vlm:MODEL@BASE_URL``, see `gymnast.reward.spec`)."""
+    from gymnast.policy.load import load_policy
+    from gymnast.reward.select import make_reward
+    from gymnast.world_model.base import load_world_model
+
+    world_model = load_world_model(wm)
+    judge = make_reward(reward, world_model)
+    if judge.needs != RewardNeeds():
+        raise ValueError(f"--reward {reward} reads more than the imagined video; rl-signal reads a judge's verdict "
+                         "(judge:RUN or vlm:MODEL@BASE_URL)")
+    labels = {"policy": str(policy), "wm": str(wm), "reward": str(reward)}
+    return measure_signal(load_policy(policy), world_model, judge, config, out, progress, labels)

@@ -1,0 +1,117 @@
+"""The GRPO signal of imagination: the advantage correlation against hand-computed cases, the dense
+reference, and one real measurement with the committed models through the command line."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import pytest
+import torch
+
+from gymnast.cli import main
+from gymnast.experiment.practice_signal import SignalConfig, dense_return, read_out, signal_figures
+from gymnast.reward.select import make_reward
+from gymnast.reward.spec import RewardSpec
+
+RESULTS = Path(__file__).resolve().parents[2] / "results"
+JUDGE = RESULTS / "judge" / "judge"
+READOUTS = ("score", "probability", "score, real video (reference)", "probability, real video (reference)",
+            "real dense reward (reference)")
+
+
+def test_a_readout_that_ranks_every_group_as_reality_does_correlates_fully():
+    real = torch.tensor([[1, 0, 0, 1], [0, 0, 1, 0]], dtype=torch.bool)
+    figures = signal_figures(real.float() * 0.7 + 0.1, real, binary=False)
+    assert figures["advantage_correlation"] == pytest.approx(1.0)
+    assert figures["correlation_ci_low"] == pytest.approx(1.0) and figures["correlation_ci_high"] == pytest.approx(1.0)
+    assert figures["reinforced_real_success"] == 1.0 and figures["discouraged_real_success"] == 0.0
+    assert figures["signal_groups"] == figures["real_signal_groups"] == 1.0
+
+
+def test_a_readout_that_ranks_backwards_correlates_negatively_and_reinforces_failures():
+    real = torch.tensor([[1, 0, 0, 1], [0, 0, 1, 0]], dtype=torch.bool)
+    figures = signal_figures((~real).float(), real, binary=True)
+    assert figures["advantage_correlation"] == pytest.approx(-1.0)
+    assert figures["reinforced_real_success"] == 0.0 and figures["discouraged_real_success"] == 1.0
+    assert figures["agreement"] == 0.0 and figures["false_success"] == 1.0 and figures["imagined_success"] == 0.625
+
+
+def test_the_correlation_is_the_cosine_of_the_group_advantages():
+    values = torch.tensor([[0.9, 0.1, 0.5], [0.2, 0.2, 0.8]])
+    real = torch.tensor([[1, 1, 0], [0, 1, 1]], dtype=torch.bool)
+
+    def advantages(row):  # GRPO's group normalisation, written out: population std, eps 1e-6
+        mean = sum(row) / len(row)
+        std = math.sqrt(sum((x - mean) ** 2 for x in row) / len(row))
+        return [(x - mean) / (std + 1e-6) for x in row]
+
+    read = [a for row in values.tolist() for a in advantages(row)]
+    truth = [a for row in real.float().tolist() for a in advantages(row)]
+    cosine = sum(r * t for r, t in zip(read, truth)) / math.sqrt(sum(r * r for r in read) * sum(t * t for t in truth))
+    assert signal_figures(values, real, binary=False)["advantage_correlation"] == pytest.approx(cosine, abs=1e-5)
+
+
+def test_a_readout_without_spread_gives_no_signal_and_no_correlation():
+    real = torch.tensor([[1, 0], [0, 1]], dtype=torch.bool)
+    figures = signal_figures(torch.ones(2, 2), real, binary=True)
+    assert figures["advantage_correlation"] is None and figures["signal_groups"] == 0.0
+    assert figures["reinforced_real_success"] is None and figures["false_success"] == 0.5
+
+
+def test_the_dense_reference_counts_the_maximum_from_the_success_on():
+    rewards = torch.tensor([[1.0, 2.0, 3.0, 4.0], [1.0, 1.0, float("nan"), float("nan")]])
+    success = torch.tensor([[False, False, True, True], [False, False, False, False]])
+    assert dense_return(rewards, success).tolist() == pytest.approx([(1 + 2 + 10 + 10) / 40, 0.1])
+
+
+def test_a_per_frame_judge_is_read_at_every_horizon_from_one_pass():
+    judge = make_reward(RewardSpec.judge(JUDGE))
+    frames = torch.randint(0, 256, (2, 11, 96, 96, 3), dtype=torch.uint8)
+    readouts = read_out(judge, frames, ["reach the goal"] * 2, (5, 10))
+    for h in (5, 10):
+        probability = judge.probability(frames[:, : h + 1], ["reach the goal"] * 2)
+        assert torch.allclose(readouts["probability"][h], probability, atol=1e-5)
+        assert torch.equal(readouts["score"][h], judge.score(frames[:, : h + 1], ["reach the goal"] * 2))
+
+
+def test_a_progress_judge_is_read_as_its_score_at_every_horizon():
+    from gymnast.reward.judge import JudgeConfig
+    from gymnast.reward.progress_judge import ProgressJudge
+
+    judge = ProgressJudge(JudgeConfig(width=16, image_size=16)).eval()
+    frames = torch.randint(0, 256, (2, 11, 16, 16, 3), dtype=torch.uint8)
+    readouts = read_out(judge, frames, ["push the puck"] * 2, (5, 10))
+    assert set(readouts) == {"score"}
+    for h in (5, 10):
+        assert torch.allclose(readouts["score"][h], judge.score(frames[:, : h + 1], ["push the puck"] * 2), atol=1e-6)
+
+
+def test_settings_that_cannot_rank_are_refused():
+    with pytest.raises(ValueError, match="group_size"):
+        SignalConfig(group_size=1)
+    with pytest.raises(ValueError, match="multiple of group_size"):
+        SignalConfig(group_size=8, batch=12)
+    with pytest.raises(ValueError, match="temperature"):
+        SignalConfig(temperature=0.0)
+
+
+@pytest.mark.slow
+def test_the_command_measures_the_committed_models_against_real_replays(tmp_path):
+    out = tmp_path / "signal"
+    main(["rl-signal", "--policy", str(RESULTS / "sft" / "policy"), "--wm", str(RESULTS / "world_model" / "wm"),
+          "--reward", f"judge:{JUDGE}", "--out", str(out), "--tasks", "reach-v3", "--starts-per-task", "2",
+          "--group-size", "4", "--horizons", "10", "20", "--batch", "8", "--workers", "1"])
+    report = json.loads((out / "signal.json").read_text())
+    threshold = make_reward(RewardSpec.judge(JUDGE)).config.threshold
+    assert len(report["rollouts"]) == 8 and [r["group"] for r in report["rollouts"]] == [0] * 4 + [1] * 4
+    assert report["interactions"] == 8 * 20  # every replay runs to the longest horizon
+    for record in report["rollouts"]:
+        assert set(record["readouts"]) == set(READOUTS)
+        assert record["real"]["10"] <= record["real"]["20"]  # success by a horizon stays a success
+        for h in ("10", "20"):  # the verdict is the probability against the judge's threshold
+            assert record["readouts"]["score"][h] == float(record["readouts"]["probability"][h] >= threshold)
+    rows = {(row["readout"], row["horizon"]) for row in report["readouts"]}
+    assert rows == {(name, h) for name in READOUTS for h in (10, 20)}
+    assert "advantage correlation" in (out / "signal.md").read_text()
