@@ -97,6 +97,20 @@ def test_the_sft_policy_imagination_is_measured_against_the_real_world(experimen
     assert "](imagination/imagination.md)" in (experiment / "report.md").read_text()
 
 
+def test_the_practice_signal_of_imagination_is_measured_and_reported(experiment: Path):
+    summary = json.loads((experiment / "summary.json").read_text())
+    figures = summary["signal"]
+    report = json.loads((experiment / "signal" / "signal.json").read_text())
+    # debug: one fresh reach scene, a group of the RL preset's size, the RL horizon
+    assert figures["rollouts"] == len(report["rollouts"]) == 2 and figures["horizon"] == 40
+    assert figures["real_interactions"] == report["interactions"] == 2 * 40
+    longest = {row["readout"]: row for row in report["readouts"] if row["horizon"] == 40}
+    assert figures["imagined"]["advantage_correlation"] == longest["score"]["advantage_correlation"]
+    assert figures["real_dense"]["signal_groups"] == longest["real dense reward (reference)"]["signal_groups"]
+    assert "signal" in summary["stage_wall_s"]
+    assert "](signal/signal.md)" in (experiment / "report.md").read_text()
+
+
 def test_the_report_and_plots_are_written(experiment: Path):
     report = (experiment / "report.md").read_text()
     assert "| RL in the world model, judge (World-Gymnast) |" in report and "WorldGym" in report

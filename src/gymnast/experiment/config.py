@@ -104,6 +104,9 @@ class ExperimentConfig:
     itself), so that the policies span most of the range of real success."""
     worldgym_random: bool = True
     """WorldGym also rates uniformly random actions (the floor of the noise ladder)."""
+    signal_scenes: int = 4
+    """Fresh scenes per task of the ``signal`` stage: GRPO groups of the SFT policy sampled in
+    imagination and replayed in the real world (`gymnast rl-signal`)."""
     workers: int = 2
     """Simulator processes."""
     runner: str = "local"
@@ -117,7 +120,7 @@ class ExperimentConfig:
     their policies on the CPU, where the simulator is the cost."""
 
     def __post_init__(self) -> None:
-        for name in ("eval_episodes", "robustness_episodes", "worldgym_episodes", "workers"):
+        for name in ("eval_episodes", "robustness_episodes", "worldgym_episodes", "signal_scenes", "workers"):
             if getattr(self, name) < 1:
                 raise ValueError(f"ExperimentConfig.{name} must be at least 1, got {getattr(self, name)}")
         if self.sentences is not None:  # checked now, not hours later at the language check
@@ -162,6 +165,7 @@ def _debug() -> ExperimentConfig:
         robustness_episodes=1,
         worldgym_episodes=1,
         worldgym_noise=(0.5,),
+        signal_scenes=1,
     )
 
 
@@ -182,6 +186,7 @@ def _demo() -> ExperimentConfig:
         eval_episodes=10,
         robustness_episodes=4,
         worldgym_episodes=4,
+        signal_scenes=2,
         # Each rung of the noise ladder costs about a minute here: left out to keep the 15 minutes.
         worldgym_noise=(),
         worldgym_random=False,

@@ -7,7 +7,8 @@ Stages, in order, each done once (`gymnast.experiment.stages`; a rerun skips fin
 3. ``world_model``, ``judge``, ``world_model_eval``: the world model, the learned judge (trained on
    real and re-imagined episodes) and the world model's fidelity on held-out episodes.
    ``imagination``: the SFT policy's judged imagined rollouts against the same actions replayed
-   in the real world (`gymnast.experiment.imagination`).
+   in the real world (`gymnast.experiment.imagination`); ``signal``: whether GRPO's update in
+   imagination is the one the real outcomes would give (`gymnast.experiment.practice_signal`).
 4. ``arm_<name>``: Iter-SFT, the four RL arms and Dyna (`gymnast.experiment.arms`).
 5. ``eval_<name>``: every arm in the real world, ``eval_episodes`` per task from the evaluation
    seeds, Wilson intervals; then the SFT and world-model-RL policies under minor and major
@@ -45,6 +46,7 @@ def run_experiment(config: ExperimentConfig, out: Path, reuse: dict[str, Path] |
     stages = Stages(out, reuse)
     data, sft, wm, judge = _models(stages, config, out, progress)
     stages.run("imagination", lambda: _imagination(sft, wm, judge, config, out, progress), out / "imagination")
+    stages.run("signal", lambda: _signal(sft, wm, judge, config, out, progress), out / "signal")
     policies = {"sft": sft}
     for spec in ARMS[1:]:
         policies[spec.name] = _train_arm(stages, spec.name, config, out, sft, wm, judge, data, progress)
@@ -119,6 +121,22 @@ def _imagination(sft: Path, wm: Path, judge: Path, config: ExperimentConfig, out
                                  workers=config.workers, runner=config.runner, seed=config.seed)
     report = measure_imagination_runs(sft, wm, RewardSpec.judge(judge), settings, out / "imagination", progress)
     return imagination_brief(report)
+
+
+def _signal(sft: Path, wm: Path, judge: Path, config: ExperimentConfig, out: Path, progress: bool) -> dict:
+    """GRPO groups of the SFT policy sampled in imagination as the world-model arms sample them,
+    their judged advantages against the real outcomes of the same actions
+    (`gymnast.experiment.practice_signal`): would practice there push the policy the right way?"""
+    from gymnast.experiment.practice_signal import SignalConfig, measure_signal_runs, signal_brief
+    from gymnast.reward.spec import RewardSpec
+
+    group = config.rl.group_size
+    settings = SignalConfig(tasks=config.tasks, starts_per_task=config.signal_scenes, group_size=group,
+                            temperature=config.rl.temperature, horizons=(config.rl.horizon,),
+                            batch=group * max(1, 64 // group), workers=config.workers, runner=config.runner,
+                            seed=config.seed)
+    report = measure_signal_runs(sft, wm, RewardSpec.judge(judge), settings, out / "signal", progress)
+    return signal_brief(report)
 
 
 def _trained(train, data: Path, target: Path, settings, progress: bool) -> dict:

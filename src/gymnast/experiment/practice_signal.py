@@ -337,6 +337,20 @@ def _signed(value: float | None) -> str:
     return "-" if value is None else f"{value:+.2f}"
 
 
+def signal_brief(report: dict) -> dict:
+    """The main figures of a report at its longest horizon (what the experiment's summary.json
+    keeps): for the reward's score on imagined video, the same on the real replay's video and the
+    real dense reward, the advantage correlation with its interval and the real success of the
+    reinforced and discouraged rollouts; and the rollouts and real interactions behind them."""
+    horizon = max(report["settings"]["horizons"])
+    rows = {row["readout"]: row for row in report["readouts"] if row["horizon"] == horizon}
+    keys = ("advantage_correlation", "correlation_ci_low", "correlation_ci_high", "reinforced_real_success",
+            "discouraged_real_success", "signal_groups")
+    return {"horizon": horizon, "rollouts": len(report["rollouts"]), "real_interactions": report["interactions"],
+            **{label: {key: rows[name][key] for key in keys} for label, name in
+               (("imagined", SCORE), ("real_video", SCORE + ON_REAL_VIDEO), ("real_dense", REAL_DENSE))}}
+
+
 def measure_signal_runs(policy: str | Path, wm: str | Path, reward: RewardSpec, config: SignalConfig,
                         out: Path | None = None, progress: bool = True) -> dict:
     """`measure_signal` of saved runs: a policy run, a world-model run and a reward spec that reads

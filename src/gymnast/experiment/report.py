@@ -157,6 +157,7 @@ def build_summary(stages: Stages, config: ExperimentConfig) -> dict:
     dataset = EpisodeDataset(stages.path("collect"))
     # The SFT policy's judged imagination against the real world (None in experiments older than the stage).
     imagination = _without_bookkeeping(stages.record("imagination")) if stages.done("imagination") else None
+    signal = _without_bookkeeping(stages.record("signal")) if stages.done("signal") else None
     summary = {
         "tasks": config.tasks,
         "arms": arms,
@@ -181,6 +182,7 @@ def build_summary(stages: Stages, config: ExperimentConfig) -> dict:
         "world_model": _without_bookkeeping(stages.record("world_model_eval")) if stages.done("world_model_eval") else None,
         "imagination_agreement": imagination["agreement"] if imagination else None,
         "imagination": imagination,
+        "signal": signal,
         "dataset": {"episodes": len(dataset), "real_interactions": int(sum(dataset.lengths)), "path": str(dataset.root)},
         "rl_steps": config.rl.steps,
         "rollouts_per_step": config.rl.starts_per_step * config.rl.group_size,

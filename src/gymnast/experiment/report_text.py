@@ -149,6 +149,33 @@ def _imagination(summary: dict) -> list[str]:
     ]
 
 
+def _signal(summary: dict) -> list[str]:
+    """Whether GRPO's update in imagination is the one the real outcomes of the same actions would give."""
+    figures = summary.get("signal")
+    if not figures:
+        return ["Not measured in this experiment (it predates the `signal` stage).", ""]
+
+    def row(name: str, block: dict) -> str:
+        low, high = block["correlation_ci_low"], block["correlation_ci_high"]
+        interval = "" if low is None else f" [{low:+.2f}, {high:+.2f}]"
+        correlation = "-" if block["advantage_correlation"] is None else f"{block['advantage_correlation']:+.2f}"
+        return (f"| {name} | **{correlation}**{interval} | {pct(block['reinforced_real_success'])} / "
+                f"{pct(block['discouraged_real_success'])} | {pct(block['signal_groups'])} |")
+
+    return [
+        (f"{figures['rollouts']} rollouts of the SFT policy sampled in GRPO groups in the world model (fresh scenes, "
+         f"{figures['horizon']} actions), scored, and the same actions replayed in the real world. Advantage "
+         "correlation: 1 = the update in imagination is the one the real outcomes would give; 0 = noise "
+         "(docs/rl.md, `gymnast rl-signal`)."), "",
+        "| readout | advantage correlation [95% CI] | real success of reinforced / discouraged rollouts | groups ranked |",
+        "|---|---|---|---|",
+        row("the judge on imagined video (what the arm trains on)", figures["imagined"]),
+        row("the judge on the real replay's video (reference)", figures["real_video"]),
+        row("the real world's dense reward (reference)", figures["real_dense"]), "",
+        "Per task: [signal/signal.md](signal/signal.md).", "",
+    ]
+
+
 def _fidelity(model: dict | None) -> list[str]:
     if not model:
         return []
@@ -226,12 +253,14 @@ def report_markdown(summary: dict, plots: dict[str, str]) -> str:
         "## WorldGym: does the world model rank policies like the real world?", "", *_worldgym_table(summary), "",
         f"![WorldGym]({plots['worldgym']})", "",
         "## Imagination under the SFT policy: judged imagined outcomes vs the real world", "", *_imagination(summary),
+        "## Does practice in imagination point the right way?", "", *_signal(summary),
         "## Evidence: where imagination and reality part", "", *_evidence(summary),
         "## Files", "",
         ("- `summary.json`: every figure above; `config.json`: the resolved settings; `stages/`: one record per stage "
         "with its wall time."),
         "- `eval/`: one report per evaluation (per-episode records, seeds) and the first episode of each task as video.",
         "- `imagination/`: the SFT policy's imagined rollouts against their real replays (imagination.json, imagination.md, videos).",
+        "- `signal/`: GRPO groups in imagination against the real outcomes of the same actions (signal.json, signal.md).",
         "- `arms/<arm>/`: each arm's run (metrics.jsonl, TensorBoard, rollout videos with their rewards, summary.json).",
     ]
     return "\n".join(lines) + "\n"
