@@ -171,3 +171,18 @@ def test_summarize_horizons_on_ragged_rollouts():
     assert out["full"] == pytest.approx((sum(range(40)) + sum(range(40, 60))) / 60)
     short = summarize_horizons(values[:, :10])
     assert short["h32"] is None and short["avg32"] is None and short["h8"] == pytest.approx(27.0)
+
+
+def test_distances_to_shared_references_equal_the_pairwise_ones():
+    from gymnast.world_model.metrics import PerceptualDistance
+
+    perceptual = PerceptualDistance(pretrained=False, chunk_size=5)  # chunks that cut across rollouts
+    generator = torch.Generator().manual_seed(0)
+    pred = torch.rand(3, 4, 3, 32, 32, generator=generator)
+    references = torch.rand(2, 4, 3, 32, 32, generator=generator)
+    index = torch.tensor([1, 0, 1])
+    shared = perceptual.against_references(pred, references, index)
+    assert shared.shape == (3, 4)
+    torch.testing.assert_close(shared, perceptual(pred, references[index]), atol=1e-5, rtol=1e-5)
+    with pytest.raises(ValueError, match="must agree"):
+        perceptual.against_references(pred, references[:, :3], index)

@@ -62,18 +62,17 @@ class VerifiedReward:
         overlap = min(steps, context.reference_actions.shape[1])
         if overlap == 0:
             return torch.full((batch,), float("nan"))
-        reference = self._reference(context.start, context.reference_actions[:, :overlap].float())
-        policy, expert = to_unit_float(frames[:, :overlap]), to_unit_float(reference)  # (B, T, 3, H, W)
-        pixel = (policy - expert).abs().mean(dim=(1, 2, 3, 4))
-        perceptual = self.perceptual(policy, expert).mean(dim=1)
+        references, index = self._references(context.start, context.reference_actions[:, :overlap].float())
+        policy, expert = to_unit_float(frames[:, :overlap]), to_unit_float(references)  # (B|U, T, 3, H, W)
+        pixel = (policy - expert[index]).abs().mean(dim=(1, 2, 3, 4))
+        perceptual = self.perceptual.against_references(policy, expert, index).mean(dim=1)
         return -(pixel + perceptual)
 
-    def _reference(self, start: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
-        """(B, T, H, W, 3) the reference rollouts, each distinct (start, actions) imagined once: a
-        GRPO group shares its start and reference, so this saves G - 1 of every G rollouts."""
+    def _references(self, start: torch.Tensor, actions: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(U, T, H, W, 3) the distinct reference rollouts, each distinct (start, actions) imagined
+        once, and (B,) which one each rollout compares with: a GRPO group shares its start and
+        reference, so this saves G - 1 of every G imagined references (and their perceptual features)."""
         keys = torch.cat([start.reshape(len(start), -1).float(), actions.reshape(len(actions), -1)], dim=1)
         unique, index = torch.unique(keys, dim=0, return_inverse=True)
-        if len(unique) == len(keys):
-            return rollout(self.model, start, actions=actions).frames
         first = torch.zeros(len(unique), dtype=torch.long).scatter_(0, index.flip(0), torch.arange(len(keys)).flip(0))
-        return rollout(self.model, start[first], actions=actions[first]).frames[index]
+        return rollout(self.model, start[first], actions=actions[first]).frames, index

@@ -173,9 +173,30 @@ class PerceptualDistance(nn.Module):
         out = []
         # Chunks bound activation memory for long rollouts (B * T images at once).
         for xs, ys in zip(x.split(self.chunk_size), y.split(self.chunk_size)):
-            layers = [(fx - fy).square().mean(dim=(1, 2, 3)) for fx, fy in zip(self._features(xs), self._features(ys))]
-            out.append(torch.stack(layers).mean(dim=0))  # (chunk,)
+            out.append(_feature_distance(self._features(xs), self._features(ys)))  # (chunk,)
         return torch.cat(out).reshape(lead)
+
+    @torch.no_grad()
+    def against_references(self, pred: torch.Tensor, references: torch.Tensor, index: torch.Tensor) -> torch.Tensor:
+        """``forward(pred, references[index])``, each reference's features computed once: (B, T, 3, H,
+        W) pred, (U, T, 3, H, W) references, (B,) int64 index -> (B, T) float32. The G rollouts of a
+        GRPO group share their reference, so this halves the network's work on a group."""
+        if pred.ndim != 5 or references.shape[1:] != pred.shape[1:] or index.shape != pred.shape[:1]:
+            raise ValueError(f"pred (B, T, 3, H, W), references (U, T, 3, H, W) and index (B,) must agree; got "
+                             f"{tuple(pred.shape)}, {tuple(references.shape)} and {tuple(index.shape)}")
+        steps = pred.shape[1]
+        flat = references.float().reshape(-1, *references.shape[2:])  # (U*T, 3, H, W)
+        known = [torch.cat(layer) for layer in zip(*(self._features(part) for part in flat.split(self.chunk_size)))]
+        rows = (index[:, None] * steps + torch.arange(steps)).reshape(-1)  # (B*T,) each image's reference row
+        x = pred.float().reshape(-1, *pred.shape[2:])
+        out = [_feature_distance(self._features(xs), [layer[part] for layer in known])
+               for xs, part in zip(x.split(self.chunk_size), rows.split(self.chunk_size))]
+        return torch.cat(out).reshape(pred.shape[:2])
+
+
+def _feature_distance(fx: list[torch.Tensor], fy: list[torch.Tensor]) -> torch.Tensor:
+    """(N,) the mean over layers of the mean squared difference of unit-normalised feature maps."""
+    return torch.stack([(x - y).square().mean(dim=(1, 2, 3)) for x, y in zip(fx, fy)]).mean(dim=0)
 
 
 def summarize_horizons(values: torch.Tensor, horizons: tuple[int, ...] = (1, 8, 32)) -> dict[str, float | None]:
