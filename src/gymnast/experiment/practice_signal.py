@@ -15,8 +15,8 @@ For B fresh scenes (new data seeds, as `gymnast rl --fresh-scenes` draws them) t
 G rollouts each at the rollout temperature in the world model, closed loop on the imagined frames;
 the same actions are replayed in the real world, and each rollout's real outcome at horizon h is
 success within its first h actions. Every *readout* scores the imagined rollouts: the reward's own
-score (a judge's verdict) and, for a learned judge, its probability (the largest over the frames,
-a continuous score), each on the video cut after h actions. Two references are read out too: the
+score (a judge's verdict, a progress judge's degree) and, for a per-frame 0/1 judge, its
+probability (the largest over the frames, a continuous score), each on the video cut after h actions. Two references are read out too: the
 same readouts of the real replay's video, which separates the reward's own error from the world
 model's (the judge sees what really happened), and the real world's dense reward of the replay
 (Meta-World's, with which RL in the real world did learn, results/rl/reach_real), a signal known
@@ -196,6 +196,9 @@ def measure_signal(policy: Policy, world_model: WorldModel, reward: Reward, conf
         "seconds": seconds,
         "rollouts": records,
     }
+    longest = next(row for row in report["readouts"] if row["readout"] == SCORE and row["horizon"] == config.horizon)
+    logger.info("signal: advantage correlation %s over %d rollouts at horizon %d", longest["advantage_correlation"],
+                len(records), config.horizon)
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
         write_json(out / "signal.json", report)
