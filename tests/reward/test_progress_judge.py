@@ -9,7 +9,7 @@ import torch
 
 from gymnast.reward.judge import JudgeConfig
 from gymnast.reward.progress_judge import ProgressJudge, progress_loss, progress_targets
-from gymnast.reward.select import make_reward
+from gymnast.reward.select import make_reward, measure_judge
 from gymnast.reward.spec import RewardSpec
 from gymnast.reward.train_judge import JUDGE_PRESETS, FramePool, Video, load_judge, train_judge
 
@@ -61,3 +61,7 @@ def test_a_trained_progress_judge_reports_correlations_and_loads_as_a_continuous
     judge = make_reward(RewardSpec.judge(tmp_path / "judge"))
     assert isinstance(judge, ProgressJudge) and not judge.binary
     assert load_judge(tmp_path / "judge").backend == "progress-judge"
+    # eval-judge measures it as train-judge did: correlations, not a threshold's TPR/FPR
+    measured = measure_judge(RewardSpec.judge(tmp_path / "judge"), tiny_dataset, tmp_path / "eval.json",
+                             heldout_fraction=DEBUG.heldout_fraction)
+    assert measured["real_frame_pearson"] == report["real_frame_pearson"] and "real_tpr" not in measured

@@ -50,8 +50,10 @@ def make_reward(spec: RewardSpec, world_model: WorldModel | None = None) -> Rewa
 def measure_judge(reward: RewardSpec, data: Path, out: Path, wm: Path | None = None, heldout_fraction: float = 0.1,
                   device: str = "auto") -> dict:
     """`evaluate_judge` of the 0/1 judge `reward` (judge:RUN or vlm:MODEL@BASE_URL) on the episodes of
-    the held-out scenes of `data`, and with `wm` on its re-imaginings of them; written to `out` (JSON).
-    A learned judge and the world model run on `device`."""
+    the held-out scenes of `data`, and with `wm` on its re-imaginings of them, or `evaluate_progress`
+    of a progress judge (which gives degrees, not verdicts); written to `out` (JSON). A learned
+    judge and the world model run on `device`."""
+    from gymnast.reward.progress_judge import evaluate_progress
     from gymnast.reward.train_judge import evaluate_judge, heldout_videos
 
     if reward.kind not in ("judge", "vlm"):
@@ -60,7 +62,8 @@ def measure_judge(reward: RewardSpec, data: Path, out: Path, wm: Path | None = N
     judge = make_reward(reward)
     if isinstance(judge, torch.nn.Module):  # a learned judge; a VLM runs wherever its server does
         judge.to(where)
-    report = evaluate_judge(judge, heldout_videos(EpisodeDataset(data), heldout_fraction, wm, where))
+    measure = evaluate_judge if judge.binary else evaluate_progress
+    report = measure(judge, heldout_videos(EpisodeDataset(data), heldout_fraction, wm, where))
     report |= {"reward": str(reward), "data": str(data), "wm": str(wm) if wm else None}
     write_json(out, report)
     return report
