@@ -88,6 +88,14 @@ def test_a_progress_judge_is_read_as_its_score_at_every_horizon():
         assert torch.allclose(readouts["score"][h], judge.score(frames[:, : h + 1], ["push the puck"] * 2), atol=1e-6)
 
 
+def test_a_reward_that_reads_more_than_the_video_is_refused_before_anything_loads(tmp_path):
+    from gymnast.experiment.practice_signal import measure_signal_runs
+
+    for name in ("verified", "sim", "sim-dense"):
+        with pytest.raises(ValueError, match="rl-signal reads a judge"):
+            measure_signal_runs(tmp_path / "no-policy", tmp_path / "no-wm", RewardSpec.parse(name), SignalConfig())
+
+
 def test_settings_that_cannot_rank_are_refused():
     with pytest.raises(ValueError, match="group_size"):
         SignalConfig(group_size=1)

@@ -53,7 +53,7 @@ from gymnast.envs.starts import Start, scene_starts
 from gymnast.envs.tasks import DATA_SEEDS
 from gymnast.envs.workers import parse_runner
 from gymnast.policy.base import Policy
-from gymnast.reward.base import Reward, RewardContext, RewardNeeds
+from gymnast.reward.base import Reward, RewardContext
 from gymnast.reward.sim import META_WORLD_MAX_STEP_REWARD
 from gymnast.reward.spec import RewardSpec
 from gymnast.rl.grpo import group_advantages
@@ -362,10 +362,10 @@ def measure_signal_runs(policy: str | Path, wm: str | Path, reward: RewardSpec, 
     from gymnast.reward.select import make_reward
     from gymnast.world_model.base import load_world_model
 
+    if reward.kind not in ("judge", "vlm"):  # said before anything loads
+        raise ValueError(f"--reward {reward} reads more than the imagined video; rl-signal reads a judge "
+                         "(judge:RUN or vlm:MODEL@BASE_URL)")
     world_model = load_world_model(wm)
     judge = make_reward(reward, world_model)
-    if judge.needs != RewardNeeds():
-        raise ValueError(f"--reward {reward} reads more than the imagined video; rl-signal reads a judge's verdict "
-                         "(judge:RUN or vlm:MODEL@BASE_URL)")
     labels = {"policy": str(policy), "wm": str(wm), "reward": str(reward)}
     return measure_signal(load_policy(policy), world_model, judge, config, out, progress, labels)
