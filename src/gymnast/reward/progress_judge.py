@@ -26,6 +26,7 @@ from gymnast.reward.base import RewardContext
 from gymnast.reward.frame_judge import FrameJudge
 from gymnast.reward.sim import META_WORLD_MAX_STEP_REWARD
 from gymnast.utils.device import to_device
+from gymnast.world_model.metrics import pearson
 
 
 class ProgressJudge(FrameJudge):
@@ -79,14 +80,8 @@ def evaluate_progress(judge: ProgressJudge, videos: Sequence) -> dict:
             means.append(video.progress[1:].mean())
         predicted, truth = torch.cat(predicted), torch.cat(truth)
         prefix = "imagined" if imagined else "real"
-        report |= {f"{prefix}_frame_pearson": _pearson(predicted, truth),
+        report |= {f"{prefix}_frame_pearson": pearson(predicted, truth),
                    f"{prefix}_frame_mae": round(float((predicted - truth).abs().mean()), 4),
-                   f"{prefix}_video_pearson": _pearson(torch.stack(scores), torch.stack(means)),
+                   f"{prefix}_video_pearson": pearson(torch.stack(scores), torch.stack(means)),
                    f"{prefix}_videos": len(chosen)}
     return report
-
-
-def _pearson(x: torch.Tensor, y: torch.Tensor) -> float | None:
-    x, y = x.double() - x.double().mean(), y.double() - y.double().mean()
-    norm = float(x.norm() * y.norm())
-    return round(float((x * y).sum()) / norm, 4) if norm > 0 else None

@@ -40,7 +40,7 @@ from gymnast.world_model.base import load_world_model, rollout
 from gymnast.world_model.controllability import ControllabilityConfig, check_controllability
 from gymnast.world_model.data import split_episodes
 from gymnast.world_model.ensemble import EnsembleWorldModel, is_ensemble, member_paths
-from gymnast.world_model.metrics import PerceptualDistance, masked_psnr, moving_mask, psnr, ssim, summarize_horizons, to_unit_float
+from gymnast.world_model.metrics import PerceptualDistance, masked_psnr, moving_mask, pearson, psnr, ssim, summarize_horizons, to_unit_float
 from gymnast.world_model.videos import side_by_side, write_gif, write_side_by_side
 
 logger = logging.getLogger(__name__)
@@ -162,15 +162,9 @@ def disagreement_error(table: dict[str, np.ndarray]) -> dict[str, float | None]:
     valid = np.isfinite(disagreement) & np.isfinite(error)  # (N, T)
     with np.errstate(all="ignore"):  # all-NaN horizons
         centred = [v - np.nanmean(np.where(valid, v, np.nan), axis=0, keepdims=True) for v in (disagreement, error)]
-    return {"disagreement_error_corr": _pearson(disagreement[valid], error[valid]),
-            "disagreement_error_spearman": _pearson(_ranks(disagreement[valid]), _ranks(error[valid])),
-            "disagreement_error_corr_same_step": _pearson(centred[0][valid], centred[1][valid])}
-
-
-def _pearson(x: np.ndarray, y: np.ndarray) -> float | None:
-    if len(x) < 3 or np.std(x) == 0 or np.std(y) == 0:
-        return None
-    return round(float(np.corrcoef(x, y)[0, 1]), 4)
+    return {"disagreement_error_corr": pearson(disagreement[valid], error[valid]),
+            "disagreement_error_spearman": pearson(_ranks(disagreement[valid]), _ranks(error[valid])),
+            "disagreement_error_corr_same_step": pearson(centred[0][valid], centred[1][valid])}
 
 
 def _ranks(x: np.ndarray) -> np.ndarray:

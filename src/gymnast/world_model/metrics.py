@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import torch
 import torch.nn.functional as F
 from torch import nn
@@ -197,6 +198,15 @@ class PerceptualDistance(nn.Module):
 def _feature_distance(fx: list[torch.Tensor], fy: list[torch.Tensor]) -> torch.Tensor:
     """(N,) the mean over layers of the mean squared difference of unit-normalised feature maps."""
     return torch.stack([(x - y).square().mean(dim=(1, 2, 3)) for x, y in zip(fx, fy)]).mean(dim=0)
+
+
+def pearson(x, y) -> float | None:
+    """Pearson correlation of two equally long 1-D sequences, rounded to 4 decimals; None where it
+    is undefined or means little (fewer than 3 values, or one side constant)."""
+    x, y = np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)
+    if len(x) < 3 or np.std(x) == 0 or np.std(y) == 0:
+        return None
+    return round(float(np.corrcoef(x, y)[0, 1]), 4)
 
 
 def summarize_horizons(values: torch.Tensor, horizons: tuple[int, ...] = (1, 8, 32)) -> dict[str, float | None]:
