@@ -9,7 +9,9 @@ world model has threads (the same cores), a stricter comparison reported beside 
     .venv/bin/python benchmarks/world_model.py [--wm RUN] [--against RUN] [--chunk 5] [--steps 40] [--out JSON]
 
 Without --wm, an untrained model of the default architecture is timed (the speed does not depend
-on the weights). With --against, a second world model (another backend, say) is timed at batch 64
+on the weights). With --state, a grounded state model (`gymnast train-state`) imagines the state
+and reads the reward of the same batch-64 rollouts beside the video model, in the same rounds
+(`imagined_fps_b64_grounded`: frames per second with both). With --against, a second world model (another backend, say) is timed at batch 64
 in the same rounds, so the two compare on equal terms. Prints and writes --out (default
 benchmarks/results/world_model.json).
 """
@@ -31,6 +33,7 @@ import gymnast  # noqa: F401  (sets MUJOCO_GL)
 from gymnast.utils.atomic import write_json
 from gymnast.world_model.base import load_world_model
 from gymnast.world_model.embedded import EmbeddedWorldModel, EmbeddedWorldModelConfig
+from gymnast.world_model.state_model import load_state_model
 
 
 RESULTS = Path(__file__).parent / "results" / "world_model.json"
@@ -51,6 +54,22 @@ def imagined_fps(model, batch: int, chunk: int, steps: int) -> tuple[float, floa
     return batch * chunk * steps / elapsed, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
+def grounded_fps(model, state_model, batch: int, chunk: int, steps: int) -> float:
+    """Frames per second of imagining `steps` chunks of a batch with the video model and, for the
+    same actions, the state model's states and rewards (as `--reward state:RUN` scores a rollout)."""
+    size = model.image_size
+    context = torch.randint(0, 256, (batch, model.context_frames, size, size, 3), dtype=torch.uint8)
+    actions = torch.rand(steps, batch, chunk, model.action_dim) * 2 - 1
+    start, text = torch.randn(batch, state_model.config.state_dim), torch.randn(batch, state_model.config.text_dim)
+    state = model.init_state(context)
+    model.step(state, actions[0])  # warm-up
+    started = time.perf_counter()
+    for k in range(steps):
+        state, _ = model.step(state, actions[k])
+    state_model.imagine(start, actions.permute(1, 0, 2, 3).flatten(1, 2), text)  # (B, steps x chunk, A)
+    return batch * chunk * steps / (time.perf_counter() - started)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--wm", type=Path, default=None, help="world-model run to time (default: an untrained default model)")
@@ -59,6 +78,7 @@ def main() -> None:
     parser.add_argument("--real-steps", type=int, default=1500, help="real env steps per process")
     parser.add_argument("--rounds", type=int, default=3, help="alternating rounds of the batch-64 and real-env measurements")
     parser.add_argument("--against", type=Path, default=None, help="another world-model run timed at batch 64 in the same rounds")
+    parser.add_argument("--state", type=Path, default=None, help="a state-model run timed beside the video model")
     parser.add_argument("--out", type=Path, default=RESULTS, help="the JSON to write")
     args = parser.parse_args()
     from real_env import steps_per_second  # the same measurement as benchmarks/real_env.py
@@ -71,10 +91,13 @@ def main() -> None:
     # The headline ratio: imagination at batch 64 and the real env, measured in alternation so a
     # noisy neighbour slows both alike; the medians of the rounds are reported.
     other = load_world_model(args.against) if args.against else None
-    imagined, real, against = [], [], []
+    state_model = load_state_model(args.state) if args.state else None
+    imagined, real, against, grounded = [], [], [], []
     for _ in range(args.rounds):
         if other is not None:
             against.append(imagined_fps(other, 64, args.chunk, args.steps)[0])
+        if state_model is not None:
+            grounded.append(grounded_fps(model, state_model, 64, args.chunk, args.steps))
         fps, peak = imagined_fps(model, 64, args.chunk, args.steps)
         imagined.append(fps)
         real.append(steps_per_second("drawer-open-v3", args.real_steps, model.image_size, 1))
@@ -102,6 +125,10 @@ def main() -> None:
         result |= {"against": str(args.against), "against_imagined_fps_b64": round(statistics.median(against), 1),
                    "ratio_b64_vs_against": round(result["imagined_fps_b64"] / statistics.median(against), 2)}
         result["rounds"]["against_imagined_fps_b64"] = [round(x, 1) for x in against]
+    if state_model is not None:
+        result |= {"state": str(args.state), "imagined_fps_b64_grounded": round(statistics.median(grounded), 1),
+                   "ratio_b64_grounded": round(statistics.median(grounded) / real_one, 2)}
+        result["rounds"]["imagined_fps_b64_grounded"] = [round(x, 1) for x in grounded]
     print(json.dumps(result, indent=2))
     write_json(args.out, result)
 

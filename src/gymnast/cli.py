@@ -12,7 +12,7 @@ import tyro
 
 import gymnast  # noqa: F401  (sets MUJOCO_GL before anything imports mujoco)
 from gymnast.cli_models import (Preset, eval_judge, eval_wm, experiment, imagination, make_ensemble, object_fidelity,
-                                rl, rl_signal, serve_judge, train_judge, train_wm, worldgym)
+                                practice_summary, rl, rl_signal, serve_judge, train_judge, train_state, train_wm, worldgym)
 from gymnast.cli_settings import resolve, saved_inputs
 from gymnast.config import EnvConfig
 from gymnast.data.frames import Fit
@@ -283,6 +283,7 @@ COMMANDS = {
     "sft": sft,
     "eval": evaluate_command,
     "train-wm": train_wm,
+    "train-state": train_state,
     "eval-wm": eval_wm,
     "make-ensemble": make_ensemble,
     "object-fidelity": object_fidelity,
@@ -294,6 +295,7 @@ COMMANDS = {
     "dyna": dyna,
     "imagination": imagination,
     "rl-signal": rl_signal,
+    "practice-summary": practice_summary,
     "worldgym": worldgym,
     "contact-sheet": contact_sheet,
     "gap-report": gap_report,

@@ -73,6 +73,68 @@ def train_wm(
     print(f"world model: {checkpoint}")
 
 
+def train_state(
+    out: Path,
+    data: Path | None = None,
+    resume: bool = False,
+    steps: int = 4000,
+    unroll: int = 16,
+    seed: int = 0,
+    ridge: float = 1e-4,
+    last_action: bool = True,
+) -> None:
+    """Train the grounded state model on a dataset's recorded states, rewards and success flags: the
+    state under the actions, and a reward head read off it (`--reward state:OUT`); writes
+    OUT/eval.json, its open-loop errors on the held-out scenes.
+
+    Args:
+        out: run directory: checkpoints, metrics.jsonl, config.json, eval.json.
+        data: dataset directory (from `gymnast collect`, or a LeRobot dataset with observation.state);
+            with --resume, the run's own.
+        resume: continue the run in OUT from its last checkpoint, with the settings and data saved there.
+        steps: optimizer steps.
+        unroll: steps imagined open loop per training window.
+        seed: seed of the weights and of the windows drawn.
+        ridge: start the dynamics' linear path at the least-squares fit of the recorded steps with this
+            ridge penalty (0: at zero).
+        last_action: condition each step on the action before it too.
+    """
+    from gymnast.utils.settings import from_json, saved_settings
+    from gymnast.world_model.train_state import StateTrainConfig, train_state_model
+
+    if resume:
+        config, data = from_json(StateTrainConfig, saved_settings(out, "train")), Path(saved_settings(out)["data"])
+    elif data is None:
+        raise ValueError("train-state needs --data (or --resume to continue the run in --out)")
+    else:
+        config = StateTrainConfig(steps=steps, unroll=unroll, seed=seed, ridge=ridge, last_action=last_action)
+    checkpoint = train_state_model(data, out, config, resume=resume)
+    print(f"state model: {checkpoint}; held-out errors: {out / 'eval.json'}")
+
+
+def practice_summary(
+    out: Path,
+    run: tuple[str, ...],
+) -> None:
+    """Gather RL runs into a practice summary (results/practice/summary.json): per task set, SFT (the
+    first run's step-0 evaluation) and each RL arm's last real-world evaluation.
+
+    Args:
+        out: the JSON to write.
+        run: TASKSET:ARM=RUN, one per run; ARM is imagined_rl or real_rl (e.g. weak:imagined_rl=runs/practice_weak).
+    """
+    from gymnast.experiment.practice_summary import practice_summary as summarize
+
+    runs: dict[str, dict[str, Path]] = {}
+    for item in run:
+        named, _, path = item.partition("=")
+        task_set, _, arm = named.partition(":")
+        if not (task_set and arm and path):
+            raise ValueError(f"--run {item!r}: expected TASKSET:ARM=RUN, e.g. weak:imagined_rl=runs/practice_weak")
+        runs.setdefault(task_set, {})[arm] = Path(path)
+    print(json.dumps(summarize(runs, out), indent=2))
+
+
 def eval_wm(
     wm: Path,
     data: Path,
@@ -440,19 +502,23 @@ def rl_signal(
     workers: int = 2,
     runner: str = "local",
     seed: int = 0,
+    data: Path | None = None,
+    keyframes: Literal["first", "uniform", "near_success", "failures"] = "uniform",
+    heldout_fraction: float = 0.1,
 ) -> None:
     """Measure whether RL in imagination would push the policy where the real world would: GRPO
-    groups sampled in the world model and judged, their actions replayed in the real world, and the
-    correlation of the imagined advantages with the real ones by horizon; writes OUT/signal.json
-    and OUT/signal.md.
+    groups sampled in the world model and judged, their actions replayed in the real world from the
+    same starts, and the correlation of the imagined advantages with the real ones (real success,
+    and the real dense return) by horizon; writes OUT/signal.json and OUT/signal.md.
 
     Args:
         policy: SFT/RL run (or checkpoint) directory.
         wm: world-model run (or checkpoint) directory.
-        reward: a reward of the video alone: judge:RUN or vlm:MODEL@BASE_URL (key from OPENAI_API_KEY).
+        reward: a reward of the video alone: judge:RUN or vlm:MODEL@BASE_URL (key from OPENAI_API_KEY);
+            or a grounded world model's reward head, state:RUN (from `gymnast train-state`).
         out: report directory.
         tasks: task names and/or sets, comma-separated (default: the four weak tasks).
-        starts_per_task: fresh scenes (GRPO groups) per task.
+        starts_per_task: starts (GRPO groups) per task.
         group_size: rollouts per scene.
         temperature: the policy's sampling temperature.
         horizons: horizons read out (the largest is the rollouts' length).
@@ -460,10 +526,18 @@ def rl_signal(
         workers: simulator processes for the real-world replays.
         runner: where they run: local, ray or ray:ADDRESS (see `gymnast eval --help`).
         seed: seed of the scenes and of the policy's samples.
+        data: start from keyframes of this dataset's held-out episodes (segments as short as
+            --horizons), restored in the real world by replaying the actions that led there;
+            without it, from fresh scenes' first frames.
+        keyframes: how keyframes are drawn: first, uniform, near_success (the frames before the first
+            success) or failures (episodes that failed).
+        heldout_fraction: the share of --data's scenes the models held out, where keyframes come from;
+            0 for a dataset they never trained on (e.g. the policy's own rollouts on new seeds).
     """
     from gymnast.experiment.practice_signal import SignalConfig, measure_signal_runs
 
     config = SignalConfig(tasks=tasks, starts_per_task=starts_per_task, group_size=group_size, temperature=temperature,
-                          horizons=tuple(horizons), batch=batch, workers=workers, runner=runner, seed=seed)
+                          horizons=tuple(horizons), batch=batch, workers=workers, runner=runner, seed=seed,
+                          data=str(data or ""), keyframes=keyframes, heldout_fraction=heldout_fraction)
     measure_signal_runs(policy, wm, RewardSpec.parse(reward), config, out)
     print((out / "signal.md").read_text())

@@ -23,6 +23,24 @@ CommaFloats = Annotated[
 ]
 """A tuple of floats written on the command line as ``0,0.1,0.3``."""
 
+CAMERAS = ("front", "gripper")
+"""The named views of a scene (posed in `gymnast.envs.cameras`): ``front``, the fixed free camera
+`EnvConfig.camera`; ``gripper``, a camera that moves with the gripper and looks at its fingers."""
+
+CameraNames = Annotated[
+    tuple[str, ...],
+    tyro.constructors.PrimitiveConstructorSpec(
+        nargs=1,
+        metavar="NAME,NAME,...",
+        instance_from_str=lambda args: tuple(x.strip() for x in args[0].split(",") if x.strip()),
+        is_instance=lambda value: isinstance(value, tuple),
+        str_from_instance=lambda value: [",".join(value)],
+    ),
+    # One flag, --cameras, wherever an EnvConfig is on the command line (`gymnast collect --cameras`).
+    tyro.conf.arg(prefix_name=False),
+]
+"""Camera names written on the command line as ``front,gripper``."""
+
 
 @dataclass(frozen=True)
 class CameraPose:
@@ -62,10 +80,17 @@ class EnvConfig:
     terminate_on_success: bool = True
     """End the episode at the first step where the task succeeds."""
     camera: CameraPose = field(default_factory=CameraPose)
-    """The fixed free camera that shows the arm, the objects and the goal."""
+    """The fixed free camera that shows the arm, the objects and the goal (the front view)."""
+    cameras: CameraNames = ("front",)
+    """Views rendered into every observation (front, gripper), comma-separated; the first is the
+    primary view, obs["image"], and a dataset's frames (see gymnast.envs.metaworld)."""
 
     def __post_init__(self) -> None:
         if self.image_size < 16:
             raise ValueError(f"EnvConfig.image_size must be at least 16 pixels, got {self.image_size}")
         if self.horizon < 1:
             raise ValueError(f"EnvConfig.horizon must be positive, got {self.horizon}")
+        unknown = [name for name in self.cameras if name not in CAMERAS]
+        if not self.cameras or unknown or len(set(self.cameras)) < len(self.cameras):
+            raise ValueError(f"EnvConfig.cameras must be one or more distinct names of {CAMERAS}, "
+                             f"got {','.join(self.cameras) or 'none'}")

@@ -57,7 +57,8 @@ def test_env_passes_gymnasium_check_env():
 def test_observation_matches_its_space_and_hides_the_simulator_state(push_env):
     obs, info = push_env.reset(seed=0)
     assert push_env.observation_space.contains(obs)
-    assert set(obs) == {"image", "state"}
+    assert set(obs) == {"image", "images", "state"}
+    assert list(obs["images"]) == ["front"] and obs["images"]["front"] is obs["image"]
     assert obs["image"].shape == (48, 48, 3) and obs["image"].dtype == np.uint8
     assert info["env_state"].shape == (39,)
 

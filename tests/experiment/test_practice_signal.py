@@ -88,6 +88,36 @@ def test_a_progress_judge_is_read_as_its_score_at_every_horizon():
         assert torch.allclose(readouts["score"][h], judge.score(frames[:, : h + 1], ["push the puck"] * 2), atol=1e-6)
 
 
+def test_a_state_models_reward_head_is_read_as_its_score_and_its_verdict_at_every_horizon():
+    from gymnast.reward.base import RewardContext
+    from gymnast.reward.state_reward import StateReward
+    from gymnast.world_model.state_model import StateModel, StateModelConfig
+
+    reward = StateReward(StateModel(StateModelConfig(state_dim=6, hidden=8, layers=1)).eval())
+    frames = torch.zeros(3, 11, 8, 8, 3, dtype=torch.uint8)
+    context = RewardContext(start_state=torch.randn(3, 6), actions=torch.rand(3, 10, 4) * 2 - 1)
+    instructions = ["push the puck"] * 3
+    readouts = read_out(reward, frames, instructions, (5, 10), context)
+    assert set(readouts) == {"score", "verdict"}
+    for h in (5, 10):
+        cut = RewardContext(start_state=context.start_state, actions=context.actions[:, :h])
+        assert torch.equal(readouts["score"][h], reward.score(frames[:, : h + 1], instructions, cut))
+        assert torch.equal(readouts["verdict"][h], reward.verdict(instructions, cut))
+    with pytest.raises(ValueError, match="start states and the actions"):
+        read_out(reward, frames, instructions, (5,))
+
+
+def test_the_return_correlation_holds_the_readout_against_the_real_dense_return():
+    real = torch.tensor([[1, 0, 0, 0], [0, 0, 0, 0]], dtype=torch.bool)
+    returns = torch.tensor([[0.9, 0.5, 0.2, 0.1], [0.3, 0.6, 0.1, 0.2]])
+    figures = signal_figures(returns * 2 + 1, real, binary=False, real_return=returns)
+    assert figures["return_correlation"] == pytest.approx(1.0)
+    assert figures["return_ci_low"] == pytest.approx(1.0)
+    backwards = signal_figures(-returns, real, binary=False, real_return=returns)
+    assert backwards["return_correlation"] == pytest.approx(-1.0)
+    assert signal_figures(returns, real, binary=False)["return_correlation"] is None
+
+
 def test_a_reward_that_reads_more_than_the_video_is_refused_before_anything_loads(tmp_path):
     from gymnast.experiment.practice_signal import measure_signal_runs
 

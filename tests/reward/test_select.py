@@ -16,7 +16,7 @@ from gymnast.reward.verified import VerifiedReward
 from gymnast.reward.vlm import VLMJudge, VLMJudgeConfig
 from gymnast.world_model.embedded import EmbeddedWorldModel, EmbeddedWorldModelConfig
 
-SPECS = ["judge:runs/judge", "vlm:gpt-4o@http://127.0.0.1:9/v1", "verified", "sim", "sim-dense"]
+SPECS = ["judge:runs/judge", "state:runs/state", "vlm:gpt-4o@http://127.0.0.1:9/v1", "verified", "sim", "sim-dense"]
 
 
 def _tiny_world_model() -> EmbeddedWorldModel:
@@ -48,7 +48,19 @@ def test_a_judge_reward_loads_its_run(tmp_path):
         make_reward(RewardSpec.judge(tmp_path / "missing"))
 
 
-@pytest.mark.parametrize("spec", ["judge", "judge:", "vlm:gpt-4o", "vlm:@http://x", "dense", ""])
+def test_a_state_reward_loads_its_state_model_run(tmp_path):
+    from gymnast.reward.state_reward import StateReward
+    from gymnast.utils.checkpoint import save_checkpoint
+    from gymnast.world_model.state_model import StateModel, StateModelConfig
+
+    model = StateModel(StateModelConfig(state_dim=5, hidden=8, layers=1))
+    save_checkpoint(tmp_path, 1, model, {"model": model.spec()})
+    reward = make_reward(RewardSpec.parse(f"state:{tmp_path}"))
+    assert isinstance(reward, StateReward) and reward.model.config.state_dim == 5
+    assert reward.needs.start_state and not reward.binary
+
+
+@pytest.mark.parametrize("spec", ["judge", "judge:", "state:", "vlm:gpt-4o", "vlm:@http://x", "dense", ""])
 def test_malformed_names_list_the_valid_forms(spec):
     with pytest.raises(ValueError, match="vlm:MODEL@BASE_URL"):
         RewardSpec.parse(spec)

@@ -12,6 +12,10 @@ Every episode is played by the rollout engine (`gymnast.envs.engine.play_episode
 `Actor`, which returns a chunk of K actions executed open-loop: a scripted behaviour (expert,
 noisy expert, failure) is a chunk of one action read from the simulator state. A learned policy's actor is built above this layer (data/ never imports the
 policies) and passed in as an `ActorFactory`; see `gymnast.eval.record`.
+
+Cameras: `EnvConfig.cameras` names the views recorded (``--cameras front,gripper``); each becomes a
+video feature of the dataset, the first being the primary (`Episode.frames`; see
+`gymnast.data.lerobot_writer`). The default, the front camera alone, records what collect always has.
 """
 
 from __future__ import annotations
@@ -24,7 +28,7 @@ import math
 from collections import defaultdict
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 from tqdm import tqdm
@@ -74,7 +78,7 @@ class CollectConfig:
     flush_every: int = 50
     """Consolidate staged episodes into dataset files after this many."""
     env: EnvConfig = field(default_factory=EnvConfig)
-    """Camera, image size and horizon."""
+    """Cameras, image size and horizon."""
 
     def __post_init__(self) -> None:
         if self.episodes_per_task < 0:
@@ -159,9 +163,11 @@ def record_episode(job: EpisodeJob, make_actor: ActorFactory | None = None) -> E
         actor: Actor = ScriptedActor(make_behaviour(job.behaviour, job.task, job.noise, job.seed))
     else:
         actor = make_actor(job)
-    run = play_episode(env, actor, job.seed, record=RECORDABLE)
+    recorder = _ViewRecorder(env) if len(job.env.cameras) > 1 else None
+    run = play_episode(recorder or env, actor, job.seed, record=RECORDABLE)
+    views = {} if recorder is None else {name: np.stack(frames) for name, frames in recorder.views.items()}
     return Episode(
-        frames=np.stack(run.frames),
+        frames=views[job.env.cameras[0]] if views else np.stack(run.frames),
         states=np.stack(run.states),
         env_states=np.stack(run.env_states).astype(np.float32),
         actions=np.stack(run.actions).astype(np.float32),
@@ -176,7 +182,37 @@ def record_episode(job: EpisodeJob, make_actor: ActorFactory | None = None) -> E
             seed=job.seed,
             env_variant=env.gap.env_variant,
         ),
+        views=views,
     )
+
+
+class _ViewRecorder:
+    """The env as the rollout engine plays it, keeping every observation's camera views on the way.
+
+    The engine records the primary view (``obs["image"]``) alone; the other views come from the
+    very same observations, so every camera of an episode shows the same instants.
+    """
+
+    def __init__(self, env: MetaWorldEnv) -> None:
+        self.env = env
+        self.views: dict[str, list[np.ndarray]] = {name: [] for name in env.config.cameras}
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.env, name)  # what actors and the engine read: env_state, instruction, task
+
+    def reset(self, **kwargs):
+        obs, info = self.env.reset(**kwargs)
+        self._keep(obs)
+        return obs, info
+
+    def step(self, action):
+        obs, *rest = self.env.step(action)
+        self._keep(obs)
+        return (obs, *rest)
+
+    def _keep(self, obs: dict) -> None:
+        for name, frame in obs["images"].items():
+            self.views[name].append(frame)
 
 
 def collect(
@@ -196,7 +232,7 @@ def collect(
     """
     out = Path(out)
     _check_settings(out, config)
-    writer = LeRobotWriter(out, fps=MetaWorldEnv.metadata["render_fps"])
+    writer = LeRobotWriter(out, fps=MetaWorldEnv.metadata["render_fps"], cameras=config.env.cameras)
     plan = plan_episodes(config, None if make_actor is None else make_actor.behaviour)
     done = writer.keys()
     todo = [job for job in plan if job.key not in done]
@@ -231,10 +267,19 @@ def success_table(episodes: list[EpisodeInfo]) -> dict:
 
 def _check_settings(out: Path, config: CollectConfig) -> None:
     settings = {"env": dataclasses.asdict(config.env), "gap": config.gap}
+    if config.env.cameras == EnvConfig().cameras:
+        # Written as before cameras were a setting: one-camera datasets keep their bytes, and those
+        # recorded then (no "cameras" in the file) resume.
+        del settings["env"]["cameras"]
     path = out / SETTINGS_FILE
     if path.exists():
         recorded = json.loads(path.read_text())
         current = json.loads(json.dumps(settings))  # tuples become lists, as in the file
+        cameras = recorded.get("env", {}).get("cameras", list(EnvConfig().cameras))
+        if cameras != list(config.env.cameras):
+            raise ValueError(f"{path}: this dataset records cameras {','.join(cameras)}, not "
+                             f"{','.join(config.env.cameras)}; rerun with --cameras {','.join(cameras)} or "
+                             "record into a new directory")
         for name in current:
             if recorded.get(name) != current[name]:
                 raise ValueError(

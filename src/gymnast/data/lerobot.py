@@ -5,6 +5,8 @@
     dataset = EpisodeDataset("data/demo")
     episode = dataset.load(0)                # frames (T+1, H, W, 3) uint8, actions (T, A), ...
     square = dataset.fitted(96, "crop")      # the same episodes with 96 x 96 frames (gymnast.data.frames)
+    both = EpisodeDataset("data/demo", cameras=("front", "gripper"))
+    both.load(0).views["gripper"]            # (T+1, H, W, 3) uint8; views["front"] is frames
 
 Datasets made elsewhere have no ``gymnast/...`` episode columns; their `EpisodeInfo` gets the
 defaults documented in `gymnast.data.lerobot_format.episode_info`. ``docs/dataset_format.md``
@@ -18,6 +20,7 @@ from __future__ import annotations
 import copy
 import functools
 from collections import OrderedDict
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -36,6 +39,7 @@ from gymnast.data.lerobot_format import (
     episode_info,
     has_info_columns,
     image_key,
+    match_frames_to_rows,
     read_parquet,
 )
 from gymnast.data.lerobot_writer import LeRobotWriter
@@ -55,6 +59,9 @@ class EpisodeDataset:
         root: dataset directory (the one holding ``meta/info.json``).
         camera: camera to read, e.g. ``front``; default: the first camera whose frames exist (a
             video feature with its video files, else an image feature with its column).
+        cameras: several cameras to read, e.g. ``("front", "gripper")``: the first is the primary
+            (`Episode.frames`, and `camera` if given must be it), and `Episode.views` holds them all.
+            Their frames must have one size and, in every episode, one count. Default: `camera`.
 
     Attributes:
         root: dataset directory.
@@ -63,6 +70,8 @@ class EpisodeDataset:
         fps: frames per second.
         image_key: the camera feature read, e.g. ``observation.images.front``.
         camera_key: the camera name, e.g. ``front``.
+        cameras: the cameras read, the primary first (`Episode.views` has each).
+        available_cameras: every camera of the dataset, name -> feature (video ones, then image ones).
         camera_shape: (H, W, 3) of the camera's frames as stored.
         image_shape: (H, W, 3) of the frames `load` returns: `camera_shape`, or square once `fitted`.
         action_dim: width A of the ``action`` feature.
@@ -70,10 +79,12 @@ class EpisodeDataset:
     Raises:
         FileNotFoundError: ``meta/info.json`` or a metadata file is missing.
         DatasetError: unsupported ``codebase_version``, malformed metadata, no ``action`` feature,
-            or no camera with frames (the message names the file and field).
+            no camera with frames, or a camera asked for that has none or another frame size than
+            the first (the message names the camera and the file or field).
+        ValueError: `cameras` is empty, names a camera twice or does not start with `camera`.
     """
 
-    def __init__(self, root: str | Path, camera: str | None = None) -> None:
+    def __init__(self, root: str | Path, camera: str | None = None, cameras: Sequence[str] | None = None) -> None:
         self.root = Path(root)
         info_path = self.root / lerobot_v3.INFO_PATH
         self.info = lerobot_v3.load_info(self.root)
@@ -86,10 +97,20 @@ class EpisodeDataset:
         features = lerobot_v3.info_field(self.info, "features", dict, info_path)
         self.fps = lerobot_v3.info_field(self.info, "fps", (int, float), info_path)
         self.action_dim = _action_dim(features, info_path)
-        self.image_key, self._refs = self._camera_refs(features, camera, info_path)
+        names = _check_cameras(camera, cameras)
+        self.image_key, self._refs = self._camera_refs(features, names[0] if names else None, info_path)
         self.camera_key = self.image_key.removeprefix("observation.images.")
         self.camera_shape = _image_shape(features[self.image_key], self.image_key, info_path)
         self.image_shape = self.camera_shape
+        self.cameras = (self.camera_key, *names[1:])
+        self._keys = {self.camera_key: self.image_key} | {name: image_key(name) for name in names[1:]}
+        self.available_cameras = {key.removeprefix("observation.images."): key for key in _camera_features(features)}
+        self._view_refs = {name: self._named_refs(features, name, info_path) for name in names[1:]}
+        for name in names[1:]:
+            shape = _image_shape(features[image_key(name)], image_key(name), info_path)
+            if shape != self.camera_shape:
+                raise DatasetError(f"{info_path}: camera {name!r} has frames of shape {shape} but camera "
+                                   f"{self.camera_key!r} has {self.camera_shape}; cameras read together need one size")
         self._fit: tuple[int, Fit] | None = None
         self._tables: OrderedDict[Path, pa.Table] = OrderedDict()
 
@@ -123,30 +144,27 @@ class EpisodeDataset:
         return [self._info(ref) for ref in self._refs]
 
     def load(self, i: int) -> Episode:
-        """Decode episode ``i``: its frames, states, actions, rewards and successes.
+        """Decode episode ``i``: its frames (each camera's in `views`), states, actions, rewards and successes.
 
         Raises:
             IndexError: no episode ``i``.
             FileNotFoundError: its data or video file is missing.
-            DatasetError: a file is unreadable or truncated, or a field is missing or of the
-                wrong type; the message names the file and field.
+            DatasetError: a file is unreadable or truncated, a field is missing or of the wrong
+                type (the message names the file and field), or a camera's frames differ in count
+                or size from the primary's (it names the camera, the episode and the file).
         """
         if not 0 <= i < len(self._refs):
             raise IndexError(f"episode {i} is out of range: {self.root} has {len(self._refs)} episodes")
         ref = self._refs[i]
         rows = self._rows(ref)
-        if ref.video_path is None:
-            frames = decode_images(rows, self.image_key, ref.data_path)
-        else:
-            try:
-                # One frame of tolerance, as LeRobot's timestamp matching has; `assemble_episode`
-                # pairs the frames with the rows and warns.
-                frames = decode_video(ref.video_path, *ref.video_span, may_lack=1)
-            except ValueError as e:
-                raise DatasetError(f"episode {ref.index}, field {self.image_key!r}: {e}") from e
+        refs = {self.camera_key: ref} | {name: view_refs[i] for name, view_refs in self._view_refs.items()}
+        views = {name: _decode_frames(refs[name], rows, key) for name, key in self._keys.items()}
+        _check_views(views, refs)
+        # Matched to the rows per camera (they have one count, so alike), then fitted.
+        views = {name: match_frames_to_rows(frames, rows.num_rows, refs[name]) for name, frames in views.items()}
         if self._fit is not None:
-            frames = fit_frames(frames, *self._fit)
-        return assemble_episode(ref, rows, frames)
+            views = {name: fit_frames(frames, *self._fit) for name, frames in views.items()}
+        return assemble_episode(ref, rows, views[self.camera_key], views)
 
     def _camera_refs(self, features: dict, camera: str | None, info_path: Path) -> tuple[str, list[EpisodeRef]]:
         """The camera feature to read and its episodes: the one asked for, or the first with frames.
@@ -155,19 +173,12 @@ class EpisodeDataset:
             DatasetError: the camera asked for is not a feature or has no frames, or no camera has
                 any (the message names each camera and what it lacks).
         """
-        reader = lerobot_v3 if self.version == lerobot_v3.CODEBASE_VERSION else lerobot_v21
         if camera is not None:
-            if image_key(camera) not in features:
-                raise DatasetError(f"{info_path}: no feature {image_key(camera)!r} for camera {camera!r}")
-            refs = reader.episode_refs(self.root, self.info, image_key(camera))
-            lacking = _lacking_frames(refs, image_key(camera))
-            if lacking:
-                raise DatasetError(f"feature {image_key(camera)!r} (camera {camera!r}): {lacking}")
-            return image_key(camera), refs
+            return image_key(camera), self._named_refs(features, camera, info_path)
         reasons = []
         for key in _camera_features(features):
             try:
-                refs = reader.episode_refs(self.root, self.info, key)
+                refs = self._reader.episode_refs(self.root, self.info, key)
             except DatasetError as e:
                 reasons.append(f"{key!r}: {e}")
                 continue
@@ -178,6 +189,28 @@ class EpisodeDataset:
         if not reasons:
             raise DatasetError(f"{info_path}: no feature of dtype 'video' or 'image' in 'features'")
         raise DatasetError(f"{self.root}: no camera has frames to read; " + "; ".join(reasons))
+
+    def _named_refs(self, features: dict, camera: str, info_path: Path) -> list[EpisodeRef]:
+        """The episodes of camera `camera`.
+
+        Raises:
+            DatasetError: the camera is not a feature or lacks frames (the message names the
+                camera and what it lacks).
+        """
+        if image_key(camera) not in features:
+            raise DatasetError(f"{info_path}: no feature {image_key(camera)!r} for camera {camera!r}")
+        refs = self._reader.episode_refs(self.root, self.info, image_key(camera))
+        lacking = _lacking_frames(refs, image_key(camera))
+        if lacking:
+            missing = [ref.index for ref in refs if ref.video_path is not None and not ref.video_path.is_file()]
+            episode = f" (it holds episode {missing[0]}'s frames)" if missing else ""
+            raise DatasetError(f"feature {image_key(camera)!r} (camera {camera!r}): {lacking}{episode}")
+        return refs
+
+    @property
+    def _reader(self):
+        """The module that locates episodes in this dataset's layout."""
+        return lerobot_v3 if self.version == lerobot_v3.CODEBASE_VERSION else lerobot_v21
 
     def _info(self, ref: EpisodeRef) -> EpisodeInfo:
         if has_info_columns(list(ref.columns)) or "next.success" not in self.info["features"]:
@@ -201,6 +234,44 @@ class EpisodeDataset:
                 f"(per {ref.meta_path}), found {table.num_rows}"
             )
         return table
+
+
+def _check_cameras(camera: str | None, cameras: Sequence[str] | None) -> tuple[str, ...]:
+    """The cameras asked for, the primary first; () to read the default camera alone."""
+    if cameras is None:
+        return () if camera is None else (camera,)
+    names = tuple(cameras)
+    if not names or len(set(names)) < len(names) or camera not in (None, names[0]):
+        raise ValueError(f"cameras must be distinct names, starting with camera={camera!r} if given; got {list(names)}")
+    return names
+
+
+def _decode_frames(ref: EpisodeRef, rows: pa.Table, key: str) -> np.ndarray:
+    """The (N, H, W, 3) frames of camera feature `key` in one episode, as stored."""
+    if ref.video_path is None:
+        return decode_images(rows, key, ref.data_path)
+    try:
+        # One frame of tolerance, as LeRobot's timestamp matching has; `match_frames_to_rows`
+        # pairs the frames with the rows and warns.
+        return decode_video(ref.video_path, *ref.video_span, may_lack=1)
+    except ValueError as e:
+        raise DatasetError(f"episode {ref.index}, field {key!r}: {e}") from e
+
+
+def _check_views(views: dict[str, np.ndarray], refs: dict[str, EpisodeRef]) -> None:
+    """Every camera's frames of an episode must have the primary's (first) count and size.
+
+    Raises:
+        DatasetError: naming the camera, the episode, the file and both shapes.
+    """
+    (primary, expected), *others = views.items()
+    for name, frames in others:
+        if frames.shape != expected.shape:
+            ref = refs[name]
+            raise DatasetError(
+                f"{ref.video_path or ref.data_path}: camera {name!r} of episode {ref.index} has frames "
+                f"{frames.shape} (count, H, W, 3) but camera {primary!r} has {expected.shape}"
+            )
 
 
 def _camera_features(features: dict) -> list[str]:

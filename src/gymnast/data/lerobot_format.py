@@ -187,18 +187,23 @@ def image_stats(frames: np.ndarray) -> dict[str, np.ndarray]:
     return stats | {"count": np.array([len(frames)])}  # LeRobot counts images, not pixels
 
 
-def episode_stats(columns: Mapping[str, np.ndarray], video_key: str, frames: np.ndarray) -> dict:
-    """Stats of every numeric feature of one episode, plus the camera's per-channel stats.
+def episode_stats(columns: Mapping[str, np.ndarray], videos: Mapping[str, np.ndarray]) -> dict:
+    """Stats of every numeric feature of one episode, plus each camera's per-channel stats.
 
     Padded actions are left out of the action stats: they are not actions, and zeros would pull
     the normalisation towards 0.
+
+    Args:
+        columns: the episode's data columns (`frame_columns`).
+        videos: each camera feature to its (L, H, W, 3) uint8 frames.
     """
     stats = {}
     for name, values in columns.items():
         if name == "action":
             values = values[~columns["action_is_pad"]]
         stats[name] = feature_stats(values)
-    stats[video_key] = image_stats(frames)
+    for key, frames in videos.items():
+        stats[key] = image_stats(frames)
     return stats
 
 
@@ -344,8 +349,11 @@ def match_frames_to_rows(frames: np.ndarray, n_rows: int, ref: EpisodeRef) -> np
     return frames
 
 
-def assemble_episode(ref: EpisodeRef, rows: pa.Table, frames: np.ndarray) -> Episode:
-    """Build an `Episode` from its L data rows and L frames.
+def assemble_episode(
+    ref: EpisodeRef, rows: pa.Table, frames: np.ndarray, views: Mapping[str, np.ndarray] | None = None
+) -> Episode:
+    """Build an `Episode` from its L data rows and L frames (and every camera's, `views`, the
+    primary's being `frames`: `Episode.views`).
 
     Rows written by gymnast end with one padded action (``action_is_pad``); rows from elsewhere
     pair every frame with an action, and the last action is dropped because the frame it leads
@@ -381,6 +389,6 @@ def assemble_episode(ref: EpisodeRef, rows: pa.Table, frames: np.ndarray) -> Epi
     successes = flags[:n_steps] if flags is not None else np.arange(n_steps) == n_steps - 1
     info = episode_info(ref, flags)
     try:
-        return Episode(frames, states, env_states, actions, rewards, successes, info)
+        return Episode(frames, states, env_states, actions, rewards, successes, info, dict(views or {}))
     except ValueError as e:  # shapes that disagree between fields
         raise DatasetError(f"{path}: episode {ref.index}: {e}") from e

@@ -148,8 +148,15 @@ def episode_refs(root: Path, info: Mapping, image_key: str) -> list[EpisodeRef]:
     return refs
 
 
-def build_features(shapes: Mapping[str, tuple[int, ...]], fps: int, image_key: str, video: Mapping) -> dict:
-    """``info.json`` features: every data column plus the camera video with its stream description."""
+def build_features(shapes: Mapping[str, tuple[int, ...]], fps: int, videos: Mapping[str, Mapping]) -> dict:
+    """``info.json`` features: each camera's video with its stream description, then every data column.
+
+    Args:
+        shapes: the shape of every feature (the vectors' and each camera's).
+        fps: frames per second.
+        videos: each camera feature (``observation.images.<camera>``), in camera order, to the
+            stream description of its video.
+    """
 
     def vector(name: str, names: list[str] | None) -> dict:
         size = shapes[name][0]
@@ -162,16 +169,16 @@ def build_features(shapes: Mapping[str, tuple[int, ...]], fps: int, image_key: s
     def scalar(dtype: str) -> dict:
         return {"dtype": dtype, "shape": [1], "names": None}
 
-    height, width, channels = shapes[image_key]
     features = {
-        image_key: {
+        key: {
             "dtype": "video",
-            "shape": [height, width, channels],
+            "shape": list(shapes[key]),
             "names": ["height", "width", "channels"],
             "info": dict(video),
-        },
-        "observation.state": vector("observation.state", STATE_NAMES),
+        }
+        for key, video in videos.items()
     }
+    features["observation.state"] = vector("observation.state", STATE_NAMES)
     if shapes["observation.environment_state"][0]:
         features["observation.environment_state"] = vector("observation.environment_state", None)
     features |= {
@@ -187,7 +194,7 @@ def build_features(shapes: Mapping[str, tuple[int, ...]], fps: int, image_key: s
         "action_is_pad": scalar("bool"),
     }
     for name, feature in features.items():
-        if name != image_key:
+        if name not in videos:
             feature["fps"] = fps  # LeRobot v3.0 gives every non-video feature its rate
     return features
 

@@ -14,7 +14,13 @@ The life of an episode:
    that were committed, and keeps the others for the next flush.
 
 Readers trust only ``info.json`` (``total_episodes``), so they see the last commit whatever state
-the other files are in. One writer per dataset at a time. Legend: K episodes in a flush.
+the other files are in. One writer per dataset at a time.
+
+Several cameras: each is its own video feature ``observation.images.<camera>``, with its own video
+files (one per flush, like the data files), episode-metadata columns and stats; the first camera
+is the primary, whose frames are `Episode.frames`, and the others come from `Episode.views`.
+
+Legend: K episodes in a flush, L frames of an episode.
 """
 
 from __future__ import annotations
@@ -25,6 +31,7 @@ import itertools
 import json
 import logging
 import math
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -60,6 +67,7 @@ from gymnast.data.lerobot_v3 import (
     read_episode_rows,
     read_tasks,
     tasks_table,
+    video_columns,
 )
 from gymnast.data.schema import Episode
 from gymnast.data.staging import StagingArea
@@ -80,13 +88,16 @@ class LeRobotWriter:
         root: dataset directory.
         fps: frames per second (Meta-World's control rate is 80).
         camera: camera name; frames go to the feature ``observation.images.<camera>``.
+        cameras: every camera recorded, the primary (`Episode.frames`) first, the others read from
+            `Episode.views`; when given it replaces `camera`.
         codec: how frames are compressed (see `gymnast.utils.video`).
         robot_type: ``robot_type`` in ``info.json``.
         chunks_size: files per chunk directory before the next chunk starts.
 
     Raises:
-        ValueError: ``root`` holds a dataset with another fps, camera, codec, robot type or chunk
-            size, or one not written by gymnast; the message names the field and both values.
+        ValueError: ``root`` holds a dataset with another fps, cameras, codec, robot type or chunk
+            size, or one not written by gymnast (the message names the field and both values), or
+            `cameras` is empty or names a camera twice.
     """
 
     def __init__(
@@ -95,14 +106,19 @@ class LeRobotWriter:
         *,
         fps: int = 80,
         camera: str = "front",
+        cameras: Sequence[str] | None = None,
         codec: VideoCodec = DEFAULT_CODEC,
         robot_type: str = "sawyer",
         chunks_size: int = DEFAULT_CHUNKS_SIZE,
     ) -> None:
         self.root = Path(root)
-        self.fps, self.camera, self.codec, self.robot_type = fps, camera, codec, robot_type
+        self.cameras = tuple(cameras) if cameras is not None else (camera,)
+        if not self.cameras or len(set(self.cameras)) < len(self.cameras):
+            raise ValueError(f"cameras must be one or more distinct names, got {list(self.cameras)}")
+        self.fps, self.camera, self.codec, self.robot_type = fps, self.cameras[0], codec, robot_type
         self.chunks_size = chunks_size
-        self.image_key = image_key(camera)
+        self.image_key = image_key(self.camera)
+        self.image_keys = tuple(image_key(name) for name in self.cameras)
         self._info: dict | None = None
         self._rows: list[dict] = []  # committed episode-metadata rows, without the stats columns
         if (self.root / INFO_PATH).exists():
@@ -122,7 +138,7 @@ class LeRobotWriter:
                 self._staging.remove(number)
         self._shapes = self._committed_shapes()
         if self._shapes is None and len(self._staging):
-            self._shapes = _episode_shapes(self._staging.load(self._staging.numbers()[0]), self.image_key)
+            self._shapes = _episode_shapes(self._staging.load(self._staging.numbers()[0]), self._videos)
 
     @property
     def num_episodes(self) -> int:
@@ -142,8 +158,9 @@ class LeRobotWriter:
         """Stage an episode; it is on disk (and survives a crash) when this returns.
 
         Raises:
-            ValueError: the episode's key is already in the dataset, it has no step, or a shape
-                differs from the dataset's (the message names the feature and both shapes).
+            ValueError: the episode's key is already in the dataset, it has no step, its cameras
+                (`Episode.views`, or none but the primary) are not the writer's, or a shape differs
+                from the dataset's (the message names the feature and both shapes).
         """
         if not isinstance(episode, Episode):
             raise TypeError(f"add() takes an Episode, got {type(episode).__name__}")
@@ -152,7 +169,7 @@ class LeRobotWriter:
             raise ValueError(f"episode {key!r} has no step")
         if key in self.keys():
             raise ValueError(f"episode {key!r} is already in {self.root}")
-        shapes = _episode_shapes(episode, self.image_key)
+        shapes = _episode_shapes(episode, self._videos)
         for name, shape in (self._shapes or shapes).items():
             if shapes[name] != shape:
                 raise ValueError(f"{name}: the dataset has shape {shape}, episode {key!r} has {shapes[name]}")
@@ -170,9 +187,14 @@ class LeRobotWriter:
         chunk, file = self._next_file()
         where = {"chunk_index": chunk, "file_index": file}
         offsets = [0, *itertools.accumulate(ep.length + 1 for ep in episodes)]  # K + 1 frame offsets
-        video_psnr, stream = self._write_video(
-            VIDEO_PATH.format(video_key=self.image_key, **where), episodes, offsets
-        )
+        videos = [self._videos(episode) for episode in episodes]
+        streams, camera_psnr = {}, []
+        for key in self.image_keys:
+            worst, streams[key] = self._write_video(
+                VIDEO_PATH.format(video_key=key, **where), [v[key] for v in videos], offsets
+            )
+            camera_psnr.append(worst)
+        video_psnr = [min(values) for values in zip(*camera_psnr, strict=True)]  # each episode's worst camera
 
         first_episode, first_row = info["total_episodes"], info["total_frames"]
         columns, rows, stats = [], [], []
@@ -181,7 +203,7 @@ class LeRobotWriter:
             columns.append(
                 frame_columns(episode, first_episode + k, first_row + offsets[k], task_index, self.fps)
             )
-            stats.append(episode_stats(columns[-1], self.image_key, episode.frames))
+            stats.append(episode_stats(columns[-1], videos[k]))
             row = self._meta_row(first_episode + k, episode, first_row + offsets[k], offsets[k], chunk, file)
             rows.append(row | {PSNR_COLUMN: video_psnr[k]})
         data = {name: np.concatenate([c[name] for c in columns]) for name in columns[0]}
@@ -192,7 +214,7 @@ class LeRobotWriter:
             pa.Table.from_pylist([row | s for row, s in zip(rows, stats_columns, strict=True)]),
         )
 
-        info["features"] = info["features"] or build_features(self._shapes, self.fps, self.image_key, stream)
+        info["features"] = info["features"] or build_features(self._shapes, self.fps, streams)
         info |= {
             "total_episodes": first_episode + len(episodes),
             "total_frames": first_row + offsets[-1],
@@ -219,26 +241,39 @@ class LeRobotWriter:
         if exc_type is None:
             self.flush()
 
-    def _write_video(self, rel: str, episodes: list[Episode], offsets: list[int]) -> tuple[list[float], dict]:
-        """Encode the episodes into one file, each starting on a key frame, and verify it.
+    def _videos(self, episode: Episode) -> dict[str, np.ndarray]:
+        """Each camera feature's (L, H, W, 3) frames of the episode.
+
+        Raises:
+            ValueError: the episode's cameras are not the writer's (both named).
+        """
+        names = list(episode.views) or [self.camera]  # frames alone: the primary camera's
+        if names != list(self.cameras):
+            raise ValueError(f"episode {episode.info.key!r} has cameras {names} but {self.root} records "
+                             f"{list(self.cameras)}")
+        return {key: episode.views.get(name, episode.frames) for name, key in zip(self.cameras, self.image_keys)}
+
+    def _write_video(self, rel: str, clips: list[np.ndarray], offsets: list[int]) -> tuple[list[float], dict]:
+        """Encode one camera's frames of the episodes into one file, each episode starting on a key
+        frame, and verify it.
 
         Returns:
             The worst-frame PSNR of each episode and the stream description for ``info.json``.
         """
         with atomic_path(self.root / rel) as tmp:
-            frames = np.concatenate([ep.frames for ep in episodes])  # (sum of T+1, H, W, 3)
+            frames = np.concatenate(clips)  # (sum of L, H, W, 3)
             encode_video(tmp, frames, self.fps, self.codec, keyframes=offsets[:-1])
             decoded = decode_video(tmp)  # before the rename: a file that fails here is never committed
             stream = video_info(tmp)
-        spans = zip(episodes, offsets[:-1], offsets[1:], strict=True)
-        return [float(psnr(ep.frames, decoded[a:b]).per_frame.min()) for ep, a, b in spans], stream
+        spans = zip(clips, offsets[:-1], offsets[1:], strict=True)
+        return [float(psnr(clip, decoded[a:b]).per_frame.min()) for clip, a, b in spans], stream
 
     def _meta_row(
         self, index: int, episode: Episode, first_row: int, offset: int, chunk: int, file: int
     ) -> dict:
-        """LeRobot's episode-metadata columns (``offset``: first frame in the video) and ours."""
-        n_rows, video = episode.length + 1, f"videos/{self.image_key}/"
-        return {
+        """LeRobot's episode-metadata columns (``offset``: first frame in the videos) and ours."""
+        n_rows = episode.length + 1
+        row = {
             "episode_index": index,
             "tasks": [episode.info.instruction],
             "length": n_rows,
@@ -246,13 +281,12 @@ class LeRobotWriter:
             "data/file_index": file,
             "dataset_from_index": first_row,
             "dataset_to_index": first_row + n_rows,
-            video + "chunk_index": chunk,
-            video + "file_index": file,
-            video + "from_timestamp": offset / self.fps,
-            video + "to_timestamp": (offset + n_rows) / self.fps,
-            "meta/episodes/chunk_index": chunk,
-            "meta/episodes/file_index": file,
-        } | info_columns(episode.info)
+        }
+        span = (chunk, file, offset / self.fps, (offset + n_rows) / self.fps)
+        for key in self.image_keys:  # every camera's videos are written together, so at one offset
+            row |= dict(zip(video_columns(key), span, strict=True))  # videos/<key>/chunk_index, ...
+        row |= {"meta/episodes/chunk_index": chunk, "meta/episodes/file_index": file}
+        return row | info_columns(episode.info)
 
     def _commit(self, info: dict, tasks: dict[str, int], stats: dict) -> None:
         """Write tasks and stats, pin their bytes in info.json, then replace info.json."""
@@ -291,7 +325,7 @@ class LeRobotWriter:
         ]
         settings = {
             "fps": (info.get("fps"), self.fps),
-            "camera": (cameras, [self.camera]),
+            "camera": (cameras, list(self.cameras)),
             "robot_type": (info.get("robot_type"), self.robot_type),
             "chunks_size": (info.get("chunks_size"), self.chunks_size),
             "codec": (info["gymnast"].get("codec"), _codec_json(self.codec)),
@@ -311,8 +345,7 @@ class LeRobotWriter:
             "observation.state": tuple(features["observation.state"]["shape"]),
             "observation.environment_state": tuple(env["shape"]),
             "action": tuple(features["action"]["shape"]),
-            self.image_key: tuple(features[self.image_key]["shape"]),
-        }
+        } | {key: tuple(features[key]["shape"]) for key in self.image_keys}
 
     def _next_file(self) -> tuple[int, int]:
         if not self._rows:
@@ -333,15 +366,12 @@ class LeRobotWriter:
                 "chunk_index": row["meta/episodes/chunk_index"],
                 "file_index": row["meta/episodes/file_index"],
             }
-            referenced |= {
-                DATA_PATH.format(**data),
-                VIDEO_PATH.format(video_key=self.image_key, **data),
-                EPISODES_PATH.format(**meta),
-            }
+            referenced |= {DATA_PATH.format(**data), EPISODES_PATH.format(**meta)}
+            referenced |= {VIDEO_PATH.format(video_key=key, **data) for key in self.image_keys}
         files = "chunk-*/file-*"
         patterns = (
             f"data/{files}.parquet",
-            f"videos/{self.image_key}/{files}.mp4",
+            *(f"videos/{key}/{files}.mp4" for key in self.image_keys),
             f"{EPISODES_DIR}/{files}.parquet",
         )
         for pattern in patterns:
@@ -364,13 +394,13 @@ class LeRobotWriter:
         self._commit(self._info, tasks, stats_to_json(stats))
 
 
-def _episode_shapes(episode: Episode, image_key: str) -> dict[str, tuple[int, ...]]:
+def _episode_shapes(episode: Episode, videos: Callable[[Episode], dict[str, np.ndarray]]) -> dict[str, tuple[int, ...]]:
+    """Every feature's shape in the episode; `videos` gives each camera feature's frames."""
     return {
         "observation.state": episode.states.shape[1:],
         "observation.environment_state": episode.env_states.shape[1:],
         "action": episode.actions.shape[1:],
-        image_key: episode.frames.shape[1:],
-    }
+    } | {key: frames.shape[1:] for key, frames in videos(episode).items()}
 
 
 def _codec_json(codec: VideoCodec) -> dict:

@@ -13,7 +13,8 @@ from __future__ import annotations
 
 import dataclasses
 import re
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -103,13 +104,15 @@ class Episode:
     """One recorded episode.
 
     Attributes:
-        frames: (T+1, H, W, 3) uint8 RGB camera images.
+        frames: (T+1, H, W, 3) uint8 RGB camera images of the primary camera.
         states: (T+1, S) float32 proprioception: hand position xyz and gripper opening.
         env_states: (T+1, E) float32 the full Meta-World observation vector (objects and goal).
         actions: (T, A) float32 actions in [-1, 1]: hand displacement xyz and gripper effort.
         rewards: (T,) float32 Meta-World's dense reward for each step.
         successes: (T,) bool ``info["success"]`` after each step.
         info: per-episode facts.
+        views: every camera's (T+1, H, W, 3) uint8 frames by camera name, the primary first (its
+            frames are `frames`); empty when only `frames` were recorded, from an unnamed camera.
     """
 
     frames: np.ndarray
@@ -119,6 +122,7 @@ class Episode:
     rewards: np.ndarray
     successes: np.ndarray
     info: EpisodeInfo
+    views: Mapping[str, np.ndarray] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         n_steps = len(self.actions)
@@ -139,6 +143,13 @@ class Episode:
                 )
         if self.frames.dtype != np.uint8:
             raise ValueError(f"Episode.frames must be uint8, got {self.frames.dtype}")
+        for name, frames in self.views.items():
+            if frames.shape != self.frames.shape or frames.dtype != np.uint8:
+                raise ValueError(f"Episode.views[{name!r}] is {frames.shape} {frames.dtype}, expected "
+                                 f"{self.frames.shape} uint8 like Episode.frames")
+        primary = next(iter(self.views.values()), self.frames)
+        if primary is not self.frames and not np.array_equal(primary, self.frames):
+            raise ValueError(f"Episode.views[{next(iter(self.views))!r}] (the first, primary view) must be Episode.frames")
 
     @property
     def length(self) -> int:

@@ -1,7 +1,9 @@
 """Episodes waiting to be written into a dataset, each safe on disk as soon as it is staged.
 
 One ``<n>.npz`` file per episode (numbered in the order staged, so a resumed writer keeps that
-order), written atomically and holding only arrays and a JSON string: loading it never unpickles.
+order), written atomically and holding only arrays and JSON strings: loading it never unpickles.
+An episode with several camera views also holds their names (``views``, JSON) and each view but
+the primary, whose frames are ``frames`` (``view_1``, ``view_2``, ...).
 """
 
 from __future__ import annotations
@@ -46,8 +48,13 @@ class StagingArea:
         """Write the episode durably (it survives a crash once this returns)."""
         number = max(self._keys, default=-1) + 1
         buffer = io.BytesIO()
+        names = list(episode.views)
+        views = {f"view_{i}": episode.views[name] for i, name in enumerate(names) if i}
+        if names:
+            views["views"] = np.array(json.dumps(names))
         np.savez(
             buffer,
+            **views,
             frames=episode.frames,
             states=episode.states.astype(np.float32),
             env_states=episode.env_states.astype(np.float32),
@@ -68,7 +75,9 @@ class StagingArea:
         """The staged episode."""
         with np.load(self._path(number), allow_pickle=False) as staged:
             arrays = {name: staged[name] for name in _ARRAYS}
-            return Episode(**arrays, info=EpisodeInfo(**json.loads(str(staged["info"]))))
+            names = json.loads(str(staged["views"])) if "views" in staged else []
+            views = {name: staged[f"view_{i}"] if i else arrays["frames"] for i, name in enumerate(names)}
+            return Episode(**arrays, info=EpisodeInfo(**json.loads(str(staged["info"]))), views=views)
 
     def remove(self, number: int) -> None:
         """Delete a staged episode (once it is committed)."""

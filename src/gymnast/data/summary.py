@@ -11,11 +11,15 @@ from gymnast.utils.images import contact_sheet, save_png
 
 
 def describe_dataset(dataset: EpisodeDataset) -> str:
-    """Format, episodes, steps, frame rate, camera, image size and action width; the codec's
-    decoded-vs-raw error when the recorder measured it; success by task and behaviour."""
+    """Format, episodes, steps, frame rate, camera, image size and action width; every camera of
+    the dataset; the codec's decoded-vs-raw error when the recorder measured it; success by task
+    and behaviour."""
     lines = [f"{dataset.root}: LeRobot {dataset.info['codebase_version']}, {len(dataset.episodes)} episodes, "
              f"{sum(dataset.lengths)} steps, {dataset.fps} fps, images {dataset.image_shape} from camera "
              f"{dataset.camera_key!r}, {dataset.action_dim}-D actions"]
+    features = dataset.info["features"]
+    lines.append("cameras: " + ", ".join(f"{name} {features[key].get('shape')} {features[key].get('dtype')}"
+                                         for name, key in dataset.available_cameras.items()))
     recorded = dataset.info.get("gymnast", {})
     if "video_psnr_db" in recorded:
         lines.append(f"video: {json.dumps(recorded['codec'])}, decoded-vs-raw PSNR "

@@ -107,6 +107,7 @@ class EpisodeRun:
     env_states: list[np.ndarray] = field(default_factory=list)
     rewards: list[float] = field(default_factory=list)
     successes: list[bool] = field(default_factory=list)
+    prefix_steps: int = 0  # real actions replayed to restore the keyframe the episode starts from
 
     @property
     def done(self) -> bool:
@@ -128,13 +129,14 @@ class EpisodeRun:
 
 
 def start_episode(env: MetaWorldEnv, seed: int, instruction: str | None = None,
-                  record: Collection[str] = ()) -> EpisodeRun:
-    """Resets `env` to the scene of `seed` (with `instruction`, or the env's own) and starts recording."""
+                  record: Collection[str] = (), prefix: np.ndarray | None = None) -> EpisodeRun:
+    """Resets `env` to the scene of `seed` (with `instruction`, or the env's own), or to the keyframe
+    that `prefix` (T0, A) actions reach from it, and starts recording there."""
     unknown = set(record) - set(RECORDABLE)
     if unknown:
         raise ValueError(f"cannot record {sorted(unknown)}; recordable: {RECORDABLE}")
-    obs, _ = env.reset(seed=seed, options={"instruction": instruction})
-    run = EpisodeRun(env, obs, frozenset(record))
+    obs, info = env.reset(seed=seed, options={"instruction": instruction, "prefix": prefix})
+    run = EpisodeRun(env, obs, frozenset(record), prefix_steps=int(info.get("prefix_steps", 0)))
     run.keep(obs)
     return run
 

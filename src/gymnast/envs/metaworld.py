@@ -6,6 +6,12 @@ scripted experts, datasets and analysis, never in the observation.
 
 `(task, seed)` fixes the initial state, so identical actions give identical frames. The same class
 plays the software simulator when built with a `SimGap` other than ``none``.
+
+Cameras: the env renders the views `EnvConfig.cameras` names (`gymnast.envs.cameras`), and only
+those, each costing one more render per step. ``obs["images"]`` maps every view's name to its
+frame, in that order; ``obs["image"]`` is the first (primary) view's frame, the same array, which
+is all the policy, the world model, the judge and the rollout engine read. With the default
+``("front",)`` the frames are those of the one camera the env has always had.
 """
 
 from __future__ import annotations
@@ -18,6 +24,7 @@ import numpy as np
 from metaworld.env_dict import ALL_V3_ENVIRONMENTS
 
 from gymnast.config import EnvConfig
+from gymnast.envs.cameras import camera_pose
 from gymnast.envs.gap import SimGap, apply_gap, get_gap
 from gymnast.envs.instructions import GOAL_MARKER_TASKS, instruction_for
 from gymnast.envs.perturb import Perturbation, get_perturbation, random_offset
@@ -36,7 +43,8 @@ _MAX_LAYOUT_TRIES = 100
 class MetaWorldEnv(gym.Env):
     """One Meta-World v3 task, observed through a camera.
 
-    Observation: ``{"image": (H, W, 3) uint8, "state": (4,) float32}``.
+    Observation: ``{"image": (H, W, 3) uint8, "images": {camera: (H, W, 3) uint8}, "state": (4,)
+    float32}``; ``image`` is the first camera's frame (see the module docstring).
     Action: (4,) float32 in [-1, 1]: hand displacement xyz (scaled by 1 cm) and gripper effort.
     Reward: Meta-World's dense shaped reward. ``terminated`` means the task succeeded (when
     `EnvConfig.terminate_on_success`), ``truncated`` that the horizon was reached.
@@ -44,7 +52,7 @@ class MetaWorldEnv(gym.Env):
 
     Args:
         task: Meta-World v3 task name, e.g. ``drawer-open-v3``.
-        config: image size, horizon and camera.
+        config: image size, horizon and cameras.
         gap: ``none`` (the real world), ``mild``, ``strong`` or a custom `SimGap`.
         perturbation: e.g. ``minor``, ``major:object`` or a `Perturbation`.
         instruction_split: ``train`` or ``heldout`` paraphrases of the instruction.
@@ -87,12 +95,19 @@ class MetaWorldEnv(gym.Env):
         self._mw.action_scale *= self.gap.action_scale
 
         size = self.config.image_size
-        # Same task, same gap: the same XML with the same visual edits, so one GL context serves all.
-        self._renderer = SceneRenderer(self._mw.model, size, size, self.gap.camera(self.config.camera),
-                                       share=(self.task, self.gap))
+        # Same task, same gap: the same XML with the same visual edits, so one GL context serves
+        # all, every view of every env of the scene in this process included.
+        self._renderers = {
+            name: SceneRenderer(self._mw.model, size, size, camera_pose(name, self.config, self.gap, np.zeros(3)),
+                                share=(self.task, self.gap))
+            for name in self.config.cameras
+        }
+        self._renderer = self._renderers[self.config.cameras[0]]  # the primary view
+        image_space = gym.spaces.Box(0, 255, (size, size, 3), np.uint8)
         self.observation_space = gym.spaces.Dict(
             {
-                "image": gym.spaces.Box(0, 255, (size, size, 3), np.uint8),
+                "image": image_space,
+                "images": gym.spaces.Dict({name: image_space for name in self.config.cameras}),
                 "state": gym.spaces.Box(
                     np.append(self._mw._HAND_SPACE.low, -1.0).astype(np.float32),
                     np.append(self._mw._HAND_SPACE.high, 1.0).astype(np.float32),
@@ -115,7 +130,15 @@ class MetaWorldEnv(gym.Env):
         Args:
             seed: the episode seed; when None, one is drawn from the data seed range with the
                 env's own generator (seeded by an earlier ``reset(seed=...)``).
-            options: ``{"instruction": str}`` overrides the instruction for this episode.
+            options: ``{"instruction": str}`` overrides the instruction for this episode;
+                ``{"prefix": (T0, A) actions}`` restores a keyframe: the actions are replayed from
+                the scene's initial state (Meta-World is deterministic, so the state is exactly
+                the one the recording passed through) and the episode starts there, with its
+                step count and horizon counted from the keyframe. ``info["prefix_steps"]`` says
+                how many real actions the restore took.
+
+        Raises:
+            ValueError: the prefix is not a (T0, A) array of finite actions.
         """
         super().reset(seed=seed)
         if seed is None:
@@ -126,8 +149,12 @@ class MetaWorldEnv(gym.Env):
         self._instruction = options.get("instruction") or instruction_for(
             self.task, self._episode_seed, self.instruction_split
         )
+        prefix = check_prefix(options.get("prefix"))
+        for action in prefix:  # not observed: only the keyframe is rendered
+            mw_obs, *_ = self._mw.step(np.clip(action, -1.0, 1.0))
+            self._env_state = np.asarray(mw_obs, dtype=np.float64)
         self._steps = 0
-        return self._observe(), self._info(success=False)
+        return self._observe(), self._info(success=False) | {"prefix_steps": len(prefix)}
 
     def step(self, action):
         if self._episode_seed is None:
@@ -149,7 +176,8 @@ class MetaWorldEnv(gym.Env):
         return self._frame
 
     def close(self) -> None:
-        self._renderer.close()
+        for renderer in self._renderers.values():
+            renderer.close()
 
     # -- what else the project needs ------------------------------------------------------------
 
@@ -185,7 +213,7 @@ class MetaWorldEnv(gym.Env):
         return [Marker(position=tuple(self._mw._target_pos))]
 
     def segmentation(self) -> np.ndarray:
-        """(H, W, 2) per-pixel (object id, object type) of the current frame; see SceneRenderer."""
+        """(H, W, 2) per-pixel (object id, object type) of the primary view's current frame; see SceneRenderer."""
         return self._renderer.render_segmentation(self._mw.data, self.markers())
 
     # -- internals -----------------------------------------------------------------------------
@@ -232,9 +260,14 @@ class MetaWorldEnv(gym.Env):
         mw_obs, _ = self._mw.reset()
         self._env_state = np.asarray(mw_obs, dtype=np.float64)
 
-    def _observe(self) -> dict[str, np.ndarray]:
-        self._frame = self._renderer.render(self._mw.data, self.markers())
-        return {"image": self._frame, "state": self._env_state[:STATE_DIM].astype(np.float32)}
+    def _observe(self) -> dict[str, Any]:
+        markers, gripper = self.markers(), self._mw.tcp_center
+        images = {}
+        for name, renderer in self._renderers.items():
+            renderer.camera = camera_pose(name, self.config, self.gap, gripper)  # the gripper view moves
+            images[name] = renderer.render(self._mw.data, markers)
+        self._frame = images[self.config.cameras[0]]
+        return {"image": self._frame, "images": images, "state": self._env_state[:STATE_DIM].astype(np.float32)}
 
     def _info(self, success: bool) -> dict[str, Any]:
         return {
@@ -245,6 +278,18 @@ class MetaWorldEnv(gym.Env):
             "step": self._steps,
             "env_state": self._env_state.astype(np.float32),
         }
+
+
+def check_prefix(prefix: Any) -> np.ndarray:
+    """A keyframe's prefix as (T0, A) float32 actions (none: (0, A)), or ValueError naming its shape."""
+    if prefix is None:
+        return np.zeros((0, ACTION_DIM), np.float32)
+    actions = np.asarray(prefix, dtype=np.float32)
+    if actions.ndim != 2 or actions.shape[1] != ACTION_DIM:
+        raise ValueError(f"a keyframe prefix must be (T0, {ACTION_DIM}) actions, got shape {actions.shape}")
+    if not np.isfinite(actions).all():
+        raise ValueError("a keyframe prefix must hold finite actions")
+    return actions
 
 
 def _uniform_layouts(rng: np.random.Generator, space: gym.spaces.Box) -> Iterator[np.ndarray]:

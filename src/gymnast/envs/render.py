@@ -1,4 +1,4 @@
-"""Fast headless rendering of Meta-World scenes from a fixed free camera.
+"""Fast headless rendering of Meta-World scenes from free cameras (posed by `gymnast.envs.cameras`).
 
 Meta-World's own render path is slow on a CPU (about 12 frames/s) and its corner cameras are
 upside down. A `mujoco.Renderer` with shadows, reflections and multisampling turned off renders

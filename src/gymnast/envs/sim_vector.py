@@ -53,22 +53,24 @@ class _Episodes:
         self._envs: dict[tuple[str, int], MetaWorldEnv] = {}
         self._episodes: list[EpisodeRun] = []
 
-    def reset(self, tasks: list[str], seeds: list[int], instructions: list[str | None]) -> dict[str, np.ndarray]:
+    def reset(self, tasks: list[str], seeds: list[int], instructions: list[str | None],
+              prefixes: list[np.ndarray | None] | None = None) -> dict[str, np.ndarray]:
         counts: Counter[str] = Counter()
         self._episodes = []
-        for task, seed, instruction in zip(tasks, seeds, instructions):
+        for task, seed, instruction, prefix in zip(tasks, seeds, instructions, prefixes or [None] * len(tasks)):
             key = (task, counts[task])
             counts[task] += 1
             if key not in self._envs:
                 self._envs[key] = MetaWorldEnv(task, **self._args)
-            self._episodes.append(start_episode(self._envs[key], seed, instruction))
+            self._episodes.append(start_episode(self._envs[key], seed, instruction, prefix=prefix))
         if len(self._envs) > 2 * len(self._episodes):
             used = {id(e.env) for e in self._episodes}
             for key in [key for key, env in self._envs.items() if id(env) not in used]:
                 self._envs.pop(key).close()
         frames = np.stack([e.obs["image"] for e in self._episodes])  # (b, H, W, 3)
         instructions = np.array([e.instruction for e in self._episodes], dtype=object)
-        return {"image": frames, "instruction": instructions, **self._status()}
+        prefix_steps = np.array([e.prefix_steps for e in self._episodes], np.int64)
+        return {"image": frames, "instruction": instructions, "prefix_steps": prefix_steps, **self._status()}
 
     def step(self, actions: np.ndarray) -> dict[str, np.ndarray]:
         """Runs each episode's (K, A) actions open-loop until the chunk or the episode ends."""
@@ -102,7 +104,8 @@ class SimVectorEnv(VectorEnv):
     ``rewards`` (B,) are the dense rewards summed over the actions executed in the chunk;
     ``terminated`` (B,) means success, ``truncated`` (B,) the horizon; whichever ended an episode
     stays True. ``infos``: ``instruction`` (B,) str, ``task`` (B,) str, ``seed`` (B,) int,
-    ``step`` (B,) int actions taken so far, ``success`` (B,) bool succeeded at any step so far and,
+    ``prefix_steps`` (B,) int real actions replayed to restore each start (0 for a first frame),
+    ``step`` (B,) int actions taken so far (from the start), ``success`` (B,) bool succeeded at any step so far and,
     after `step`, ``frames`` (B, K, H, W, 3) uint8, ``rewards`` (B, K) float (NaN where no action
     was executed) and ``executed`` (B,) int actions executed in the chunk.
 
@@ -151,8 +154,11 @@ class SimVectorEnv(VectorEnv):
         Args:
             seed: seeds `np_random` only; the episodes' initial states come from ``options``.
             options: ``{"tasks": B task names, "seeds": B non-negative ints, "instructions": B
-                strings}``, instructions optional (default: each episode's own). Other keys are
-                ignored, so one dict can describe a real start for this env and the imagined one.
+                strings, "prefixes": B (T0, A) action arrays}``; instructions optional (default:
+                each episode's own), prefixes optional (default: start at the first frame; else
+                each episode starts at the keyframe its prefix reaches from the scene, restored
+                exactly by replaying it). Other keys are ignored, so one dict can describe a real
+                start for this env and the imagined one.
 
         Raises:
             ValueError: naming the field that is missing or has the wrong length or type.
@@ -167,8 +173,11 @@ class SimVectorEnv(VectorEnv):
         instructions = [None] * self.num_envs
         if options.get("instructions") is not None:
             instructions = self._field(options, "instructions", "strings", lambda s: isinstance(s, str))
+        prefixes = [None] * self.num_envs
+        if options.get("prefixes") is not None:
+            prefixes = self._field(options, "prefixes", "(T0, A) action arrays", lambda p: np.ndim(p) == 2)
         seeds = [int(s) for s in seeds]
-        result = self._call("reset", [(tasks[s], seeds[s], instructions[s]) for s in self._slices])
+        result = self._call("reset", [(tasks[s], seeds[s], instructions[s], prefixes[s]) for s in self._slices])
         result["task"] = np.array(tasks, dtype=object)
         result["seed"] = np.array(seeds, np.int64)
         self._info = result
@@ -227,7 +236,7 @@ class SimVectorEnv(VectorEnv):
         return {key: np.concatenate([part[key] for part in parts]) for key in parts[0]}
 
     def _infos(self) -> dict[str, np.ndarray]:
-        keys = ("instruction", "step", "task", "seed", "success")
+        keys = ("instruction", "step", "task", "seed", "success", "prefix_steps")
         return {key: self._info[key].copy() for key in keys}
 
 

@@ -3,7 +3,9 @@
 Legend: R rollouts, C start frames, H/W image size, A action dimensions.
 
 A start state is real in every environment: the imagined env starts from its camera frames, a
-simulator from the (task, seed) that produced them. `Start` is the one start-state type, for the
+simulator from the (task, seed) that produced them and, for a keyframe in the middle of an
+episode, the actions that led there from the scene's first frame (its ``prefix``, replayed
+exactly by the simulator's reset). `Start` is the one start-state type, for the
 batched rollouts and for `gymnast.envs.imagined.ImaginedEnv` alike. Training draws them from data seeds (a
 dataset's scenes, or fresh ones in a simulator); evaluation takes them from the evaluation seeds.
 """
@@ -33,6 +35,11 @@ class Start:
         frames: (C, H, W, 3) uint8 real camera frames, the last one being "now".
         reference_actions: (T_ref, A) float32 a demonstration's actions from this state (what the
             verified reward imagines); empty (the default) where there is none.
+        prefix: (T0, A) float32 the real actions from the scene's first frame to this one: empty
+            for a first frame; a simulator restores the keyframe by replaying them.
+        state: (S,) float32 the recorded state at this frame (the dataset's environment state where
+            it has one, else its ``observation.state``), what a grounded world model starts from;
+            empty where it is not known.
     """
 
     task: str
@@ -40,6 +47,8 @@ class Start:
     instruction: str
     frames: np.ndarray
     reference_actions: np.ndarray = field(default_factory=lambda: np.zeros((0, ACTION_DIM), np.float32))
+    prefix: np.ndarray = field(default_factory=lambda: np.zeros((0, ACTION_DIM), np.float32))
+    state: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float32))
 
 
 def start_options(starts: Sequence[Start]) -> dict:
@@ -49,6 +58,7 @@ def start_options(starts: Sequence[Start]) -> dict:
         "instructions": [start.instruction for start in starts],
         "tasks": [start.task for start in starts],
         "seeds": [start.seed for start in starts],
+        "prefixes": [start.prefix for start in starts],
     }
 
 
@@ -60,7 +70,8 @@ def scene_starts(scenes: Sequence[tuple[str, int]], config: EnvConfig) -> list[S
     starts = []
     for task, seed in scenes:
         obs, info = cached_env(task, config).reset(seed=seed)
-        starts.append(Start(task, seed, info["instruction"], obs["image"][None].copy()))
+        starts.append(Start(task, seed, info["instruction"], obs["image"][None].copy(),
+                            state=np.asarray(info["env_state"], np.float32)))
     return starts
 
 

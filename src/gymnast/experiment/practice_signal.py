@@ -11,12 +11,21 @@ each rollout's log-probability gradient weighted by its group-normalised advanta
 imagination is a step forward in the real world as far as the imagined advantages agree with the
 advantages the real outcomes would have given the same rollouts.
 
-For B fresh scenes (new data seeds, as `gymnast rl --fresh-scenes` draws them) the policy samples
-G rollouts each at the rollout temperature in the world model, closed loop on the imagined frames;
-the same actions are replayed in the real world, and each rollout's real outcome at horizon h is
-success within its first h actions. Every *readout* scores the imagined rollouts: the reward's own
+For B real starts the policy samples G rollouts each at the rollout temperature in the world
+model, closed loop on the imagined frames; the same actions are replayed in the real world from
+the same start, and each rollout's real outcome at horizon h is read two ways: success within its
+first h actions, and the real dense return of those h actions (Meta-World's reward, as
+`dense_return` scores it). The starts are fresh scenes' first frames (new data seeds, as `gymnast
+rl --fresh-scenes` draws them), or keyframes of a dataset's held-out episodes
+(`gymnast.data.keyframes`: anywhere in an episode, restored in the real world by replaying the
+actions that led there), for segments as short as practice from keyframes runs them. For a
+segment the dense return is the outcome to hold imagination against: a segment of 8-40 actions
+from the middle of an episode often cannot reach success, and the dense reward is the real signal
+that taught RL in the real world here (results/rl/reach_real); success is reported beside it. Every *readout* scores the imagined rollouts: the reward's own
 score (a judge's verdict, a progress judge's degree) and, for a per-frame 0/1 judge, its
-probability (the largest over the frames, a continuous score), each on the video cut after h actions. Two references are read out too: the
+probability (the largest over the frames, a continuous score), each on the video cut after h actions;
+a grounded world model's reward head (`gymnast.reward.state_reward`) is read from the state it
+imagines under the same actions, as its predicted return and its success verdict. Two references are read out too: the
 same readouts of the real replay's video, which separates the reward's own error from the world
 model's (the judge sees what really happened), and the real world's dense reward of the replay
 (Meta-World's, with which RL in the real world did learn, results/rl/reach_real), a signal known
@@ -24,9 +33,10 @@ to teach. Per readout and horizon:
 
 - ``advantage_correlation``: sum(A_read * A_real) / sqrt(sum(A_read^2) * sum(A_real^2)) over the R
   rollouts, A being GRPO's group advantage (`gymnast.rl.grpo.group_advantages`, 0 in a group
-  without spread): 1 when every group is ranked as reality ranks it, 0 when the updates are noise
-  with respect to the real outcome, negative when they point away from it; with a 95% interval
-  from resampling the groups.
+  without spread) and A_real that of the real success: 1 when every group is ranked as reality
+  ranks it, 0 when the updates are noise with respect to the real outcome, negative when they
+  point away from it; with a 95% interval from resampling the groups.
+- ``return_correlation`` (with its interval): the same against the real dense return's advantages.
 - ``reinforced_real_success`` and ``discouraged_real_success``: the real success of the rollouts GRPO
   would make more likely (positive advantage) and less likely (negative).
 - ``signal_groups``: the share of groups the readout ranks at all (the others give no gradient).
@@ -56,7 +66,9 @@ from gymnast.policy.base import Policy
 from gymnast.reward.base import Reward, RewardContext
 from gymnast.reward.sim import META_WORLD_MAX_STEP_REWARD
 from gymnast.reward.spec import RewardSpec
+from gymnast.data.keyframes import KeyframeConfig
 from gymnast.rl.grpo import group_advantages
+from gymnast.rl.rollout import reward_context
 from gymnast.utils.atomic import write_bytes, write_json
 from gymnast.world_model.base import WorldModel
 
@@ -70,6 +82,8 @@ PROBABILITY = "probability"
 """The readout of a learned judge's probability of success (its largest over the frames)."""
 ON_REAL_VIDEO = ", real video (reference)"
 """Suffix of the readouts of the real replay's video: the reward's own error, without imagination's."""
+VERDICT = "verdict"
+"""The readout of a grounded world model's success verdict (success predicted at any step)."""
 REAL_DENSE = "real dense reward (reference)"
 """The readout of the replay's own dense reward: a real-world signal, not imagination's."""
 BOOTSTRAP = 1000
@@ -83,7 +97,15 @@ class SignalConfig:
     tasks: str = WEAK_TASKS
     """Task names and/or task sets (mt10, mt50), comma-separated."""
     starts_per_task: int = 8
-    """Fresh scenes (groups) per task."""
+    """Starts (groups) per task."""
+    data: str = ""
+    """Dataset whose held-out episodes give keyframe starts (`keyframes`); empty: fresh scenes' first frames."""
+    keyframes: str = "uniform"
+    """How keyframes are drawn from `data`'s episodes: first, uniform, near_success or failures
+    (`gymnast.data.keyframes`); unused without `data`."""
+    heldout_fraction: float = 0.1
+    """Share of `data`'s scenes the models held out (their training split), the only ones keyframes
+    come from; 0: every episode (a dataset they never trained on, e.g. the policy's own rollouts)."""
     group_size: int = 8
     """Rollouts G per scene, as GRPO samples them."""
     temperature: float = 1.0
@@ -113,6 +135,10 @@ class SignalConfig:
             raise ValueError(f"SignalConfig.temperature must be > 0 (GRPO samples), got {self.temperature}")
         if not self.horizons or min(self.horizons) < 1:
             raise ValueError(f"SignalConfig.horizons must be positive, got {self.horizons}")
+        if self.data:
+            KeyframeConfig(sampling=self.keyframes)  # fails here, naming the setting
+        if not 0 <= self.heldout_fraction < 1:
+            raise ValueError(f"SignalConfig.heldout_fraction must be in [0, 1), got {self.heldout_fraction}")
         parse_runner(self.runner)
 
     @property
@@ -147,7 +173,8 @@ def measure_signal(policy: Policy, world_model: WorldModel, reward: Reward, conf
     began = time.perf_counter()
     tasks = resolve_tasks(config.tasks)
     env_config = EnvConfig(image_size=world_model.image_size, horizon=config.horizon)
-    starts = fresh_starts(tasks, config.starts_per_task, env_config, config.seed)
+    starts = (heldout_keyframes(Path(config.data), tasks, config, world_model.image_size) if config.data
+              else fresh_starts(tasks, config.starts_per_task, env_config, config.seed))
     rollout_starts = [start for start in starts for _ in range(config.group_size)]  # groups are contiguous
     size = min(config.batch, len(rollout_starts))
     envs = EnvFactory(IMAGINED, policy.chunk_size, env_config, "none", config.workers, world_model)
@@ -168,24 +195,29 @@ def measure_signal(policy: Policy, world_model: WorldModel, reward: Reward, conf
             batch = rollout_starts[first: first + size]
             imagined = timed("imagine", lambda: collect_rollouts(envs.get(IMAGINED, len(batch)), policy, batch,
                                                                  config.temperature, generator, config.seed))
-            readouts = timed("score", lambda: read_out(reward, imagined.frames, imagined.instructions, config.horizons))
+            readouts = timed("score", lambda: read_out(reward, imagined.frames, imagined.instructions, config.horizons,
+                                                       reward_context(imagined)))
             replay = timed("replay", lambda: replay_actions(replays.get(REAL, len(batch)), imagined.starts,
                                                             imagined.actions, imagined.lengths))
             interactions += replay.interactions
-            on_real = timed("score", lambda: read_out(reward, replay.frames, imagined.instructions, config.horizons))
-            readouts |= {f"{name}{ON_REAL_VIDEO}": values for name, values in on_real.items()}
+            if not reward.needs.start_state:  # a reward of the video: read it on the real video too
+                on_real = timed("score", lambda: read_out(reward, replay.frames, imagined.instructions, config.horizons))
+                readouts |= {f"{name}{ON_REAL_VIDEO}": values for name, values in on_real.items()}
             readouts[REAL_DENSE] = {h: dense_return(replay.rewards[:, :h], replay.success_by_step[:, :h])
                                     for h in config.horizons}
             for i, start in enumerate(batch):
-                records.append({"task": start.task, "seed": start.seed, "group": (first + i) // config.group_size,
+                records.append({"task": start.task, "seed": start.seed, "keyframe": len(start.prefix),
+                                "group": (first + i) // config.group_size,
                                 "real": {str(h): bool(replay.success_by_step[i, h - 1]) for h in config.horizons},
+                                "real_return": {str(h): float(readouts[REAL_DENSE][h][i]) for h in config.horizons},
                                 "readouts": {name: {str(h): float(values[h][i]) for h in config.horizons}
                                              for name, values in readouts.items()}})
     finally:
         envs.close()
         replays.close()
     seconds["total"] = time.perf_counter() - began
-    binary = {name: name in (SCORE, SCORE + ON_REAL_VIDEO) and reward.binary for name in records[0]["readouts"]}
+    binary = {name: (name in (SCORE, SCORE + ON_REAL_VIDEO) and reward.binary) or name == VERDICT
+              for name in records[0]["readouts"]}
     report = {
         "settings": {**dataclasses.asdict(config), **(labels or {}), "task_list": list(tasks),
                      "reward_type": type(reward).__name__, "policy_type": type(policy).__name__,
@@ -215,14 +247,62 @@ def fresh_starts(tasks: Sequence[str], per_task: int, config: EnvConfig, seed: i
                         config)
 
 
-def read_out(reward: Reward, frames: torch.Tensor, instructions: Sequence[str], horizons: Sequence[int]
-             ) -> dict[str, dict[int, torch.Tensor]]:
-    """Every readout of (R, T + 1, H, W, 3) videos cut after each horizon's h actions: ``score`` (the
-    reward as RL reads it) and, for a per-frame 0/1 judge, ``probability``; (R,) each.
+def heldout_keyframes(data: Path, tasks: Sequence[str], config: SignalConfig, image_size: int) -> list[Start]:
+    """`config.starts_per_task` keyframes of each task from the episodes of `data`'s held-out scenes
+    (`config.heldout_fraction`, the world models' split: they never trained on them) recorded in the real world, drawn by
+    `config.keyframes` from `config.seed`; the frames fitted to `image_size` as the models were
+    trained. A task without a held-out episode lends its other episodes (with a warning): a
+    dataset too small to hold scenes out measures the models on what they trained on.
 
-    A per-frame judge is run once for all horizons. The reward reads only the video here (a judge's
-    input): a reward that needs more (a reference, a simulator) cannot be read out.
+    Raises:
+        ValueError: a task has no real episode in `data` (that fits the sampling).
     """
+    from gymnast.data.keyframes import KeyframeConfig, dataset_keyframes
+    from gymnast.data.lerobot import EpisodeDataset
+    from gymnast.world_model.data import is_heldout
+
+    dataset = EpisodeDataset(data)
+    if dataset.image_shape[:2] != (image_size, image_size):
+        dataset = dataset.fitted(image_size, "resize")
+    draw, starts = np.random.default_rng(config.seed), []
+    keyframes = KeyframeConfig(sampling=config.keyframes, horizon=config.horizon)
+    for task in tasks:
+        episodes = [i for i, info in enumerate(dataset.episodes) if info.task == task and info.env_variant == "real"
+                    and not (config.keyframes == "failures" and info.success)]
+        heldout = [i for i in episodes if not config.heldout_fraction or is_heldout(dataset.episodes[i],
+                                                                                    config.heldout_fraction)]
+        if not episodes:
+            raise ValueError(f"{data} has no real episode of {task} to take {config.keyframes} keyframes from")
+        if not heldout:
+            logger.warning("%s: no held-out episode of %s; its keyframes come from episodes the models trained on",
+                           data, task)
+        episodes = heldout or episodes
+        chosen = draw.choice(episodes, size=config.starts_per_task, replace=len(episodes) < config.starts_per_task)
+        # One keyframe per pick: an episode picked twice gives two different keyframes.
+        starts += [dataset_keyframes(dataset, [int(i)], keyframes, seed=config.seed + n)[0] for n, i in enumerate(chosen)]
+    return starts
+
+
+def read_out(reward: Reward, frames: torch.Tensor, instructions: Sequence[str], horizons: Sequence[int],
+             context: RewardContext | None = None) -> dict[str, dict[int, torch.Tensor]]:
+    """Every readout of (R, T + 1, H, W, 3) videos cut after each horizon's h actions: ``score`` (the
+    reward as RL reads it) and, for a per-frame 0/1 judge, ``probability``, or for a grounded world
+    model's reward head, its ``verdict``; (R,) each.
+
+    A per-frame judge is run once for all horizons. A reward reads only the video (a judge), or the
+    start state and the (R, T, A) actions of `context` (a state model's head); one that needs a
+    reference or a simulator cannot be read out.
+    """
+    if reward.needs.start_state:
+        if context is None or context.actions is None:
+            raise ValueError(f"{type(reward).__name__} reads the start states and the actions: pass their context")
+
+        def cut(h: int) -> RewardContext:
+            return RewardContext(start_state=context.start_state, start_action=context.start_action,
+                                 actions=context.actions[:, :h])
+
+        return {SCORE: {h: reward.score(frames[:, : h + 1], instructions, cut(h)).float() for h in horizons},
+                VERDICT: {h: reward.verdict(instructions, cut(h)) for h in horizons}}
     per_frame = getattr(reward, "frame_probabilities", None)
     if per_frame is None:  # a reward of whole videos: score each cut
         return {SCORE: {h: reward.score(frames[:, : h + 1], instructions, RewardContext()).float() for h in horizons}}
@@ -250,36 +330,41 @@ def signal_table(records: list[dict], config: SignalConfig, binary: dict[str, bo
         for h in map(str, config.horizons):
             values = torch.tensor([r["readouts"][name][h] for r in records]).view(-1, config.group_size)  # (B, G)
             real = torch.tensor([r["real"][h] for r in records]).view(-1, config.group_size)  # (B, G)
-            rows.append({"readout": name, "horizon": int(h), **signal_figures(values, real, is_binary)})
+            returns = torch.tensor([r["real_return"][h] for r in records]).view(-1, config.group_size)  # (B, G)
+            rows.append({"readout": name, "horizon": int(h), **signal_figures(values, real, is_binary, returns)})
     return rows
 
 
-def signal_figures(values: torch.Tensor, real: torch.Tensor, binary: bool, seed: int = 0) -> dict:
+def signal_figures(values: torch.Tensor, real: torch.Tensor, binary: bool, real_return: torch.Tensor | None = None,
+                   seed: int = 0) -> dict:
     """How a readout's GRPO advantages agree with the real outcomes' (see the module docstring).
 
     Args:
         values: (B, G) the readout of each group's rollouts.
-        real: (B, G) bool the real outcome of the same rollouts.
+        real: (B, G) bool the real success of the same rollouts.
         binary: the readout is a 0/1 verdict (agreement and false successes are reported too).
-        seed: of the resampling behind the interval.
+        real_return: (B, G) the real dense return of the same rollouts, if known.
+        seed: of the resampling behind the intervals.
 
     Returns:
-        ``advantage_correlation`` with ``correlation_ci_low`` / ``_high``, ``reinforced_real_success``,
-        ``discouraged_real_success``, ``signal_groups``, ``real_signal_groups``, ``groups``,
-        ``real_success``, ``mean_readout``, and for binary readouts ``agreement``, ``imagined_success``
-        and ``false_success``; None where a share has nothing to divide by.
+        ``advantage_correlation`` with ``correlation_ci_low`` / ``_high`` (against real success),
+        ``return_correlation`` with ``return_ci_low`` / ``_high`` (against the real dense return; None
+        without it), ``reinforced_real_success``, ``discouraged_real_success``, ``signal_groups``,
+        ``real_signal_groups``, ``groups``, ``real_success``, ``mean_readout``, and for binary readouts
+        ``agreement``, ``imagined_success`` and ``false_success``; None where a share has nothing to
+        divide by.
     """
     read, _ = group_advantages(values.float())  # (B, G)
     truth, _ = group_advantages(real.float())  # (B, G)
     groups = len(values)
-    draws = np.random.default_rng(seed).integers(0, groups, size=(BOOTSTRAP, groups))  # resampled groups
-    resampled = [_correlation(read[d], truth[d]) for d in torch.from_numpy(draws)]
-    resampled = [c for c in resampled if c is not None]
+    draws = torch.from_numpy(np.random.default_rng(seed).integers(0, groups, size=(BOOTSTRAP, groups)))  # resampled groups
+    correlation, low, high = _correlation_interval(read, truth, draws)
     figures = {
         "groups": groups,
-        "advantage_correlation": _correlation(read, truth),
-        "correlation_ci_low": float(np.percentile(resampled, 2.5)) if resampled else None,
-        "correlation_ci_high": float(np.percentile(resampled, 97.5)) if resampled else None,
+        "advantage_correlation": correlation,
+        "correlation_ci_low": low,
+        "correlation_ci_high": high,
+        "return_correlation": None, "return_ci_low": None, "return_ci_high": None,
         "reinforced_real_success": _mean(real[read > 0]),
         "discouraged_real_success": _mean(real[read < 0]),
         "signal_groups": _mean((read != 0).any(dim=1)),
@@ -287,11 +372,25 @@ def signal_figures(values: torch.Tensor, real: torch.Tensor, binary: bool, seed:
         "real_success": _mean(real),
         "mean_readout": _mean(values),
     }
+    if real_return is not None:
+        returns, _ = group_advantages(real_return.float())  # (B, G)
+        figures["return_correlation"], figures["return_ci_low"], figures["return_ci_high"] = \
+            _correlation_interval(read, returns, draws)
     if binary:
         said = values > 0.5
         figures |= {"agreement": _mean(said == real), "imagined_success": _mean(said),
                     "false_success": _mean(~real[said])}
     return figures
+
+
+def _correlation_interval(read: torch.Tensor, truth: torch.Tensor, draws: torch.Tensor
+                          ) -> tuple[float | None, float | None, float | None]:
+    """The advantage correlation of (B, G) `read` and `truth`, and its 95% interval over the
+    (N, B) resampled groups `draws`."""
+    resampled = [c for c in (_correlation(read[d], truth[d]) for d in draws) if c is not None]
+    if not resampled:
+        return _correlation(read, truth), None, None
+    return _correlation(read, truth), float(np.percentile(resampled, 2.5)), float(np.percentile(resampled, 97.5))
 
 
 def _correlation(read: torch.Tensor, truth: torch.Tensor) -> float | None:
@@ -311,18 +410,20 @@ def format_signal(report: dict) -> str:
     settings = report["settings"]
     lines = [
         "# Does practice in imagination push the policy where the real world would?", "",
-        f"{settings['starts_per_task']} fresh scenes per task x {settings['group_size']} rollouts at temperature "
+        f"{settings['starts_per_task']} {_where(settings)} per task x {settings['group_size']} rollouts at temperature "
         f"{settings['temperature']}, imagined closed loop and replayed action for action in the real world "
         f"({report['interactions']:,} real interactions, {report['seconds']['total'] / 60:.1f} min). Tasks: "
         f"{', '.join(settings['task_list'])}. Advantage correlation: 1 = GRPO's update in imagination is the one the "
         "real outcomes would give; 0 = noise with respect to them (gymnast.experiment.practice_signal).", "",
-        "| readout | horizon | advantage correlation [95% CI] | real success: reinforced / discouraged rollouts "
-        "| groups ranked | agreement | false successes |",
-        "|---|---|---|---|---|---|---|",
+        "| readout | horizon | advantage correlation with real success [95% CI] | with the real dense return [95% CI] "
+        "| real success: reinforced / discouraged rollouts | groups ranked | agreement | false successes |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for row in report["readouts"]:
         lines.append(f"| {row['readout']} | {row['horizon']} | {_signed(row['advantage_correlation'])} "
                      f"[{_signed(row['correlation_ci_low'])}, {_signed(row['correlation_ci_high'])}] | "
+                     f"{_signed(row.get('return_correlation'))} "
+                     f"[{_signed(row.get('return_ci_low'))}, {_signed(row.get('return_ci_high'))}] | "
                      f"{pct(row['reinforced_real_success'])} / {pct(row['discouraged_real_success'])} | "
                      f"{pct(row['signal_groups'])} | {pct(row.get('agreement'))} | {pct(row.get('false_success'))} |")
     horizon = max(settings["horizons"])
@@ -336,6 +437,13 @@ def format_signal(report: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _where(settings: dict) -> str:
+    """What the groups started from, in words."""
+    if not settings.get("data"):
+        return "fresh scenes"
+    return f"keyframes ({settings['keyframes']}) of held-out episodes of {settings['data']}"
+
+
 def _signed(value: float | None) -> str:
     return "-" if value is None else f"{value:+.2f}"
 
@@ -347,24 +455,26 @@ def signal_brief(report: dict) -> dict:
     reinforced and discouraged rollouts; and the rollouts and real interactions behind them."""
     horizon = max(report["settings"]["horizons"])
     rows = {row["readout"]: row for row in report["readouts"] if row["horizon"] == horizon}
-    keys = ("advantage_correlation", "correlation_ci_low", "correlation_ci_high", "reinforced_real_success",
-            "discouraged_real_success", "signal_groups")
+    keys = ("advantage_correlation", "correlation_ci_low", "correlation_ci_high", "return_correlation",
+            "return_ci_low", "return_ci_high", "reinforced_real_success", "discouraged_real_success", "signal_groups")
     return {"horizon": horizon, "rollouts": len(report["rollouts"]), "real_interactions": report["interactions"],
-            **{label: {key: rows[name][key] for key in keys} for label, name in
-               (("imagined", SCORE), ("real_video", SCORE + ON_REAL_VIDEO), ("real_dense", REAL_DENSE))}}
+            **{label: {key: rows[name].get(key) for key in keys} for label, name in
+               (("imagined", SCORE), ("real_video", SCORE + ON_REAL_VIDEO), ("real_dense", REAL_DENSE))
+               if name in rows}}
 
 
 def measure_signal_runs(policy: str | Path, wm: str | Path, reward: RewardSpec, config: SignalConfig,
                         out: Path | None = None, progress: bool = True) -> dict:
     """`measure_signal` of saved runs: a policy run, a world-model run and a reward spec that reads
-    only the video (``judge:RUN`` or ``vlm:MODEL@BASE_URL``, see `gymnast.reward.spec`)."""
+    only the video (``judge:RUN`` or ``vlm:MODEL@BASE_URL``) or a grounded world model's reward head
+    (``state:RUN``), see `gymnast.reward.spec`."""
     from gymnast.policy.load import load_policy
     from gymnast.reward.select import make_reward
     from gymnast.world_model.base import load_world_model
 
-    if reward.kind not in ("judge", "vlm"):  # said before anything loads
+    if reward.kind not in ("judge", "vlm", "state"):  # said before anything loads
         raise ValueError(f"--reward {reward} reads more than the imagined video; rl-signal reads a judge "
-                         "(judge:RUN or vlm:MODEL@BASE_URL)")
+                         "(judge:RUN or vlm:MODEL@BASE_URL) or a state model's reward head (state:RUN)")
     world_model = load_world_model(wm)
     judge = make_reward(reward, world_model)
     labels = {"policy": str(policy), "wm": str(wm), "reward": str(reward)}

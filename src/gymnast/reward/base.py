@@ -34,12 +34,20 @@ class RewardContext:
         success: (B,) bool whether a simulator reported success (software sim or real world).
         env_rewards: (B, T) float the simulator's per-step rewards; steps after an episode ended
             are NaN.
+        start_state: (B, S) float the recorded state each rollout started from (a grounded world
+            model imagines on from it); S = 0 where the starts carry none.
+        start_action: (B, A) float the action that led to each start (the last of its prefix; zeros
+            at a first frame).
+        actions: (B, T) float the actions each rollout executed (0 after its end).
     """
 
     start: torch.Tensor | None = None
     reference_actions: torch.Tensor | None = None
     success: torch.Tensor | None = None
     env_rewards: torch.Tensor | None = None
+    start_state: torch.Tensor | None = None
+    start_action: torch.Tensor | None = None
+    actions: torch.Tensor | None = None
 
 
 @dataclass(frozen=True)
@@ -53,6 +61,9 @@ class RewardNeeds:
     """It reads a simulator's own outcome (`RewardContext.success`, ``env_rewards``)."""
     reference_actions: bool = False
     """It reads a demonstration's actions from each start (`RewardContext.reference_actions`)."""
+    start_state: bool = False
+    """It reads each rollout's recorded start state and actions (`RewardContext.start_state`,
+    ``actions``): a grounded world model imagines the state on from there."""
 
 
 class Reward(Protocol):

@@ -1,5 +1,5 @@
 """Rewards from their specs (`gymnast.reward.spec.RewardSpec`, parsed from the command line's
-`--reward judge:RUN | vlm:MODEL@BASE_URL | verified | sim | sim-dense`).
+`--reward judge:RUN | state:RUN | vlm:MODEL@BASE_URL | verified | sim | sim-dense`).
 
 The verified reward imagines with the world model the rollouts were imagined with, so it needs
 that model; the others need nothing more than their spec says. `measure_judge` measures a judge
@@ -32,6 +32,11 @@ def make_reward(spec: RewardSpec, world_model: WorldModel | None = None) -> Rewa
         from gymnast.reward.train_judge import load_judge
 
         return load_judge(spec.run)
+    if spec.kind == "state":
+        from gymnast.reward.state_reward import StateReward
+        from gymnast.world_model.state_model import load_state_model
+
+        return StateReward(load_state_model(spec.run))
     if spec.kind == "vlm":
         from gymnast.reward.vlm import VLMJudge, VLMJudgeConfig
 

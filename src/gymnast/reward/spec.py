@@ -1,5 +1,5 @@
-"""A reward as the command line names it, parsed once: `judge:RUN | vlm:MODEL@BASE_URL | verified |
-sim | sim-dense`.
+"""A reward as the command line names it, parsed once: `judge:RUN | state:RUN | vlm:MODEL@BASE_URL |
+verified | sim | sim-dense`.
 
 The command line parses the text into a `RewardSpec`; the library passes the spec on, builds the
 reward from it (`gymnast.reward.select.make_reward`) and writes it back as text (`str(spec)`) only
@@ -13,9 +13,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
-REWARD_FORMS = "judge:RUN | vlm:MODEL@BASE_URL | verified | sim | sim-dense"
+REWARD_FORMS = "judge:RUN | state:RUN | vlm:MODEL@BASE_URL | verified | sim | sim-dense"
 
-RewardKind = Literal["judge", "vlm", "verified", "sim", "sim-dense"]
+RewardKind = Literal["judge", "state", "vlm", "verified", "sim", "sim-dense"]
+_RUN_KINDS = ("judge", "state")  # named by their kind and a run directory
 _PLAIN_KINDS = ("verified", "sim", "sim-dense")  # named by their kind alone
 
 
@@ -25,7 +26,8 @@ class RewardSpec:
 
     Attributes:
         kind: the reward's kind.
-        run: the learned judge's run directory (``judge`` only).
+        run: the learned judge's run directory (``judge``), or the state model's (``state``: the
+            reward head of a grounded world model, `gymnast.reward.state_reward`).
         model: the vision-language model's name (``vlm`` only).
         base_url: the OpenAI-compatible endpoint serving it (``vlm`` only).
     """
@@ -36,16 +38,17 @@ class RewardSpec:
     base_url: str | None = None
 
     def __post_init__(self) -> None:
-        complete = {"judge": self.run is not None, "vlm": bool(self.model and self.base_url)}.get(self.kind, True)
-        if self.kind not in (*_PLAIN_KINDS, "judge", "vlm") or not complete:
+        complete = {"vlm": bool(self.model and self.base_url)} | dict.fromkeys(_RUN_KINDS, self.run is not None)
+        complete = complete.get(self.kind, True)
+        if self.kind not in (*_PLAIN_KINDS, *_RUN_KINDS, "vlm") or not complete:
             raise ValueError(f"unknown reward {self!r}; the forms are {REWARD_FORMS}")
 
     @classmethod
     def parse(cls, text: str) -> RewardSpec:
         """The spec `text` names (see `REWARD_FORMS`); ValueError listing the forms otherwise."""
         kind, _, argument = text.partition(":")
-        if kind == "judge" and argument:
-            return cls("judge", run=Path(argument))
+        if kind in _RUN_KINDS and argument:
+            return cls(kind, run=Path(argument))
         model, _, base_url = argument.partition("@")
         if kind == "vlm" and model and base_url:
             return cls("vlm", model=model, base_url=base_url)
@@ -59,8 +62,8 @@ class RewardSpec:
         return cls("judge", run=Path(run))
 
     def __str__(self) -> str:
-        if self.kind == "judge":
-            return f"judge:{self.run}"
+        if self.kind in _RUN_KINDS:
+            return f"{self.kind}:{self.run}"
         if self.kind == "vlm":
             return f"vlm:{self.model}@{self.base_url}"
         return self.kind

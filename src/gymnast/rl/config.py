@@ -7,6 +7,8 @@ without importing the loop itself.
 from __future__ import annotations
 
 from dataclasses import dataclass
+
+from gymnast.data.keyframes import KeyframeConfig
 from pathlib import Path
 from typing import Any
 
@@ -39,6 +41,13 @@ class RLConfig:
     instruction: str | None = None
     """Give the policy (and the judge) this sentence in every rollout and evaluation instead of the
     task's paraphrases: practise on your own wording. One task only."""
+    keyframes: str = "first"
+    """Where in the dataset's episodes practice starts: their first frames (first), or keyframes
+    anywhere in them (uniform, near_success: the frames before the first success, failures: in
+    episodes that failed; `gymnast.data.keyframes`), each imagined for `horizon` actions: short
+    segments from real frames. Not with --fresh-scenes or --scenes."""
+    keyframes_per_episode: int = 4
+    """Keyframes drawn from each episode for the pool of starts (with --keyframes other than first)."""
     starts_per_step: int = 4
     """Start states B per step (groups)."""
     group_size: int = 8
@@ -47,7 +56,10 @@ class RLConfig:
     """Sampling temperature of the rollouts (the log-probabilities use the same). World-Gymnast's 1.6
     halves our policy's success (docs/rl.md), so we sample at 1.0."""
     horizon: int = 150
-    """Actions per rollout, as in evaluation."""
+    """Actions per training rollout: the task's whole episode, or a segment from a keyframe (--keyframes)."""
+    eval_horizon: int = 0
+    """Actions per evaluation episode (evaluation starts at first frames); 0: `horizon`. With
+    segments from keyframes, set the task's horizon (150, as `gymnast eval` runs episodes)."""
     clip_low: float = 0.2
     """PPO ratio clip below 1."""
     clip_high: float = 0.28
@@ -121,6 +133,11 @@ class RLConfig:
     seed: int = 0
     """Seed of start sampling, rollouts and environment resets."""
 
+    @property
+    def evaluation_horizon(self) -> int:
+        """Actions per evaluation episode."""
+        return self.eval_horizon or self.horizon
+
     def __post_init__(self) -> None:
         for name in ("steps", "starts_per_step", "group_size", "horizon", "max_rounds", "minibatches", "micro_batch",
                      "workers", "eval_episodes", "checkpoint_every", "video_every", "imitation_batch"):
@@ -138,6 +155,12 @@ class RLConfig:
                 raise ValueError("RLConfig: --scenes names the scenes to practise on; --fresh-scenes draws new ones; "
                                  "give one of them")
             parse_scenes(self.scenes)
+        if self.eval_horizon < 0:
+            raise ValueError(f"RLConfig.eval_horizon must be at least 0, got {self.eval_horizon}")
+        KeyframeConfig(sampling=self.keyframes, horizon=self.horizon, per_episode=self.keyframes_per_episode)
+        if self.keyframes != "first" and (self.fresh_scenes or self.scenes is not None):
+            raise ValueError(f"RLConfig: --keyframes {self.keyframes} draws starts from the dataset's episodes; "
+                             "--fresh-scenes and --scenes start from first frames; give one of them")
         if self.instruction is not None and not self.instruction.strip():
             raise ValueError("RLConfig.instruction is empty; give a sentence or leave it out")
         if not 0 <= self.keep_low <= self.keep_high <= 1:

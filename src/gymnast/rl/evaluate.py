@@ -80,7 +80,8 @@ class Replay:
         success_by_step: (R, T) bool success at any step up to the end of the chunk holding action
             t (the simulator reports success once per chunk); False after the replay's end.
         rewards: (R, T) float32 the simulator's reward for each action (NaN after the replay's end).
-        interactions: actions the simulator executed (real interactions in the real world).
+        interactions: actions the simulator executed (real interactions in the real world), those
+            replayed to restore keyframe starts (their prefixes) included.
     """
 
     success: torch.Tensor
@@ -116,7 +117,8 @@ def replay_actions(env: VectorEnv, starts: Sequence[Start], actions: torch.Tenso
     planned = torch.zeros(count, calls * chunk, actions.shape[2])  # zero actions after the end
     planned[:, : min(steps, calls * chunk)] = actions[:, : calls * chunk].float()
     plan = iter(planned.split(chunk, dim=1))  # (R, K, A) each
-    frames, by_chunk, rewards, interactions = [], [], [], 0
+    frames, by_chunk, rewards = [], [], []
+    interactions = sum(len(start.prefix) for start in starts)  # restoring a keyframe takes real actions
     success = torch.zeros(count, dtype=torch.bool)
     for index, result in enumerate(run_batch(env, lambda images, instructions: next(plan).numpy(),
                                              start_options(starts), seed=0, max_calls=calls)):

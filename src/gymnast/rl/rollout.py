@@ -28,6 +28,7 @@ import torch
 from gymnasium.vector import VectorEnv
 
 from gymnast.data.frames import Fit
+from gymnast.data.keyframes import KeyframeConfig, dataset_keyframes
 from gymnast.data.lerobot import EpisodeDataset
 from gymnast.data.schema import EXTERNAL, EpisodeInfo
 from gymnast.envs.engine import run_batch
@@ -191,6 +192,11 @@ def reward_context(rollouts: Rollouts) -> RewardContext:
         reference_actions=torch.from_numpy(np.stack([r[:shortest] for r in references])),
         success=rollouts.success,
         env_rewards=rollouts.env_rewards,
+        start_state=torch.from_numpy(np.stack([start.state for start in rollouts.starts])),
+        start_action=torch.from_numpy(np.stack([start.prefix[-1] if len(start.prefix) else
+                                                np.zeros(rollouts.actions.shape[-1], np.float32)
+                                                for start in rollouts.starts])),
+        actions=rollouts.actions,
     )
 
 
@@ -255,12 +261,16 @@ def tasks_with_starts(data: Path, wanted: Sequence[str]) -> tuple[str, ...]:
 
 
 def dataset_starts(data: Path, tasks: Sequence[str] | None = None, image_size: int | None = None,
-                   fit: Fit = "resize", camera: str | None = None) -> list[Start]:
-    """One start per (task, seed) scene of a dataset: its first frame, instruction and reference.
+                   fit: Fit = "resize", camera: str | None = None, keyframes: KeyframeConfig | None = None
+                   ) -> list[Start]:
+    """One start per (task, seed) scene of a dataset: its first frame, instruction and reference;
+    or, with `keyframes` other than ``first``, keyframes of every episode of `tasks` recorded in the
+    real world (or on another robot), each with the episode's own continuation as its reference.
 
-    The reference is the successful scripted-expert episode (with or without action noise) with
-    the least noise in that scene; scenes with no successful expert episode are left out (they
-    have no reference, and an imagined start should be one the expert solved in the real world).
+    The reference of a first frame is the successful scripted-expert episode (with or without
+    action noise) with the least noise in that scene; scenes with no successful expert episode are
+    left out (they have no reference, and an imagined start should be one the expert solved in the
+    real world).
 
     Args:
         data: dataset directory.
@@ -269,13 +279,23 @@ def dataset_starts(data: Path, tasks: Sequence[str] | None = None, image_size: i
             were trained (`gymnast.data.frames`); None: the frames as stored.
         fit: resize or crop, the models' training setting.
         camera: the dataset camera to read (default: the first whose frames exist).
+        keyframes: where in the episodes to start (None or ``first``: first frames).
 
     Raises:
-        ValueError: no scene of `tasks` has a successful expert episode.
+        ValueError: no scene of `tasks` has a successful expert episode (no episode of `tasks`, for
+            keyframes).
     """
     dataset = EpisodeDataset(data, camera)
     if image_size is not None:
         dataset = dataset.fitted(image_size, fit)
+    if keyframes is not None and keyframes.sampling != "first":
+        episodes = [i for i, info in enumerate(dataset.episodes) if info.env_variant in ("real", EXTERNAL)
+                    and (not tasks or info.task in tasks)]
+        starts = dataset_keyframes(dataset, episodes, keyframes)
+        if not starts:
+            raise ValueError(f"{data} has no episode of {', '.join(tasks or ['any task'])} to draw "
+                             f"{keyframes.sampling} keyframes from")
+        return starts
     best: dict[tuple[str, int], int] = {}
     for i, info in enumerate(dataset.episodes):
         if not _expert_solved(info) or (tasks and info.task not in tasks):
@@ -288,8 +308,10 @@ def dataset_starts(data: Path, tasks: Sequence[str] | None = None, image_size: i
     starts = []
     for key in sorted(best):
         episode = dataset.load(best[key])
+        state = episode.env_states[0] if episode.env_states.shape[1] else episode.states[0]
         starts.append(Start(episode.info.task, episode.info.seed, episode.info.instruction,
-                            episode.frames[:1].copy(), episode.actions.astype(np.float32)))
+                            episode.frames[:1].copy(), episode.actions.astype(np.float32),
+                            state=np.asarray(state, np.float32)))
     return starts
 
 

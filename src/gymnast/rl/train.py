@@ -36,6 +36,7 @@ from tqdm import tqdm
 from gymnast.config import EnvConfig
 from gymnast.envs.factory import EnvFactory
 from gymnast.envs.kinds import REAL
+from gymnast.data.keyframes import KeyframeConfig
 from gymnast.envs.starts import Start, StartSampler, evaluation_starts, own_instruction, scene_starts
 from gymnast.envs.tasks import parse_scenes, resolve_tasks
 from gymnast.reward.base import Reward, check_fits
@@ -96,11 +97,16 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
     practice = own_instruction(scene_starts(scenes, env_config), config.instruction) if scenes else None
     # Start frames as the policy saw its training frames: the same camera, fitted the same way.
     frames = policy_frames(run_spec.policy)
+    keyframes = KeyframeConfig(sampling=config.keyframes, horizon=config.horizon, per_episode=config.keyframes_per_episode)
     pool = dataset_starts(data, tasks, policy.config.image_size, frames.get("fit", "resize"),
-                          frames.get("camera")) if data else None
+                          frames.get("camera"), keyframes) if data else None
     draw_starts = StartSampler(tasks, practice or pool, env_config, config.instruction)
     envs = EnvFactory(env, policy.chunk_size, env_config, config.gap, config.workers, world_model,
                       stop_above=config.disagreement_stop or None, runner=config.runner)
+    # Segments from keyframes are shorter than the task's episodes, which evaluation runs whole.
+    eval_envs = envs if config.evaluation_horizon == config.horizon else EnvFactory(
+        env, policy.chunk_size, dataclasses.replace(env_config, horizon=config.evaluation_horizon), config.gap,
+        config.workers, world_model, stop_above=config.disagreement_stop or None, runner=config.runner)
     resolved = {"rl": dataclasses.asdict(config), "run": run_spec.to_json(), "model": policy.spec(),
                 "data": str(data) if data else None, "frames": frames}
 
@@ -143,9 +149,9 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
                 board.add_scalar(key, value, step)
 
     def evaluate(step: int) -> None:
-        values = evaluate_in_env(envs, env, policy, reward, eval_starts, prefix="eval/own")
+        values = evaluate_in_env(eval_envs, env, policy, reward, eval_starts, prefix="eval/own")
         if config.real_eval and not env.real_interactions:  # else its own evaluation is the real one
-            real = evaluate_in_env(envs, REAL, policy, reward, eval_starts, prefix="eval/real")
+            real = evaluate_in_env(eval_envs, REAL, policy, reward, eval_starts, prefix="eval/real")
             state["eval_real_interactions"] += int(real.pop("eval/real_interactions"))
             values |= real
         own = int(values.pop("eval/own_interactions", 0))
@@ -196,6 +202,7 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
                                 {"schedule": schedule.state_dict(), "state": state})
     finally:  # worker processes and event files are released even when a step fails
         envs.close()
+        eval_envs.close()
         if board is not None:
             board.close()
     return write_summary(out, run_spec, config, state)

@@ -1,0 +1,308 @@
+"""`gymnast train-state`: fit the grounded state model (`gymnast.world_model.state_model`) to a
+dataset's recorded states, rewards and success flags, and measure it on the held-out scenes.
+
+Legend: N episodes, B batch, L unrolled steps, T longest episode, S state dimensions, A action
+dimensions, E instruction embedding.
+
+Each step draws B windows of L steps from random episodes and times, imagines the L states open
+loop from the window's real first state under its real actions, and minimises, over the steps
+inside the episode: the squared error of every imagined state (in normalised units), and of the
+reward head's reward and success on both the imagined and the recorded states (the recorded ones
+teach the head what the task rewards; the imagined ones, what it should say of a drifted state).
+Backpropagating through the unrolled steps teaches the dynamics to correct its own drift, as the
+video model's training does.
+
+`evaluate_state_model` measures what practice relies on, on scenes the model never trained on:
+how far the imagined hand and object end from the real ones after h actions (centimetres, against
+the linear baseline of docs/world_model.md), and how well the imagined rewards and success agree
+with the recorded ones.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from tqdm import tqdm
+
+from gymnast.data.lerobot import EpisodeDataset
+from gymnast.data.schema import EXTERNAL
+from gymnast.policy.text import InstructionEncoder
+from gymnast.utils.atomic import write_json
+from gymnast.utils.checkpoint import resume_training, save_training, write_run_config
+from gymnast.utils.metrics import MetricsLog
+from gymnast.utils.optim import gradient_step, warmup_cosine
+from gymnast.world_model.data import split_episodes
+from gymnast.world_model.metrics import pearson
+from gymnast.world_model.state_model import REWARD_SCALE, StateModel, StateModelConfig
+
+logger = logging.getLogger(__name__)
+
+HAND, OBJECT = slice(0, 3), slice(4, 7)
+"""Where Meta-World's environment state keeps the hand's and the first object's position (metres)."""
+
+
+@dataclass(frozen=True)
+class StateTrainConfig:
+    """State-model training settings."""
+
+    steps: int = 4000
+    """Optimiser steps."""
+    batch_size: int = 256
+    """Windows B per step."""
+    unroll: int = 16
+    """L: steps imagined open loop per window (what the model learns to stay right over)."""
+    lr: float = 1e-3
+    """Peak learning rate (AdamW, warm-up then cosine decay)."""
+    hidden: int = 256
+    """Width of the networks."""
+    last_action: bool = True
+    """Condition each step on the action before it too (`StateModelConfig.last_action`)."""
+    ridge: float = 1e-4
+    """Start the dynamics' linear path at the ridge-regularised least-squares fit of the recorded
+    steps, with this penalty per input (0: start it at zero)."""
+    heldout_fraction: float = 0.1
+    """Share of the scenes kept out of training for the evaluation (the world model's split)."""
+    checkpoint_every: int = 1000
+    """Steps between checkpoints (and at the end)."""
+    seed: int = 0
+    """Seed of the initial weights and of the windows drawn."""
+
+    def __post_init__(self) -> None:
+        for name in ("steps", "batch_size", "unroll", "hidden", "checkpoint_every"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"StateTrainConfig.{name} must be at least 1, got {getattr(self, name)}")
+
+
+@dataclass(frozen=True)
+class EpisodeTensors:
+    """N episodes padded to the longest (T actions), for drawing windows in one indexing operation.
+
+    Attributes:
+        states: (N, T + 1, S) recorded states (padded by repeating the last).
+        actions: (N, T, A); rewards (N, T) in [0, 1]; success (N, T) float.
+        lengths: (N,) actions per episode.
+        embedding: (N, E) the instruction's embedding.
+        tasks: the N task names.
+    """
+
+    states: torch.Tensor
+    actions: torch.Tensor
+    rewards: torch.Tensor
+    success: torch.Tensor
+    lengths: torch.Tensor
+    embedding: torch.Tensor
+    tasks: tuple[str, ...]
+
+    def windows(self, index: torch.Tensor, starts: torch.Tensor, steps: int) -> tuple[torch.Tensor, ...]:
+        """Windows of `steps` actions from (B,) episodes at (B,) start times: (B, S) first state,
+        (B, L, A) actions, (B, L, S) next states, (B, L) rewards and success, (B, L) bool inside,
+        and (B, A) the action before the window (zeros at an episode's start)."""
+        times = starts[:, None] + torch.arange(steps)  # (B, L)
+        inside = times < self.lengths[index, None]
+        times = times.clamp(max=self.actions.shape[1] - 1)
+        rows = index[:, None].expand_as(times)
+        before = torch.where((starts > 0)[:, None], self.actions[index, (starts - 1).clamp(min=0)], 0.0)
+        return (self.states[index, starts], self.actions[rows, times], self.states[rows, times + 1],
+                self.rewards[rows, times], self.success[rows, times], inside, before)
+
+
+def episode_tensors(dataset: EpisodeDataset, episodes: list[int], encoder: InstructionEncoder,
+                    progress: bool = False) -> EpisodeTensors:
+    """The given episodes as padded tensors (state: the environment state where recorded, else
+    ``observation.state``).
+
+    Raises:
+        ValueError: no episodes, or an episode without a state.
+    """
+    if not episodes:
+        raise ValueError(f"{dataset.root}: no episodes to train the state model on")
+    loaded = [dataset.load(i) for i in tqdm(episodes, desc="load", unit="ep", disable=not progress)]
+    longest = max(len(e.actions) for e in loaded)
+
+    def pad(values: np.ndarray, length: int) -> np.ndarray:
+        return np.concatenate([values, np.repeat(values[-1:], length - len(values), axis=0)]) if len(values) < length else values
+
+    states = []
+    for i, episode in zip(episodes, loaded):
+        state = episode.env_states if episode.env_states.shape[1] else episode.states
+        if state.shape[1] == 0:
+            raise ValueError(f"{dataset.root}: episode {i} records no observation.state; the state model learns from it")
+        states.append(pad(state, longest + 1))
+    return EpisodeTensors(
+        states=torch.from_numpy(np.stack(states)).float(),
+        actions=torch.from_numpy(np.stack([pad(e.actions, longest) for e in loaded])).float(),
+        rewards=torch.from_numpy(np.stack([pad(e.rewards, longest) for e in loaded])).float() / REWARD_SCALE,
+        success=torch.from_numpy(np.stack([pad(e.successes, longest) for e in loaded])).float(),
+        lengths=torch.tensor([len(e.actions) for e in loaded]),
+        embedding=encoder([e.info.instruction for e in loaded]),
+        tasks=tuple(e.info.task for e in loaded),
+    )
+
+
+def state_loss(model: StateModel, batch: tuple[torch.Tensor, ...], embedding: torch.Tensor) -> tuple[torch.Tensor, dict]:
+    """The loss of one batch of windows (see the module docstring) and its parts."""
+    start, actions, future, rewards, success, inside, before = batch
+    states, predicted_rewards, logits = model.unroll(start, actions, embedding, before)
+    weight = inside.float() / inside.float().sum().clamp_min(1)  # (B, L)
+    state_error = (((states - future) / model.state_std) ** 2).mean(-1)
+    steps = future.shape[1]
+    true_rewards, true_logits = model.read_reward(future, start[:, None].expand(-1, steps, -1),
+                                                  model.embed_text(embedding)[:, None].expand(-1, steps, -1))
+    reward_error = (predicted_rewards - rewards) ** 2 + (true_rewards - rewards) ** 2
+    success_error = (F.binary_cross_entropy_with_logits(logits, success, reduction="none")
+                     + F.binary_cross_entropy_with_logits(true_logits, success, reduction="none"))
+    parts = {name: (error * weight).sum() for name, error in
+             (("state", state_error), ("reward", reward_error), ("success", success_error))}
+    loss = parts["state"] + 10 * parts["reward"] + 0.1 * parts["success"]
+    return loss, {f"train/{name}": float(value.detach()) for name, value in parts.items()}
+
+
+def fit_linear_path(model: StateModel, episodes: EpisodeTensors, ridge: float) -> None:
+    """Sets the dynamics' linear path to the ridge-regularised least-squares fit of every recorded
+    step (`ridge` times the number of steps on the diagonal, inputs being of unit spread).
+
+    Why: the inputs are in units of the states' spread and the output in units of one step's, so
+    carrying a position forward takes gains of tens (the spread over the step), which Adam's steps
+    of about the learning rate do not reach in a few thousand updates; measured, the network alone
+    stayed behind a linear model of the hand. The penalty keeps the fitted system stable when it is
+    iterated over many steps (an unpenalised fit of every dimension diverged).
+    """
+    inputs, targets = [], []
+    for i, n in enumerate(episodes.lengths.tolist()):
+        states, actions = episodes.states[i, : n + 1], episodes.actions[i, :n]
+        before = torch.cat([torch.zeros_like(actions[:1]), actions[:-1]])
+        inputs.append(model.linear_inputs(states[:-1], states[:1].expand(n, -1), actions, before))
+        targets.append((states[1:] - states[:-1] - model.delta_mean) / model.delta_std)
+    x = torch.cat(inputs).double()
+    x = torch.cat([x, torch.ones(len(x), 1, dtype=torch.double)], dim=1)  # the bias
+    gram = x.T @ x + ridge * len(x) * torch.eye(x.shape[1], dtype=torch.double)
+    solution = torch.linalg.solve(gram, x.T @ torch.cat(targets).double()).float()  # (F + 1, S)
+    with torch.no_grad():
+        model.linear_dynamics.weight.copy_(solution[:-1].T)
+        model.linear_dynamics.bias.copy_(solution[-1])
+
+
+def train_state_model(data: Path, out: Path, config: StateTrainConfig, resume: bool = False,
+                      progress: bool = True) -> Path:
+    """Trains (or resumes) a state-model run in `out` on `data`'s episodes recorded in the real
+    world (or on another robot); returns the final checkpoint directory and writes ``eval.json``."""
+    dataset = EpisodeDataset(data)
+    usable = [i for i, info in enumerate(dataset.episodes) if info.env_variant in ("real", EXTERNAL)]
+    train, heldout = split_episodes([dataset.episodes[i] for i in usable], config.heldout_fraction)
+    train, heldout = [usable[i] for i in train], [usable[i] for i in heldout]
+    encoder = InstructionEncoder()
+    episodes = episode_tensors(dataset, train, encoder, progress)
+    torch.manual_seed(config.seed)
+    stats = dataset.action_stats
+    spans = all(high > low for low, high in zip(stats.min, stats.max))  # else actions are taken as they are
+    model = StateModel(StateModelConfig(state_dim=episodes.states.shape[-1], action_dim=episodes.actions.shape[-1],
+                                        hidden=config.hidden, last_action=config.last_action, action_low=tuple(stats.min) if spans else (),
+                                        action_high=tuple(stats.max) if spans else ()))
+    real = torch.cat([episodes.states[i, : n + 1] for i, n in enumerate(episodes.lengths.tolist())])
+    deltas = torch.cat([episodes.states[i, 1: n + 1] - episodes.states[i, :n] for i, n in enumerate(episodes.lengths.tolist())])
+    model.set_statistics(real, deltas)
+    if config.ridge > 0:
+        fit_linear_path(model, episodes, config.ridge)
+    optimizer = torch.optim.AdamW(model.parameters(), lr=config.lr, weight_decay=1e-4)
+    schedule = torch.optim.lr_scheduler.LambdaLR(optimizer, warmup_cosine(min(200, config.steps // 10), config.steps))
+    sampler = torch.Generator().manual_seed(config.seed)
+    write_run_config(out, resolved := {"train": dataclasses.asdict(config), "model": model.spec(), "data": str(data),
+                                       "train_episodes": len(train), "heldout_episodes": len(heldout)})
+    start = resume_training(out, model, optimizer, schedule, sampler) if resume else 0
+    metrics = MetricsLog(out, resume_step=start if resume else None)
+    checkpoint = None
+    for step in tqdm(range(start, config.steps), initial=start, total=config.steps, desc="train-state", disable=not progress):
+        model.train()
+        index = torch.randint(len(episodes.lengths), (config.batch_size,), generator=sampler)
+        times = (torch.rand(config.batch_size, generator=sampler) * episodes.lengths[index]).long()
+        batch = episodes.windows(index, times, config.unroll)
+        loss, values = state_loss(model, batch, episodes.embedding[index])
+        gradient_step(loss, model, optimizer, schedule)
+        if step % 50 == 0:
+            metrics.log(step, values)
+        if (step + 1) % config.checkpoint_every == 0 or step + 1 == config.steps:
+            checkpoint = save_training(out, step + 1, model, resolved, optimizer, schedule, sampler)
+    model.eval()
+    if heldout:
+        report = evaluate_state_model(model, episode_tensors(dataset, heldout, encoder),
+                                      baseline=LinearHandBaseline(episodes))
+        write_json(out / "eval.json", report)
+        logger.info("state model on %d held-out episodes: hand error %s cm", len(heldout),
+                    {h: round(v["hand_cm"], 2) for h, v in report["horizons"].items()})
+    return checkpoint or out
+
+
+class LinearHandBaseline:
+    """How predictable the hand is from the actions alone: a least-squares linear model of the
+    hand's step from this action, the last action and the last step, integrated open loop with the
+    positions clipped to the recorded workspace. A state model has to beat it to be called grounded."""
+
+    def __init__(self, episodes: EpisodeTensors) -> None:
+        features, targets = [], []
+        for i, n in enumerate(episodes.lengths.tolist()):
+            hand, actions = episodes.states[i, : n + 1, HAND], episodes.actions[i, :n]
+            steps = hand[1:] - hand[:-1]  # (n, 3)
+            features.append(self._features(actions[1:], actions[:-1], steps[:-1]))
+            targets.append(steps[1:])
+        self.weights = torch.linalg.lstsq(torch.cat(features).double(), torch.cat(targets).double()).solution.float()
+        hands = torch.cat([episodes.states[i, : n + 1, HAND] for i, n in enumerate(episodes.lengths.tolist())])
+        self.low, self.high = hands.min(0).values, hands.max(0).values
+
+    @staticmethod
+    def _features(action: torch.Tensor, last_action: torch.Tensor, last_step: torch.Tensor) -> torch.Tensor:
+        return torch.cat([action, last_action, last_step, torch.ones(len(action), 1)], dim=1)
+
+    def hands(self, hand: torch.Tensor, last_step: torch.Tensor, last_action: torch.Tensor,
+              actions: torch.Tensor) -> torch.Tensor:
+        """(B, L, 3) hand positions after (B, L, A) `actions` from (B, 3) `hand`, whose last step and
+        action were `last_step` (B, 3) and `last_action` (B, A)."""
+        positions = []
+        for t in range(actions.shape[1]):
+            last_step = self._features(actions[:, t], last_action, last_step) @ self.weights
+            hand = torch.minimum(torch.maximum(hand + last_step, self.low), self.high)
+            last_action = actions[:, t]
+            positions.append(hand)
+        return torch.stack(positions, dim=1)
+
+
+def evaluate_state_model(model: StateModel, episodes: EpisodeTensors, horizons: tuple[int, ...] = (8, 16, 40),
+                         baseline: LinearHandBaseline | None = None) -> dict:
+    """Open-loop errors of windows of the held-out episodes, from every 10th step of each.
+
+    Returns:
+        ``horizons``: per h, the mean distance (cm) between imagined and recorded hand and object
+        after h actions (and the `baseline`'s hand, when given), and the correlation of the summed
+        imagined and recorded rewards over the h actions; ``success_agreement``: how often "success
+        within the window" agrees; ``windows``.
+    """
+    report = {"horizons": {}, "windows": 0}
+    for h in horizons:
+        index, starts = zip(*[(i, t) for i, n in enumerate(episodes.lengths.tolist()) for t in range(0, max(n - h, 1), 10)])
+        index, starts = torch.tensor(index), torch.tensor(starts)
+        start, actions, future, rewards, success, inside, before = episodes.windows(index, starts, h)
+        imagined = model.imagine(start, actions, episodes.embedding[index], before)
+        last = inside.long().sum(1).clamp_min(1) - 1  # the last step inside the episode
+        rows = torch.arange(len(index))
+        hand = (imagined.states[rows, last, HAND] - future[rows, last, HAND]).norm(dim=-1) * 100
+        obj = (imagined.states[rows, last, OBJECT] - future[rows, last, OBJECT]).norm(dim=-1) * 100
+        mask = inside.float()
+        said = ((imagined.success > 0.5) & inside).any(1)
+        real = ((success > 0.5) & inside).any(1)
+        report["horizons"][str(h)] = {
+            "hand_cm": float(hand.mean()), "object_cm": float(obj.mean()),
+            "return_correlation": pearson((imagined.rewards * mask).sum(1), (rewards * mask).sum(1)),
+            "success_agreement": float((said == real).float().mean()),
+        }
+        if baseline is not None:
+            last_step = start[:, HAND] - episodes.states[index, (starts - 1).clamp(min=0), HAND]
+            linear = baseline.hands(start[:, HAND], last_step, before, actions)[rows, last]
+            report["horizons"][str(h)]["linear_baseline_hand_cm"] = float(
+                ((linear - future[rows, last, HAND]).norm(dim=-1) * 100).mean())
+        report["windows"] = len(index)
+    return report

@@ -1,0 +1,81 @@
+"""The grounded state model: it learns the recorded states and rewards, saves and loads exactly,
+resumes, and its reward head scores rollouts from their start states and actions."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+import torch
+
+from gymnast.data.lerobot import EpisodeDataset
+from gymnast.policy.text import InstructionEncoder
+from gymnast.reward.base import RewardContext
+from gymnast.reward.state_reward import StateReward
+from gymnast.world_model.state_model import StateModel, StateModelConfig, load_state_model
+from gymnast.world_model.train_state import StateTrainConfig, episode_tensors, state_loss, train_state_model
+
+
+@pytest.fixture(scope="module")
+def state_run(tiny_dataset, tmp_path_factory):
+    out = tmp_path_factory.mktemp("state")
+    train_state_model(tiny_dataset, out, StateTrainConfig(steps=300, batch_size=32, unroll=8, heldout_fraction=0.0,
+                                                          checkpoint_every=150), progress=False)
+    return out
+
+
+def test_training_lowers_the_loss_on_the_recorded_episodes(tiny_dataset, state_run):
+    dataset = EpisodeDataset(tiny_dataset)
+    episodes = episode_tensors(dataset, list(range(len(dataset))), InstructionEncoder())
+    index = torch.arange(len(episodes.lengths)).repeat(8)
+    times = torch.arange(len(index)) % 40
+    batch = episodes.windows(index, times, 8)
+    trained = load_state_model(state_run)
+    untrained = StateModel(trained.config)
+    untrained.load_state_dict({k: v for k, v in trained.state_dict().items() if "mean" in k or "std" in k}, strict=False)
+    with torch.no_grad():
+        before, _ = state_loss(untrained, batch, episodes.embedding[index])
+        after, _ = state_loss(trained, batch, episodes.embedding[index])
+    assert after < 0.5 * before
+
+
+def test_a_saved_state_model_imagines_exactly_what_it_did_before(state_run):
+    first, second = load_state_model(state_run), load_state_model(state_run)
+    start, actions, text = torch.randn(3, first.config.state_dim), torch.rand(3, 5, 4) * 2 - 1, torch.randn(3, 384)
+    a, b = first.imagine(start, actions, text), second.imagine(start, actions, text)
+    assert torch.equal(a.states, b.states) and torch.equal(a.rewards, b.rewards)
+    assert a.states.shape == (3, 5, first.config.state_dim) and a.success.shape == (3, 5)
+
+
+def test_a_resumed_run_goes_on_from_its_last_checkpoint(tiny_dataset, state_run, tmp_path):
+    saved = json.loads((state_run / "config.json").read_text())
+    assert saved["train"]["steps"] == 300 and (state_run / "checkpoints" / "000150").is_dir()
+    out = tmp_path / "again"
+    config = StateTrainConfig(steps=150, batch_size=32, unroll=8, heldout_fraction=0.0, checkpoint_every=150)
+    train_state_model(tiny_dataset, out, config, progress=False)
+    longer = StateTrainConfig(steps=300, batch_size=32, unroll=8, heldout_fraction=0.0, checkpoint_every=150)
+    train_state_model(tiny_dataset, out, longer, resume=True, progress=False)
+    steps = [json.loads(line)["step"] for line in (out / "metrics.jsonl").read_text().splitlines()]
+    assert steps == sorted(steps) and steps[-1] == 250 and (out / "checkpoints" / "000300").is_dir()
+
+
+def test_the_reward_head_scores_rollouts_from_their_start_states_and_actions(state_run):
+    reward = StateReward(load_state_model(state_run))
+    states = torch.randn(4, reward.model.config.state_dim)
+    actions = torch.zeros(4, 6, 4)
+    context = RewardContext(start_state=states, actions=actions)
+    frames = torch.zeros(4, 7, 8, 8, 3, dtype=torch.uint8)
+    scores = reward.score(frames, ["reach the goal"] * 4, context)
+    assert scores.shape == (4,) and ((0 <= scores) & (scores <= 1)).all()
+    assert reward.verdict(["reach the goal"] * 4, context).shape == (4,)
+    with pytest.raises(ValueError, match="start_state"):
+        reward.score(frames, ["reach the goal"] * 4, RewardContext())
+    with pytest.raises(ValueError, match="do not fit"):
+        reward.score(frames, ["reach the goal"] * 4, RewardContext(start_state=states[:, :3], actions=actions))
+
+
+def test_sizes_that_cannot_build_a_model_are_refused():
+    with pytest.raises(ValueError, match="hidden"):
+        StateModelConfig(hidden=0)
+    with pytest.raises(ValueError, match="unroll"):
+        StateTrainConfig(unroll=0)
