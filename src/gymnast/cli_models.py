@@ -82,6 +82,7 @@ def train_state(
     seed: int = 0,
     ridge: float = 1e-4,
     last_action: bool = True,
+    extra_data: tuple[Path, ...] = (),
 ) -> None:
     """Train the grounded state model on a dataset's recorded states, rewards and success flags: the
     state under the actions, and a reward head read off it (`--reward state:OUT`); writes
@@ -98,6 +99,7 @@ def train_state(
         ridge: start the dynamics' linear path at the least-squares fit of the recorded steps with this
             ridge penalty (0: at zero).
         last_action: condition each step on the action before it too.
+        extra_data: more datasets to train on, e.g. the policy's own rollouts (`gymnast collect --policy`).
     """
     from gymnast.utils.settings import from_json, saved_settings
     from gymnast.world_model.train_state import StateTrainConfig, train_state_model
@@ -107,7 +109,8 @@ def train_state(
     elif data is None:
         raise ValueError("train-state needs --data (or --resume to continue the run in --out)")
     else:
-        config = StateTrainConfig(steps=steps, unroll=unroll, seed=seed, ridge=ridge, last_action=last_action)
+        config = StateTrainConfig(steps=steps, unroll=unroll, seed=seed, ridge=ridge, last_action=last_action,
+                                  extra_data=extra_data)
     checkpoint = train_state_model(data, out, config, resume=resume)
     print(f"state model: {checkpoint}; held-out errors: {out / 'eval.json'}")
 

@@ -79,3 +79,11 @@ def test_sizes_that_cannot_build_a_model_are_refused():
         StateModelConfig(hidden=0)
     with pytest.raises(ValueError, match="unroll"):
         StateTrainConfig(unroll=0)
+
+
+def test_extra_datasets_train_together_and_are_saved_with_the_run(tiny_dataset, tmp_path):
+    config = StateTrainConfig(steps=2, batch_size=4, unroll=2, heldout_fraction=0.0, extra_data=(tiny_dataset,))
+    train_state_model(tiny_dataset, tmp_path / "both", config, progress=False)
+    saved = json.loads((tmp_path / "both" / "config.json").read_text())
+    assert saved["train_episodes"] == 2 * len(EpisodeDataset(tiny_dataset))
+    assert saved["train"]["extra_data"] == [str(tiny_dataset)]

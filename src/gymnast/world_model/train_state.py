@@ -63,6 +63,9 @@ class StateTrainConfig:
     """Width of the networks."""
     last_action: bool = True
     """Condition each step on the action before it too (`StateModelConfig.last_action`)."""
+    extra_data: tuple[Path, ...] = ()
+    """More datasets to train on (the same state and actions), e.g. the policy's own rollouts, split
+    by the same scene hash."""
     ridge: float = 1e-4
     """Start the dynamics' linear path at the ridge-regularised least-squares fit of the recorded
     steps, with this penalty per input (0: start it at zero)."""
@@ -112,27 +115,33 @@ class EpisodeTensors:
                 self.rewards[rows, times], self.success[rows, times], inside, before)
 
 
-def episode_tensors(dataset: EpisodeDataset, episodes: list[int], encoder: InstructionEncoder,
-                    progress: bool = False) -> EpisodeTensors:
-    """The given episodes as padded tensors (state: the environment state where recorded, else
+def episode_tensors(dataset: EpisodeDataset | list[tuple[EpisodeDataset, list[int]]], episodes: list[int] | None,
+                    encoder: InstructionEncoder, progress: bool = False) -> EpisodeTensors:
+    """The given episodes of a dataset (or of several: a list of (dataset, episodes) and
+    `episodes` None) as padded tensors (state: the environment state where recorded, else
     ``observation.state``).
 
     Raises:
         ValueError: no episodes, or an episode without a state.
     """
-    if not episodes:
-        raise ValueError(f"{dataset.root}: no episodes to train the state model on")
-    loaded = [dataset.load(i) for i in tqdm(episodes, desc="load", unit="ep", disable=not progress)]
+    sources = dataset if episodes is None else [(dataset, episodes)]
+    if not any(chosen for _, chosen in sources):
+        raise ValueError(f"{', '.join(str(d.root) for d, _ in sources)}: no episodes to train the state model on")
+    pairs = [(data, i) for data, chosen in sources for i in chosen]
+    loaded = [data.load(i) for data, i in tqdm(pairs, desc="load", unit="ep", disable=not progress)]
     longest = max(len(e.actions) for e in loaded)
 
     def pad(values: np.ndarray, length: int) -> np.ndarray:
         return np.concatenate([values, np.repeat(values[-1:], length - len(values), axis=0)]) if len(values) < length else values
 
     states = []
-    for i, episode in zip(episodes, loaded):
+    for (data, i), episode in zip(pairs, loaded):
         state = episode.env_states if episode.env_states.shape[1] else episode.states
         if state.shape[1] == 0:
-            raise ValueError(f"{dataset.root}: episode {i} records no observation.state; the state model learns from it")
+            raise ValueError(f"{data.root}: episode {i} records no observation.state; the state model learns from it")
+        if states and state.shape[1] != states[0].shape[1]:
+            raise ValueError(f"{data.root}: episode {i} has a state of {state.shape[1]} numbers, the episodes before "
+                             f"it {states[0].shape[1]}; datasets trained on together need the same state")
         states.append(pad(state, longest + 1))
     return EpisodeTensors(
         states=torch.from_numpy(np.stack(states)).float(),
@@ -188,16 +197,25 @@ def fit_linear_path(model: StateModel, episodes: EpisodeTensors, ridge: float) -
         model.linear_dynamics.bias.copy_(solution[-1])
 
 
+def _settings(config: StateTrainConfig) -> dict:
+    """The config as JSON (paths as strings)."""
+    return dataclasses.asdict(config) | {"extra_data": [str(path) for path in config.extra_data]}
+
+
 def train_state_model(data: Path, out: Path, config: StateTrainConfig, resume: bool = False,
                       progress: bool = True) -> Path:
     """Trains (or resumes) a state-model run in `out` on `data`'s episodes recorded in the real
     world (or on another robot); returns the final checkpoint directory and writes ``eval.json``."""
     dataset = EpisodeDataset(data)
-    usable = [i for i, info in enumerate(dataset.episodes) if info.env_variant in ("real", EXTERNAL)]
-    train, heldout = split_episodes([dataset.episodes[i] for i in usable], config.heldout_fraction)
-    train, heldout = [usable[i] for i in train], [usable[i] for i in heldout]
+    train_sources, heldout_sources = [], []
+    for source in (dataset, *(EpisodeDataset(path) for path in config.extra_data)):
+        usable = [i for i, info in enumerate(source.episodes) if info.env_variant in ("real", EXTERNAL)]
+        train, heldout = split_episodes([source.episodes[i] for i in usable], config.heldout_fraction)
+        train_sources.append((source, [usable[i] for i in train]))
+        heldout_sources.append((source, [usable[i] for i in heldout]))
+    train, heldout = train_sources[0][1], heldout_sources[0][1]  # the main dataset's, reported in config.json
     encoder = InstructionEncoder()
-    episodes = episode_tensors(dataset, train, encoder, progress)
+    episodes = episode_tensors(train_sources, None, encoder, progress)
     torch.manual_seed(config.seed)
     stats = dataset.action_stats
     spans = all(high > low for low, high in zip(stats.min, stats.max))  # else actions are taken as they are
@@ -212,8 +230,9 @@ def train_state_model(data: Path, out: Path, config: StateTrainConfig, resume: b
     optimizer = torch.optim.AdamW(model.parameters(), lr=config.lr, weight_decay=1e-4)
     schedule = torch.optim.lr_scheduler.LambdaLR(optimizer, warmup_cosine(min(200, config.steps // 10), config.steps))
     sampler = torch.Generator().manual_seed(config.seed)
-    write_run_config(out, resolved := {"train": dataclasses.asdict(config), "model": model.spec(), "data": str(data),
-                                       "train_episodes": len(train), "heldout_episodes": len(heldout)})
+    write_run_config(out, resolved := {"train": _settings(config), "model": model.spec(), "data": str(data),
+                                       "train_episodes": len(episodes.lengths),
+                                       "heldout_episodes": sum(len(chosen) for _, chosen in heldout_sources)})
     start = resume_training(out, model, optimizer, schedule, sampler) if resume else 0
     metrics = MetricsLog(out, resume_step=start if resume else None)
     checkpoint = None
@@ -229,7 +248,7 @@ def train_state_model(data: Path, out: Path, config: StateTrainConfig, resume: b
         if (step + 1) % config.checkpoint_every == 0 or step + 1 == config.steps:
             checkpoint = save_training(out, step + 1, model, resolved, optimizer, schedule, sampler)
     model.eval()
-    if heldout:
+    if heldout:  # the main dataset's held-out scenes, comparable between runs with other extra data
         report = evaluate_state_model(model, episode_tensors(dataset, heldout, encoder),
                                       baseline=LinearHandBaseline(episodes))
         write_json(out / "eval.json", report)
