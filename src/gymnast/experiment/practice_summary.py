@@ -40,9 +40,10 @@ def arm_from_run(run: Path, at_start: bool = False) -> dict:
     if success is None:
         raise ValueError(f"{path}: no evaluation in the real world ({when}_real_success)")
     low, high = summary[f"{when}_real_ci"]
-    tasks = len({key.split("/", 2)[-1] for key in summary["curve"][-1] if key.startswith("eval/real_success/")
-                 or key.startswith("eval/own_success/")}) or 1
-    return {"success": success, "ci_low": low, "ci_high": high, "episodes": summary["eval_episodes"] * tasks,
+    point = summary["curve"][0 if at_start else -1]
+    # A run in the real world evaluates there as its own env; one elsewhere reports the real world apart.
+    episodes = point.get("eval/real_episodes", point.get("eval/own_episodes"))
+    return {"success": success, "ci_low": low, "ci_high": high, "episodes": episodes,
             "real_interactions": 0 if at_start else summary["real_interactions"],
             "eval_real_interactions": summary["eval_real_interactions"],
             "watch_real_interactions": 0 if at_start else summary["watch_real_interactions"],
