@@ -45,10 +45,10 @@ def arm_from_run(run: Path, at_start: bool = False) -> dict:
     episodes = point.get("eval/real_episodes", point.get("eval/own_episodes"))
     return {"success": success, "ci_low": low, "ci_high": high, "episodes": episodes,
             "real_interactions": 0 if at_start else summary["real_interactions"],
-            "eval_real_interactions": summary["eval_real_interactions"],
+            "eval_real_interactions": point.get("eval/real_interactions", 0),  # the evaluations' so far
             "watch_real_interactions": 0 if at_start else summary["watch_real_interactions"],
-            "steps": 0 if at_start else summary["steps"], "env": summary["env"], "reward": summary["reward"],
-            "run": str(run)}
+            "steps": 0 if at_start else summary["steps"], "env": None if at_start else summary["env"],
+            "reward": None if at_start else summary["reward"], "run": str(run)}
 
 
 def practice_summary(runs: Mapping[str, Mapping[str, Path]], out: Path) -> dict:
