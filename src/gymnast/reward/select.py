@@ -34,9 +34,9 @@ def make_reward(spec: RewardSpec, world_model: WorldModel | None = None) -> Rewa
         return load_judge(spec.run)
     if spec.kind == "state":
         from gymnast.reward.state_reward import StateReward
-        from gymnast.world_model.state_model import load_state_model
+        from gymnast.world_model.state_model import load_state_models
 
-        return StateReward(load_state_model(spec.run))
+        return StateReward(load_state_models(spec.run))
     if spec.kind == "vlm":
         from gymnast.reward.vlm import VLMJudge, VLMJudgeConfig
 

@@ -12,6 +12,12 @@ both on the signal RL receives).
 The score is the predicted dense reward as `gymnast.reward.sim.SimDense` scores a real rollout:
 the mean per-step reward in units of Meta-World's largest, each step from the first predicted
 success on counting as the largest. `verdict` gives the 0/1 reading: success predicted at any step.
+
+With an ensemble of state models (``gymnast make-ensemble`` over `gymnast train-state` runs of
+different seeds), the predicted rewards are the members' mean, and success counts only where every
+member predicts it: an imagined success that some member does not see is treated as likely
+hallucinated and earns no bonus (WoVR masks GRPO's update there). The members' spread of the
+scores is reported as ``reward/state_disagreement``.
 """
 
 from __future__ import annotations
@@ -26,46 +32,61 @@ from gymnast.world_model.state_model import StateModel, StateRollout
 
 
 class StateReward:
-    """`Reward` from a state model's reward head; reads `RewardContext.start_state`, ``start_action``
-    (zeros where absent) and ``actions``.
+    """`Reward` from the reward head of one state model or the mean of an ensemble's; reads
+    `RewardContext.start_state`, ``start_action`` (zeros where absent) and ``actions``.
 
     Args:
-        model: the trained state model.
+        models: the trained state model(s) (`gymnast.world_model.state_model.load_state_models`).
         threshold: predicted success probability counted as success.
     """
 
     binary = False
     needs = RewardNeeds(start_state=True)
 
-    def __init__(self, model: StateModel, threshold: float = 0.5) -> None:
-        self.model, self.threshold = model, threshold
+    def __init__(self, models: StateModel | Sequence[StateModel], threshold: float = 0.5) -> None:
+        self.models = [models] if isinstance(models, StateModel) else list(models)
+        if not self.models:
+            raise ValueError("StateReward needs at least one state model")
+        self.threshold = threshold
         self.encoder = InstructionEncoder()
+        self._disagreement: float | None = None
 
     def metrics(self) -> dict[str, float]:
-        return {}  # counts nothing
+        """The members' spread of the last scores (ensembles only)."""
+        return {} if self._disagreement is None else {"reward/state_disagreement": self._disagreement}
 
-    def imagine(self, instructions: Sequence[str], context: RewardContext) -> StateRollout:
-        """The state model's rollout of `context.actions` (B, T, A) from `context.start_state` (B, S).
+    def imagine(self, instructions: Sequence[str], context: RewardContext) -> list[StateRollout]:
+        """Each member's rollout of `context.actions` (B, T, A) from `context.start_state` (B, S).
 
         Raises:
-            ValueError: the context lacks them, or their shapes do not fit the model.
+            ValueError: the context lacks them, or their shapes do not fit the models.
         """
         start, actions = context.start_state, context.actions
         if start is None or actions is None or start.ndim != 2 or start.shape[1] == 0:
             raise ValueError("the state reward needs RewardContext.start_state (B, S) and actions (B, T, A): "
                              "starts that carry their recorded state")
-        expected = (self.model.config.state_dim, self.model.config.action_dim)
+        config = self.models[0].config
+        expected = (config.state_dim, config.action_dim)
         if (start.shape[1], actions.shape[-1]) != expected or actions.shape[0] != start.shape[0]:
             raise ValueError(f"start_state {tuple(start.shape)} and actions {tuple(actions.shape)} do not fit the state "
                              f"model's (B, {expected[0]}) states and (B, T, {expected[1]}) actions")
-        return self.model.imagine(start, actions, self.encoder(list(instructions)), context.start_action)
+        embedding = self.encoder(list(instructions))
+        return [model.imagine(start, actions, embedding, context.start_action) for model in self.models]
+
+    def _succeeded(self, rollouts: list[StateRollout]) -> torch.Tensor:
+        """(B, T) bool: success predicted by every member at this step or an earlier one."""
+        agreed = torch.stack([r.success for r in rollouts]).amin(dim=0) > self.threshold
+        return agreed.cummax(dim=1).values
 
     def score(self, frames: torch.Tensor, instructions: Sequence[str], context: RewardContext) -> torch.Tensor:
         """(B,) the predicted dense return of each rollout (see the module docstring); frames unused."""
-        imagined = self.imagine(instructions, context)
-        succeeded = (imagined.success > self.threshold).cummax(dim=1).values  # (B, T)
-        return torch.where(succeeded, 1.0, imagined.rewards.clamp(0, 1)).mean(dim=1)
+        rollouts = self.imagine(instructions, context)
+        succeeded = self._succeeded(rollouts)
+        returns = torch.stack([torch.where(succeeded, 1.0, r.rewards.clamp(0, 1)).mean(dim=1) for r in rollouts])
+        if len(rollouts) > 1:
+            self._disagreement = float(returns.std(dim=0).mean())
+        return returns.mean(dim=0)
 
     def verdict(self, instructions: Sequence[str], context: RewardContext) -> torch.Tensor:
-        """(B,) 1.0 where success is predicted at any step."""
-        return (self.imagine(instructions, context).success > self.threshold).any(dim=1).float()
+        """(B,) 1.0 where every member predicts success at some step."""
+        return self._succeeded(self.imagine(instructions, context)).any(dim=1).float()

@@ -158,8 +158,14 @@ def write_ensemble(out: Path, members: Sequence[Path]) -> EnsembleWorldModel:
         FileNotFoundError: a member has no checkpoint.
         ValueError: fewer than two members, or they make different frames or take different actions.
     """
-    out = Path(out)
     model = EnsembleWorldModel([load_world_model(member) for member in members])
+    write_manifest(out, members)
+    return model
+
+
+def write_manifest(out: Path, members: Sequence[Path]) -> None:
+    """Writes ``out/ensemble.json`` listing `members` relative to `out` (the runs and the ensemble
+    can move together); the caller has checked that they load and fit together."""
+    out = Path(out)
     relative = [os.path.relpath(Path(member).absolute(), out.absolute()) for member in members]
     write_json(out / ENSEMBLE_FILE, {"backend": EnsembleWorldModel.backend, "members": relative})
-    return model

@@ -26,13 +26,15 @@ state:RUN` practises on: a world model's own reward, read off its state instead 
 
 from __future__ import annotations
 
+import json
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import torch
 from torch import nn
 
-from gymnast.utils.checkpoint import load_model
+from gymnast.utils.checkpoint import load_model, resolve_checkpoint
 from gymnast.world_model.base import ActionScale, check_action_range
 
 REWARD_SCALE = 10.0
@@ -177,7 +179,55 @@ class StateModel(nn.Module):
 def load_state_model(run: str | Path) -> StateModel:
     """The newest checkpoint of a state-model run (or a checkpoint directory), in eval mode."""
     def build(spec: dict) -> StateModel:
+        if "state_dim" not in spec:
+            raise ValueError(f"{run} is not a state-model run (its model has no state_dim: {sorted(spec)})")
         fields = {k: tuple(v) if k in ("action_low", "action_high") else v for k, v in spec.items()}
         return StateModel(StateModelConfig(**fields))
 
     return load_model(Path(run), build)
+
+
+def load_state_models(run: str | Path) -> list[StateModel]:
+    """The state models of `run`: one run, or an ensemble directory listing several
+    (``ensemble.json``, as `gymnast make-ensemble` writes it), in member order.
+
+    Raises:
+        ValueError: the members do not take the same states and actions.
+    """
+    from gymnast.world_model.ensemble import is_ensemble, member_paths
+
+    models = [load_state_model(path) for path in member_paths(run)] if is_ensemble(run) else [load_state_model(run)]
+    return _fitting_together(models, str(run))
+
+
+def is_state_model(run: str | Path) -> bool:
+    """Whether `run` (a run or checkpoint directory) holds a state model rather than a video model."""
+    try:
+        spec = json.loads((resolve_checkpoint(Path(run)) / "config.json").read_text()).get("model", {})
+    except (FileNotFoundError, ValueError):
+        return False
+    return isinstance(spec, dict) and "state_dim" in spec
+
+
+def write_state_ensemble(out: Path, members: Sequence[Path]) -> list[StateModel]:
+    """Writes the ensemble directory `out` over state-model runs (see `load_state_models`); returns
+    the members loaded.
+
+    Raises:
+        ValueError: fewer than two members, or they take different states or actions.
+    """
+    from gymnast.world_model.ensemble import write_manifest
+
+    if len(members) < 2:
+        raise ValueError(f"an ensemble needs two or more state-model runs, got {len(members)}")
+    models = _fitting_together([load_state_model(member) for member in members], ", ".join(map(str, members)))
+    write_manifest(out, members)
+    return models
+
+
+def _fitting_together(models: list[StateModel], where: str) -> list[StateModel]:
+    """`models`, or ValueError naming `where` if they do not take the same states and actions."""
+    shapes = {(m.config.state_dim, m.config.action_dim) for m in models}
+    if len(shapes) > 1:
+        raise ValueError(f"{where}: the state models take different (states, actions): {sorted(shapes)}")
+    return models
