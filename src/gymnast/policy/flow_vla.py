@@ -32,9 +32,8 @@ import torch
 from torch import nn
 
 from gymnast.policy.base import ActionSample
+from gymnast.policy.flow_path import bounded_sigma, init_noise_head, integrate, path_log_prob, sample_path
 from gymnast.policy.observation import ObservationConditioned, PolicyArchitecture
-
-_LOG_2PI = math.log(2 * math.pi)
 
 
 @dataclass(frozen=True)
@@ -94,10 +93,7 @@ class FlowVLA(ObservationConditioned):
         self.norm = nn.LayerNorm(width)
         self.velocity = nn.Linear(width, config.action_dim)
         self.sigma = nn.Linear(width, config.action_dim)
-        # Until RL trains it, every step's noise is sigma_init: zero weights, and the bias that maps to it.
-        nn.init.zeros_(self.sigma.weight)
-        share = (config.sigma_init - config.sigma_min) / (config.sigma_max - config.sigma_min)
-        nn.init.constant_(self.sigma.bias, math.log(share / (1 - share)))
+        init_noise_head(self.sigma, config.sigma_min, config.sigma_init, config.sigma_max)
 
     # -- the network -----------------------------------------------------------------------------
 
@@ -107,8 +103,7 @@ class FlowVLA(ObservationConditioned):
         [sigma_min, sigma_max]."""
         tokens = self.action_in(x) + self.action_position + self.time_mlp(_time_embedding(t, self.config.width))[:, None]
         features = self.norm(self.decoder(tokens, memory))  # (B, K, D)
-        config = self.config
-        sigma = config.sigma_min + (config.sigma_max - config.sigma_min) * torch.sigmoid(self.sigma(features))
+        sigma = bounded_sigma(self.sigma(features), self.config.sigma_min, self.config.sigma_max)
         return self.velocity(features), sigma
 
     def observe(self, obs: torch.Tensor, instructions: Sequence[str], bf16_vision: bool = False) -> torch.Tensor:
@@ -124,14 +119,10 @@ class FlowVLA(ObservationConditioned):
         if temperature <= 0:
             raise ValueError(f"temperature must be positive, got {temperature}; use act() for the deterministic sampler")
         memory = self.observe(obs, instructions)
-        x = self._noise((len(obs), self.chunk_size, self.action_dim), generator, memory)
-        path = [x]
-        for i in range(self.config.steps):
-            mean, sigma = self._transition(memory, x, i)
-            x = mean + temperature * sigma * self._noise(x.shape, generator, memory)
-            path.append(x)
-        path = torch.stack(path, dim=1)  # (B, S + 1, K, A)
-        return ActionSample(actions=self._to_actions(x), tokens=path.flatten(1).cpu(),
+        start = self._noise((len(obs), self.chunk_size, self.action_dim), generator, memory)
+        path = sample_path(self._field_at(memory), start, self.config.steps, temperature,
+                           lambda shape: self._noise(shape, generator, memory))  # (B, S + 1, K, A)
+        return ActionSample(actions=self._to_actions(path[:, -1]), tokens=path.flatten(1).cpu(),
                             logp=self._path_log_prob(memory, path, temperature)[0].cpu())
 
     def log_prob(self, obs: torch.Tensor, instructions: Sequence[str], tokens: torch.Tensor,
@@ -151,10 +142,8 @@ class FlowVLA(ObservationConditioned):
         """(B, K, A) the deterministic sampler's chunk, integrated from the zero noise (the mode of
         the starting distribution), so evaluation is reproducible without a generator."""
         memory = self.observe(obs, instructions)
-        x = torch.zeros(len(obs), self.chunk_size, self.action_dim, device=memory.device)
-        for i in range(self.config.steps):
-            x = self._transition(memory, x, i)[0]
-        return self._to_actions(x)
+        start = torch.zeros(len(obs), self.chunk_size, self.action_dim, device=memory.device)
+        return self._to_actions(integrate(self._field_at(memory), start, self.config.steps))
 
     def chunk_tokens(self, actions: torch.Tensor) -> torch.Tensor:
         """(B, K, A) actions -> (B, (S + 1) * N) a path that ends at them and is zero before: the
@@ -217,17 +206,14 @@ class FlowVLA(ObservationConditioned):
         velocity, sigma = self.field(memory, x, t)
         return x + velocity / self.config.steps, sigma
 
+    def _field_at(self, memory: torch.Tensor):
+        """The sampler's transition (`gymnast.policy.flow_path.Transition`) given the observation."""
+        return lambda x, i: self._transition(memory, x, i)
+
     def _path_log_prob(self, memory: torch.Tensor, path: torch.Tensor, temperature: float
                        ) -> tuple[torch.Tensor, torch.Tensor]:
         """(B, N) log-density and (B, N) entropy of a (B, S + 1, K, A) path, summed over its steps."""
-        start = path[:, 0]
-        logp = -0.5 * (start ** 2 + _LOG_2PI)  # the starting noise's density: no parameters, but part of the path's
-        entropy = torch.full_like(start, 0.5 * (1 + _LOG_2PI))
-        for i in range(self.config.steps):
-            mean, sigma = self._transition(memory, path[:, i], i)
-            scale = temperature * sigma
-            logp = logp - 0.5 * (((path[:, i + 1] - mean) / scale) ** 2 + _LOG_2PI) - scale.log()
-            entropy = entropy + 0.5 * (1 + _LOG_2PI) + scale.log()
+        logp, entropy = path_log_prob(self._field_at(memory), path, self.config.steps, temperature)
         return logp.flatten(1), entropy.flatten(1)
 
     def _path(self, tokens: torch.Tensor) -> torch.Tensor:
