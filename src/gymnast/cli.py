@@ -11,8 +11,9 @@ from typing import Annotated, Literal
 import tyro
 
 import gymnast  # noqa: F401  (sets MUJOCO_GL before anything imports mujoco)
-from gymnast.cli_models import (Preset, eval_judge, eval_wm, experiment, imagination, make_ensemble, object_fidelity,
-                                practice_summary, rl, rl_signal, serve_judge, train_judge, train_state, train_wm, worldgym)
+from gymnast.cli_models import (KeyFlags, Preset, eval_judge, eval_wm, experiment, feature_keys, imagination,
+                                key_overrides, make_ensemble, object_fidelity, practice_summary, rl, rl_signal,
+                                serve_judge, train_judge, train_state, train_wm, worldgym)
 from gymnast.cli_settings import resolve, saved_inputs
 from gymnast.config import EnvConfig
 from gymnast.data.frames import Fit
@@ -91,6 +92,7 @@ def sft(
     policy_type: Literal["tokens", "flow"] | None = None,
     fit: Fit | None = None,
     device: str | None = None,
+    keys: Annotated[KeyFlags, tyro.conf.arg(name="")] = KeyFlags(),
 ) -> None:
     """Behaviour-clone a VLA on N successful expert demonstrations per task.
 
@@ -104,36 +106,57 @@ def sft(
         vision: override the image encoder.
         tasks: restrict to these tasks (comma-separated).
         seed: override the seed.
-        camera: the dataset camera to read (e.g. front); default: its first video (else image) feature.
+        camera: the dataset camera to read, by name (front: observation.images.front) or by feature key
+            (image, observation.images.top); default: its first video (else image) feature.
         policy_type: the policy family: tokens (the tokenized VLA, the default) or flow (the
             flow-matching VLA of VLA-RFT). Saved with the checkpoint; rl and eval read it there.
         fit: how frames that are not the model's square size are fitted: resize (squash the whole
             frame) or crop (the central square); saved with the run.
         device: auto (CUDA when torch sees a GPU, else the CPU), cpu, cuda or cuda:N; --resume may change it.
+        keys: which dataset features are the actions and the states (default: LeRobot's action and
+            observation.state); saved with the run.
     """
     from gymnast.policy.sft import SFT_PRESETS, saved_sft_config, train_sft
 
     config, inputs = resolve(
         "sft", out, resume, SFT_PRESETS[preset], inputs={"data": data}, required=("data",),
         overrides={"demos_per_task": demos_per_task, "steps": steps, "tasks": tasks, "seed": seed,
-                   "vla.vision": vision, "camera": camera, "policy": policy_type, "fit": fit, "device": device},
+                   "vla.vision": vision, "camera": camera, "policy": policy_type, "fit": fit, "device": device,
+                   **key_overrides(keys)},
         saved=lambda: (saved_sft_config(out), saved_inputs(out, "data")))
     checkpoint = train_sft(inputs["data"], out, config, resume=resume)
     print(f"policy: {checkpoint}")
 
 
-def inspect(data: Path, sheet: Path | None = None, episodes: int = 10) -> None:
-    """Summarise a dataset (v3.0 or v2.1): episodes, success by task and behaviour, codec error.
+def inspect(
+    data: Path,
+    sheet: Path | None = None,
+    episodes: int = 10,
+    camera: str | None = None,
+    keys: Annotated[KeyFlags, tyro.conf.arg(name="")] = KeyFlags(),
+) -> None:
+    """Summarise a dataset (v3.0 or v2.1): episodes, the features read, success by task and behaviour,
+    codec error. A dataset whose features are named otherwise gets the candidates for the actions,
+    the states and the cameras instead, and the flags that read them.
 
     Args:
         data: dataset directory.
         sheet: also write a PNG contact sheet (first, middle and last frame of a few episodes).
         episodes: how many episodes the contact sheet shows.
+        camera: the dataset camera to read, by name (front: observation.images.front) or by feature key
+            (image, observation.images.top); default: its first video (else image) feature.
+        keys: which dataset features are the actions and the states (default: LeRobot's action and
+            observation.state).
     """
+    from gymnast.data.features import FeatureNotFound
     from gymnast.data.lerobot import EpisodeDataset
-    from gymnast.data.summary import describe_dataset, write_episode_sheet
+    from gymnast.data.summary import describe_candidates, describe_dataset, write_episode_sheet
 
-    dataset = EpisodeDataset(data)
+    try:
+        dataset = EpisodeDataset(data, camera, keys=feature_keys(keys))
+    except FeatureNotFound:  # the usual case of a dataset published elsewhere: say what to pass
+        print(describe_candidates(data, feature_keys(keys), camera))
+        return
     print(describe_dataset(dataset))
     if sheet is not None:
         print(f"contact sheet: {write_episode_sheet(dataset, sheet, episodes)}")

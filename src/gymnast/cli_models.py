@@ -15,6 +15,7 @@ import tyro
 from gymnast.cli_settings import flags_of, resolve, saved_inputs
 from gymnast.config import CommaFloats
 from gymnast.data.frames import Fit
+from gymnast.data.lerobot_format import FeatureKeys
 from gymnast.experiment.worldgym import DEFAULT_NOISE
 from gymnast.envs.kinds import EnvName, env_kind
 from gymnast.reward.chat_server import ChatLimits
@@ -25,6 +26,18 @@ Preset = Literal["debug", "demo", "full"]
 GPUPreset = Literal["debug", "demo", "full", "gpu"]
 """The presets of the commands that also have one sized for a GPU (docs/gpu.md)."""
 RLFlags = flags_of(RLConfig, RL_PRESETS)
+KeyFlags = flags_of(FeatureKeys, {"LeRobot": FeatureKeys()})
+"""--action-key and --state-key: which dataset features are the actions and the states."""
+
+
+def key_overrides(keys: KeyFlags) -> dict[str, str | None]:
+    """The feature-key flags as `resolve` overrides of a run's ``keys`` setting (None: not given)."""
+    return {f"keys.{name}": value for name, value in dataclasses.asdict(keys).items()}
+
+
+def feature_keys(keys: KeyFlags) -> FeatureKeys:
+    """The feature keys the flags name, LeRobot's where a flag is left out."""
+    return FeatureKeys(**{name: value for name, value in dataclasses.asdict(keys).items() if value is not None})
 
 
 def train_wm(
@@ -41,6 +54,7 @@ def train_wm(
     extra_data: tuple[Path, ...] = (),
     camera: str | None = None,
     fit: Fit | None = None,
+    keys: Annotated[KeyFlags, tyro.conf.arg(name="")] = KeyFlags(),
 ) -> None:
     """Train a world model on every episode of a dataset (held-out scenes excepted).
 
@@ -58,16 +72,19 @@ def train_wm(
         moving_weight: extra loss weight of moving pixels, normalised (0 = plain mean squared error).
         init: fine-tune: start from the weights of this world-model run or checkpoint (same model spec).
         extra_data: more dataset directories to train on (same image size), split by the same scene hash.
-        camera: the dataset camera to read (e.g. front); default: its first video (else image) feature.
+        camera: the dataset camera to read, by name (front: observation.images.front) or by feature key
+            (image, observation.images.top); default: its first video (else image) feature.
         fit: how frames that are not the model's square size are fitted: resize (squash the whole
             frame) or crop (the central square); saved with the run.
+        keys: which dataset features are the actions and the states (default: LeRobot's action and
+            observation.state); saved with the run.
     """
     from gymnast.world_model.train import saved_train_config, train_world_model, wm_preset
 
     config, inputs = resolve(
         "train-wm", out, resume, wm_preset(preset, backend or "embedded"), inputs={"data": data}, required=("data",),
         overrides={"backend": backend, "device": device, "steps": steps, "seed": seed, "moving_weight": moving_weight,
-                   "init": init, "extra_data": extra_data or None, "camera": camera, "fit": fit},
+                   "init": init, "extra_data": extra_data or None, "camera": camera, "fit": fit, **key_overrides(keys)},
         saved=lambda: (saved_train_config(out), saved_inputs(out, "data")))
     checkpoint = train_world_model(inputs["data"], out, config, resume=resume)
     print(f"world model: {checkpoint}")
@@ -83,6 +100,7 @@ def train_state(
     ridge: float = 1e-4,
     last_action: bool = True,
     extra_data: tuple[Path, ...] = (),
+    keys: Annotated[KeyFlags, tyro.conf.arg(name="")] = KeyFlags(),
 ) -> None:
     """Train the grounded state model on a dataset's recorded states, rewards and success flags: the
     state under the actions, and a reward head read off it (`--reward state:OUT`); writes
@@ -100,6 +118,8 @@ def train_state(
             ridge penalty (0: at zero).
         last_action: condition each step on the action before it too.
         extra_data: more datasets to train on, e.g. the policy's own rollouts (`gymnast collect --policy`).
+        keys: which dataset features are the actions and the states (default: LeRobot's action and
+            observation.state); saved with the run.
     """
     from gymnast.utils.settings import from_json, saved_settings
     from gymnast.world_model.train_state import StateTrainConfig, train_state_model
@@ -110,7 +130,7 @@ def train_state(
         raise ValueError("train-state needs --data (or --resume to continue the run in --out)")
     else:
         config = StateTrainConfig(steps=steps, unroll=unroll, seed=seed, ridge=ridge, last_action=last_action,
-                                  extra_data=extra_data)
+                                  extra_data=extra_data, keys=feature_keys(keys))
     checkpoint = train_state_model(data, out, config, resume=resume)
     print(f"state model: {checkpoint}; held-out errors: {out / 'eval.json'}")
 
@@ -149,6 +169,7 @@ def eval_wm(
     reanchor_every: int | None = None,
     camera: str | None = None,
     device: str = "auto",
+    keys: Annotated[KeyFlags, tyro.conf.arg(name="")] = KeyFlags(),
 ) -> None:
     """Measure a world model's open-loop fidelity and controllability on held-out episodes.
 
@@ -161,15 +182,18 @@ def eval_wm(
         gifs: also write the first GIFS of them as small looping GIFs.
         control_scenes: held-out scenes for the controllability check (0 skips it).
         reanchor_every: override how often a long rollout re-encodes its own frames (0 = never).
-        camera: the dataset camera to read (e.g. front); default: its first video (else image) feature.
+        camera: the dataset camera to read, by name (front: observation.images.front) or by feature key
+            (image, observation.images.top); default: its first video (else image) feature.
         device: where the world model imagines: auto (CUDA when torch sees a GPU, else the CPU), cpu, cuda or cuda:N.
+        keys: which dataset features are the actions and the states (default: LeRobot's action and
+            observation.state).
     """
     from gymnast.world_model.controllability import ControllabilityConfig
     from gymnast.world_model.evaluate import WorldModelEvalConfig, evaluate_world_model, format_report
 
     config = WorldModelEvalConfig(max_episodes=max_episodes, videos=videos, gifs=gifs,
                                   controllability=ControllabilityConfig(scenes=control_scenes), reanchor_every=reanchor_every,
-                                  camera=camera, device=device)
+                                  camera=camera, device=device, keys=feature_keys(keys))
     report = evaluate_world_model(wm, data, out, config)
     print(format_report(report))
     print(f"report: {out}")
@@ -230,6 +254,7 @@ def train_judge(
     camera: str | None = None,
     fit: Fit | None = None,
     device: str | None = None,
+    keys: Annotated[KeyFlags, tyro.conf.arg(name="")] = KeyFlags(),
 ) -> None:
     """Train the embedded success judge on real episodes (and their re-imaginings with --wm), choose
     its threshold on validation scenes, then report its TPR and FPR on held-out real and imagined videos.
@@ -246,10 +271,13 @@ def train_judge(
             (every frame's dense reward; a video scores its mean: a continuous reward, no threshold).
         extra_data: more datasets to train and measure on (e.g. a policy's recorded rollouts).
         init: a judge run (or checkpoint) to fine-tune instead of starting from random weights.
-        camera: the dataset camera to read (e.g. front); default: its first video (else image) feature.
+        camera: the dataset camera to read, by name (front: observation.images.front) or by feature key
+            (image, observation.images.top); default: its first video (else image) feature.
         fit: how frames that are not the model's square size are fitted: resize (squash the whole
             frame) or crop (the central square); saved with the run.
         device: auto (CUDA when torch sees a GPU, else the CPU), cpu, cuda or cuda:N; --resume may change it.
+        keys: which dataset features are the actions and the states (default: LeRobot's action and
+            observation.state); saved with the run.
     """
     from gymnast.reward.train_judge import JUDGE_PRESETS, saved_judge_config
     from gymnast.reward.train_judge import train_judge as train
@@ -257,7 +285,7 @@ def train_judge(
     config, inputs = resolve(
         "train-judge", out, resume, JUDGE_PRESETS[preset], inputs={"data": data, "wm": wm}, required=("data",),
         overrides={"steps": steps, "kind": kind, "extra_data": extra_data or None, "init": init, "camera": camera, "fit": fit,
-                   "device": device},
+                   "device": device, **key_overrides(keys)},
         saved=lambda: (saved_judge_config(out), saved_inputs(out, "data", "wm")))
     report = train(inputs["data"], out, config, wm=inputs["wm"], resume=resume)
     print(json.dumps({k: v for k, v in report.items() if k.startswith(("real", "imagined"))}, indent=2))

@@ -1,9 +1,9 @@
 """A dataset's action statistics: what the models' action normalisation is computed from.
 
 LeRobot keeps per-feature min/max/mean/std in ``meta/stats.json`` and saves the ones a policy
-was trained with alongside its weights; gymnast does the same for the ``action`` feature. The
-statistics come from ``meta/stats.json`` when the dataset has them, else from the action column
-of every data file. Both the world model (its action input) and the policies (the tokenizer's and
+was trained with alongside its weights; gymnast does the same for the action feature (``action``
+unless `FeatureKeys.action_key` names another). The statistics come from ``meta/stats.json`` when
+the dataset has them, else from the action column of every data file. Both the world model (its action input) and the policies (the tokenizer's and
 the flow's ranges) use the min/max range, which maps Meta-World's actions, already in [-1, 1],
 onto themselves.
 
@@ -21,7 +21,8 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from gymnast.data.lerobot_format import DatasetError, aggregate_stats, column_matrix, column_vector, read_parquet
+from gymnast.data.lerobot_format import (DatasetError, FeatureKeys, aggregate_stats, column_matrix, column_vector,
+                                         read_parquet)
 
 STATS_PATH = "meta/stats.json"
 _NAMES = ("min", "max", "mean", "std")
@@ -73,11 +74,11 @@ class ActionStats:
         return _from_arrays(pooled, sum(part.count for part in parts))
 
 
-def read_action_stats(root: Path, dim: int, data_paths: Iterable[Path]) -> ActionStats:
-    """The action statistics of the dataset at `root` with `dim`-wide actions.
+def read_action_stats(root: Path, dim: int, data_paths: Iterable[Path], key: str = FeatureKeys.action_key) -> ActionStats:
+    """The action statistics of the dataset at `root` with `dim`-wide actions in feature `key`.
 
-    From ``meta/stats.json`` when it has the ``action`` feature, else computed from the ``action``
-    column of `data_paths` (rows gymnast marks ``action_is_pad`` are not actions and are left out).
+    From ``meta/stats.json`` when it has the `key` feature, else computed from the `key` column of
+    `data_paths` (rows gymnast marks ``action_is_pad`` are not actions and are left out).
 
     Raises:
         FileNotFoundError: a data file is missing.
@@ -87,18 +88,18 @@ def read_action_stats(root: Path, dim: int, data_paths: Iterable[Path]) -> Actio
     path = root / STATS_PATH
     if path.is_file():
         try:
-            saved = json.loads(path.read_text()).get("action")
+            saved = json.loads(path.read_text()).get(key)
         except (json.JSONDecodeError, UnicodeDecodeError, AttributeError) as e:
             raise DatasetError(f"{path}: not a JSON object of features: {e}") from e
         if saved is not None:
-            return _from_saved(saved, dim, path)
+            return _from_saved(saved, dim, path, key)
     parts = []
     for data_path in dict.fromkeys(data_paths):
-        table = read_parquet(data_path, [n for n in ("action", "action_is_pad") if n in _columns(data_path)])
-        actions = column_matrix(table, "action", data_path)  # (L, A)
+        table = read_parquet(data_path, [n for n in (key, "action_is_pad") if n in _columns(data_path)])
+        actions = column_matrix(table, key, data_path)  # (L, A)
         if actions.shape[1] != dim:
-            raise DatasetError(f"{data_path}: field 'action' has {actions.shape[1]} values per row, "
-                               f"info.json's 'action' feature says {dim}")
+            raise DatasetError(f"{data_path}: field {key!r} has {actions.shape[1]} values per row, "
+                               f"info.json's {key!r} feature says {dim}")
         if "action_is_pad" in table.column_names:
             actions = actions[~column_vector(table, "action_is_pad", data_path, bool)]
         parts.append(actions)
@@ -118,10 +119,10 @@ def _columns(path: Path) -> list[str]:
         raise DatasetError(f"{path}: cannot read parquet file: {e}") from e
 
 
-def _from_saved(saved: object, dim: int, path: Path) -> ActionStats:
-    """`ActionStats` from the ``action`` entry of a stats file, each statistic checked for width."""
+def _from_saved(saved: object, dim: int, path: Path, key: str) -> ActionStats:
+    """`ActionStats` from the `key` entry of a stats file, each statistic checked for width."""
     if not isinstance(saved, dict):
-        raise DatasetError(f"{path}: field 'action' is {type(saved).__name__}, expected an object of statistics")
+        raise DatasetError(f"{path}: field {key!r} is {type(saved).__name__}, expected an object of statistics")
     values = {}
     for name in _NAMES:
         value = np.asarray(saved.get(name), dtype=object)
@@ -130,8 +131,8 @@ def _from_saved(saved: object, dim: int, path: Path) -> ActionStats:
         except (TypeError, ValueError):
             value = np.zeros(0)
         if value.shape != (dim,) or not np.isfinite(value).all():
-            raise DatasetError(f"{path}: field 'action.{name}' is {saved.get(name)!r}, expected {dim} finite numbers "
-                               "(the width of info.json's 'action' feature)")
+            raise DatasetError(f"{path}: field '{key}.{name}' is {saved.get(name)!r}, expected {dim} finite numbers "
+                               f"(the width of info.json's {key!r} feature)")
         values[name] = value
     count = np.asarray(saved.get("count", [0])).reshape(-1)
     return _from_arrays(values, int(count[0]) if len(count) else 0)

@@ -7,10 +7,11 @@
     square = dataset.fitted(96, "crop")      # the same episodes with 96 x 96 frames (gymnast.data.frames)
     both = EpisodeDataset("data/demo", cameras=("front", "gripper"))
     both.load(0).views["gripper"]            # (T+1, H, W, 3) uint8; views["front"] is frames
+    theirs = EpisodeDataset("data/x", camera="image", keys=FeatureKeys("actions", "state"))
 
 Datasets made elsewhere have no ``gymnast/...`` episode columns; their `EpisodeInfo` gets the
-defaults documented in `gymnast.data.lerobot_format.episode_info`. ``docs/dataset_format.md``
-describes the layout.
+defaults documented in `gymnast.data.lerobot_format.episode_info`, and their features may be named
+otherwise (`gymnast.data.features`). ``docs/dataset_format.md`` describes the layout.
 
 Legend: T steps of an episode, H/W image height/width, A action dimensions.
 """
@@ -29,16 +30,17 @@ import pyarrow.parquet as pq
 
 from gymnast.data import lerobot_v3, lerobot_v21
 from gymnast.data.action_stats import ActionStats, read_action_stats
+from gymnast.data.features import camera_features, camera_key, camera_name, vector_width
 from gymnast.data.frames import Fit, fit_frames
 from gymnast.data.lerobot_format import (
     DatasetError,
     EpisodeRef,
+    FeatureKeys,
     assemble_episode,
     column_vector,
     decode_images,
     episode_info,
     has_info_columns,
-    image_key,
     match_frames_to_rows,
     read_parquet,
 )
@@ -46,7 +48,7 @@ from gymnast.data.lerobot_writer import LeRobotWriter
 from gymnast.data.schema import Episode, EpisodeInfo
 from gymnast.utils.video import decode_video
 
-__all__ = ["SUPPORTED_VERSIONS", "DatasetError", "EpisodeDataset", "LeRobotWriter"]
+__all__ = ["SUPPORTED_VERSIONS", "DatasetError", "EpisodeDataset", "FeatureKeys", "LeRobotWriter"]
 
 SUPPORTED_VERSIONS = (*lerobot_v21.CODEBASE_VERSIONS, lerobot_v3.CODEBASE_VERSION)
 _CACHED_DATA_FILES = 2  # a v3.0 data file holds many episodes: keep the last ones read
@@ -57,35 +59,42 @@ class EpisodeDataset:
 
     Args:
         root: dataset directory (the one holding ``meta/info.json``).
-        camera: camera to read, e.g. ``front``; default: the first camera whose frames exist (a
+        camera: camera to read, by name (``front`` is ``observation.images.front``) or by feature key
+            (``image``, ``observation.images.top``); default: the first camera whose frames exist (a
             video feature with its video files, else an image feature with its column).
-        cameras: several cameras to read, e.g. ``("front", "gripper")``: the first is the primary
+        cameras: several cameras to read, named as `camera`, e.g. ``("front", "gripper")``: the first is the primary
             (`Episode.frames`, and `camera` if given must be it), and `Episode.views` holds them all.
             Their frames must have one size and, in every episode, one count. Default: `camera`.
+        keys: which features are the actions and the states (default: LeRobot's ``action`` and
+            ``observation.state``).
 
     Attributes:
         root: dataset directory.
         info: the parsed ``meta/info.json``.
         version: its ``codebase_version``.
         fps: frames per second.
-        image_key: the camera feature read, e.g. ``observation.images.front``.
-        camera_key: the camera name, e.g. ``front``.
-        cameras: the cameras read, the primary first (`Episode.views` has each).
+        image_key: the camera feature read, e.g. ``observation.images.front`` or ``image``.
+        camera_key: the camera name, e.g. ``front`` (`gymnast.data.features.camera_name`).
+        cameras: the names of the cameras read, the primary first (`Episode.views` has each).
         available_cameras: every camera of the dataset, name -> feature (video ones, then image ones).
+        keys: the features read as the actions and the states.
         camera_shape: (H, W, 3) of the camera's frames as stored.
         image_shape: (H, W, 3) of the frames `load` returns: `camera_shape`, or square once `fitted`.
-        action_dim: width A of the ``action`` feature.
+        action_dim: width A of the action feature.
 
     Raises:
         FileNotFoundError: ``meta/info.json`` or a metadata file is missing.
-        DatasetError: unsupported ``codebase_version``, malformed metadata, no ``action`` feature,
-            no camera with frames, or a camera asked for that has none or another frame size than
-            the first (the message names the camera and the file or field).
+        DatasetError: unsupported ``codebase_version``, malformed metadata, no camera with frames,
+            or a camera asked for that has none or another frame size than the first (the message
+            names the camera and the file or field).
+        FeatureNotFound: no action feature, no state feature of a key asked for, or no camera asked
+            for (the message lists the candidates and the flag to pass).
         ValueError: `cameras` is empty, names a camera twice or does not start with `camera`.
     """
 
-    def __init__(self, root: str | Path, camera: str | None = None, cameras: Sequence[str] | None = None) -> None:
-        self.root = Path(root)
+    def __init__(self, root: str | Path, camera: str | None = None, cameras: Sequence[str] | None = None,
+                 keys: FeatureKeys = FeatureKeys()) -> None:
+        self.root, self.keys = Path(root), keys
         info_path = self.root / lerobot_v3.INFO_PATH
         self.info = lerobot_v3.load_info(self.root)
         self.version = self.info.get("codebase_version")
@@ -96,18 +105,21 @@ class EpisodeDataset:
             )
         features = lerobot_v3.info_field(self.info, "features", dict, info_path)
         self.fps = lerobot_v3.info_field(self.info, "fps", (int, float), info_path)
-        self.action_dim = _action_dim(features, info_path)
+        self.action_dim = vector_width(features, keys.action_key, "action", info_path)
+        if not (keys.reads_default_state and keys.state_key not in features):  # LeRobot's may be absent
+            vector_width(features, keys.state_key, "state", info_path, taken=(keys.action_key,))
         names = _check_cameras(camera, cameras)
         self.image_key, self._refs = self._camera_refs(features, names[0] if names else None, info_path)
-        self.camera_key = self.image_key.removeprefix("observation.images.")
+        self.camera_key = camera_name(self.image_key)
         self.camera_shape = _image_shape(features[self.image_key], self.image_key, info_path)
         self.image_shape = self.camera_shape
-        self.cameras = (self.camera_key, *names[1:])
-        self._keys = {self.camera_key: self.image_key} | {name: image_key(name) for name in names[1:]}
-        self.available_cameras = {key.removeprefix("observation.images."): key for key in _camera_features(features)}
-        self._view_refs = {name: self._named_refs(features, name, info_path) for name in names[1:]}
-        for name in names[1:]:
-            shape = _image_shape(features[image_key(name)], image_key(name), info_path)
+        view_keys = [camera_key(features, name, info_path) for name in names[1:]]
+        self.cameras = (self.camera_key, *map(camera_name, view_keys))
+        self._camera_features = dict(zip(self.cameras, (self.image_key, *view_keys), strict=True))
+        self.available_cameras = {camera_name(key): key for key in camera_features(features)}
+        self._view_refs = {camera_name(key): self._named_refs(key, name) for key, name in zip(view_keys, names[1:])}
+        for name, key in zip(self.cameras[1:], view_keys):
+            shape = _image_shape(features[key], key, info_path)
             if shape != self.camera_shape:
                 raise DatasetError(f"{info_path}: camera {name!r} has frames of shape {shape} but camera "
                                    f"{self.camera_key!r} has {self.camera_shape}; cameras read together need one size")
@@ -134,9 +146,9 @@ class EpisodeDataset:
         """Statistics of the actions, from ``meta/stats.json`` or else from the data files.
 
         Raises:
-            DatasetError: the stats file or a data file lacks the ``action`` field or has the wrong width.
+            DatasetError: the stats file or a data file lacks the action field or has the wrong width.
         """
-        return read_action_stats(self.root, self.action_dim, (ref.data_path for ref in self._refs))
+        return read_action_stats(self.root, self.action_dim, (ref.data_path for ref in self._refs), self.keys.action_key)
 
     @functools.cached_property
     def episodes(self) -> list[EpisodeInfo]:
@@ -158,13 +170,13 @@ class EpisodeDataset:
         ref = self._refs[i]
         rows = self._rows(ref)
         refs = {self.camera_key: ref} | {name: view_refs[i] for name, view_refs in self._view_refs.items()}
-        views = {name: _decode_frames(refs[name], rows, key) for name, key in self._keys.items()}
+        views = {name: _decode_frames(refs[name], rows, key) for name, key in self._camera_features.items()}
         _check_views(views, refs)
         # Matched to the rows per camera (they have one count, so alike), then fitted.
         views = {name: match_frames_to_rows(frames, rows.num_rows, refs[name]) for name, frames in views.items()}
         if self._fit is not None:
             views = {name: fit_frames(frames, *self._fit) for name, frames in views.items()}
-        return assemble_episode(ref, rows, views[self.camera_key], views)
+        return assemble_episode(ref, rows, views[self.camera_key], views, self.keys)
 
     def _camera_refs(self, features: dict, camera: str | None, info_path: Path) -> tuple[str, list[EpisodeRef]]:
         """The camera feature to read and its episodes: the one asked for, or the first with frames.
@@ -174,9 +186,10 @@ class EpisodeDataset:
                 any (the message names each camera and what it lacks).
         """
         if camera is not None:
-            return image_key(camera), self._named_refs(features, camera, info_path)
+            key = camera_key(features, camera, info_path)
+            return key, self._named_refs(key, camera)
         reasons = []
-        for key in _camera_features(features):
+        for key in camera_features(features):
             try:
                 refs = self._reader.episode_refs(self.root, self.info, key)
             except DatasetError as e:
@@ -190,21 +203,18 @@ class EpisodeDataset:
             raise DatasetError(f"{info_path}: no feature of dtype 'video' or 'image' in 'features'")
         raise DatasetError(f"{self.root}: no camera has frames to read; " + "; ".join(reasons))
 
-    def _named_refs(self, features: dict, camera: str, info_path: Path) -> list[EpisodeRef]:
-        """The episodes of camera `camera`.
+    def _named_refs(self, key: str, camera: str) -> list[EpisodeRef]:
+        """The episodes of camera feature `key`, asked for as `camera`.
 
         Raises:
-            DatasetError: the camera is not a feature or lacks frames (the message names the
-                camera and what it lacks).
+            DatasetError: the camera lacks frames (the message names the camera and what it lacks).
         """
-        if image_key(camera) not in features:
-            raise DatasetError(f"{info_path}: no feature {image_key(camera)!r} for camera {camera!r}")
-        refs = self._reader.episode_refs(self.root, self.info, image_key(camera))
-        lacking = _lacking_frames(refs, image_key(camera))
+        refs = self._reader.episode_refs(self.root, self.info, key)
+        lacking = _lacking_frames(refs, key)
         if lacking:
             missing = [ref.index for ref in refs if ref.video_path is not None and not ref.video_path.is_file()]
             episode = f" (it holds episode {missing[0]}'s frames)" if missing else ""
-            raise DatasetError(f"feature {image_key(camera)!r} (camera {camera!r}): {lacking}{episode}")
+            raise DatasetError(f"feature {key!r} (camera {camera!r}): {lacking}{episode}")
         return refs
 
     @property
@@ -274,11 +284,6 @@ def _check_views(views: dict[str, np.ndarray], refs: dict[str, EpisodeRef]) -> N
             )
 
 
-def _camera_features(features: dict) -> list[str]:
-    """Camera features in the order a default camera is chosen: video features, then image ones."""
-    return [k for dtype in ("video", "image") for k, f in features.items() if isinstance(f, dict) and f.get("dtype") == dtype]
-
-
 def _lacking_frames(refs: list[EpisodeRef], key: str) -> str | None:
     """What keeps the episodes from having frames of camera `key` (a missing video file or image
     column, named), or None when every episode has them."""
@@ -294,18 +299,6 @@ def _lacking_frames(refs: list[EpisodeRef], key: str) -> str | None:
         if key not in names:
             return f"{path} has no field {key!r}"
     return None
-
-
-def _action_dim(features: dict, info_path: Path) -> int:
-    """The width of the ``action`` feature, which every model learns from."""
-    feature = features.get("action")
-    if not isinstance(feature, dict):
-        raise DatasetError(f"{info_path}: no 'action' feature in 'features' (found {sorted(features)}); "
-                           "gymnast learns from the robot's actions")
-    shape = feature.get("shape")
-    if not (isinstance(shape, list) and len(shape) == 1 and isinstance(shape[0], int) and shape[0] > 0):
-        raise DatasetError(f"{info_path}: features['action'].shape is {shape!r}, expected [A] with A > 0")
-    return shape[0]
 
 
 def _image_shape(feature: dict, key: str, info_path: Path) -> tuple[int, int, int]:

@@ -47,9 +47,28 @@ class DatasetError(ValueError):
     """A dataset file is unreadable or malformed; the message names the file and the field."""
 
 
+@dataclass(frozen=True)
+class FeatureKeys:
+    """The features read as a robot's actions and states; the defaults are LeRobot's names."""
+
+    action_key: str = "action"
+    """Feature of the robot's actions, a float vector per frame (e.g. actions)."""
+    state_key: str = "observation.state"
+    """Feature of the robot's own state, a float vector per frame (e.g. state); a dataset without the
+    default one has states of width 0."""
+
+    @property
+    def reads_default_state(self) -> bool:
+        """Whether the states come from LeRobot's ``observation.state``, which a dataset may lack."""
+        return self.state_key == FeatureKeys.state_key
+
+
+CAMERA_PREFIX = "observation.images."
+
+
 def image_key(camera: str) -> str:
     """The LeRobot feature name of a camera, e.g. ``front`` -> ``observation.images.front``."""
-    return f"observation.images.{camera}"
+    return f"{CAMERA_PREFIX}{camera}"
 
 
 @dataclass(frozen=True)
@@ -350,15 +369,16 @@ def match_frames_to_rows(frames: np.ndarray, n_rows: int, ref: EpisodeRef) -> np
 
 
 def assemble_episode(
-    ref: EpisodeRef, rows: pa.Table, frames: np.ndarray, views: Mapping[str, np.ndarray] | None = None
+    ref: EpisodeRef, rows: pa.Table, frames: np.ndarray, views: Mapping[str, np.ndarray] | None = None,
+    keys: FeatureKeys = FeatureKeys(),
 ) -> Episode:
     """Build an `Episode` from its L data rows and L frames (and every camera's, `views`, the
-    primary's being `frames`: `Episode.views`).
+    primary's being `frames`: `Episode.views`); `keys` names the action and state columns.
 
     Rows written by gymnast end with one padded action (``action_is_pad``); rows from elsewhere
     pair every frame with an action, and the last action is dropped because the frame it leads
     to was not recorded. Missing optional fields become zeros (rewards; states and environment
-    states of width 0); missing ``next.success`` marks only the last step successful.
+    states of width 0: a state key asked for is checked against ``info.json`` before); missing ``next.success`` marks only the last step successful.
     """
     path, n_rows = ref.data_path, rows.num_rows
     if n_rows < 2:
@@ -371,11 +391,11 @@ def assemble_episode(
             raise DatasetError(
                 f"{path}: field 'action_is_pad' of episode {ref.index} must mark only the last row"
             )
-    if "observation.state" in names:
-        states = column_matrix(rows, "observation.state", path)
+    if keys.state_key in names:
+        states = column_matrix(rows, keys.state_key, path)
     else:
         states = np.zeros((n_rows, 0), np.float32)
-    actions = column_matrix(rows, "action", path)[:n_steps]
+    actions = column_matrix(rows, keys.action_key, path)[:n_steps]
     if "observation.environment_state" in names:
         env_states = column_matrix(rows, "observation.environment_state", path)
     else:

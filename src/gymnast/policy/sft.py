@@ -24,7 +24,7 @@ from tqdm import tqdm
 
 from gymnast.data.action_stats import ActionStats
 from gymnast.data.frames import Fit, model_image_size
-from gymnast.data.lerobot import EpisodeDataset
+from gymnast.data.lerobot import EpisodeDataset, FeatureKeys
 from gymnast.data.schema import EpisodeInfo
 from gymnast.policy.action_tokenizer import ActionTokenizer
 from gymnast.policy.flow_vla import FlowVLA, FlowVLAConfig
@@ -50,6 +50,8 @@ class SFTConfig:
     """Successful expert episodes per task to imitate (few-shot keeps SFT imperfect)."""
     camera: str | None = None
     """Camera to read from the dataset (e.g. ``front``); default: the first camera whose frames exist."""
+    keys: FeatureKeys = FeatureKeys()
+    """Which dataset features are the actions and the states (--action-key, --state-key); saved with the run."""
     fit: Fit = "resize"
     """How frames become the policy's square image when they are not square or larger than 256 px
     (they are then fitted to `vla.image_size`): resize (the whole frame, aspect ratio not kept) or
@@ -175,7 +177,7 @@ def train_sft(data: Path, out: Path, config: SFTConfig, resume: bool = False, pr
         extra: more samples (say, a policy's own successful rollouts), drawn 1:1 with the
             demonstrations: half of every batch comes from each.
     """
-    dataset = EpisodeDataset(data, config.camera)
+    dataset = EpisodeDataset(data, config.camera, keys=config.keys)
     size = model_image_size(dataset.camera_shape, config.vla.image_size)
     if init is not None:
         from gymnast.policy.load import load_policy

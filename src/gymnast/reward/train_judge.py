@@ -30,7 +30,7 @@ import torch
 from tqdm import tqdm
 
 from gymnast.data.frames import Fit, model_image_size
-from gymnast.data.lerobot import EpisodeDataset
+from gymnast.data.lerobot import EpisodeDataset, FeatureKeys
 from gymnast.reward.base import Reward, RewardContext
 from gymnast.reward.frame_judge import FrameJudge, frame_loss
 from gymnast.reward.progress_judge import ProgressJudge, evaluate_progress, progress_loss, progress_targets
@@ -82,6 +82,8 @@ class JudgeTrainConfig:
     takes its share of each."""
     camera: str | None = None
     """Camera to read from the datasets (e.g. ``front``); default: the first camera whose frames exist."""
+    keys: FeatureKeys = FeatureKeys()
+    """Which dataset features are the actions and the states (--action-key, --state-key); saved with the run."""
     fit: Fit = "resize"
     """How frames become the judge's square image when they are not square or larger than 256 px
     (they are then fitted to `judge.image_size`): resize (the whole frame, aspect ratio not kept) or
@@ -257,7 +259,7 @@ def train_judge(data: Path, out: Path, config: JudgeTrainConfig, wm: Path | None
     """Trains the judge in `out`, chooses its threshold on the validation scenes, writes
     `out/metrics.json` (held-out TPR/FPR) and returns it."""
     started = time.perf_counter()
-    datasets = [EpisodeDataset(path, config.camera) for path in (data, *config.extra_data)]
+    datasets = [EpisodeDataset(path, config.camera, keys=config.keys) for path in (data, *config.extra_data)]
     for other in datasets[1:]:
         if other.camera_shape != datasets[0].camera_shape:
             raise ValueError(f"{other.root}: frames are {other.camera_shape}, but {data} has {datasets[0].camera_shape}")

@@ -32,7 +32,7 @@ import torch
 from tqdm import tqdm
 
 from gymnast.data.frames import Fit, model_image_size
-from gymnast.data.lerobot import EpisodeDataset
+from gymnast.data.lerobot import EpisodeDataset, FeatureKeys
 from gymnast.utils.atomic import write_json
 from gymnast.utils.checkpoint import resolve_checkpoint
 from gymnast.utils.device import resolve_device
@@ -66,6 +66,8 @@ class WorldModelEvalConfig:
     """Override the embedded model's re-anchoring period (0 = never; None = as trained)."""
     camera: str | None = None
     """Camera to read from the dataset (e.g. ``front``); default: its first video (else image) feature."""
+    keys: FeatureKeys = FeatureKeys()
+    """Which dataset features are the actions and the states (--action-key, --state-key)."""
     device: str = "auto"
     """Where the world model imagines: auto (CUDA when torch sees a GPU, else the CPU), cpu, cuda or cuda:N."""
 
@@ -78,7 +80,7 @@ def evaluate_world_model(wm: Path, data: Path, out: Path, config: WorldModelEval
     model = model.to(resolve_device(config.device))
     fraction = heldout_fraction(Path(wm))
     ensemble = isinstance(model, EnsembleWorldModel)
-    dataset = EpisodeDataset(data, config.camera)
+    dataset = EpisodeDataset(data, config.camera, keys=config.keys)
     if model_image_size(dataset.camera_shape, model.image_size) != model.image_size:
         raise ValueError(f"{data}: frames are {dataset.camera_shape}, the world model makes {model.image_size}x{model.image_size}")
     dataset = dataset.fitted(model.image_size, frame_fit(Path(wm)))

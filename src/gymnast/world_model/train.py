@@ -36,7 +36,7 @@ from tqdm import tqdm
 
 from gymnast.data.action_stats import ActionStats
 from gymnast.data.frames import Fit, model_image_size
-from gymnast.data.lerobot import EpisodeDataset
+from gymnast.data.lerobot import EpisodeDataset, FeatureKeys
 from gymnast.utils.checkpoint import resolve_checkpoint, resume_training, save_training, write_run_config
 from gymnast.utils.device import resolve_device, to_device
 from gymnast.utils.distributed import Parallel, data_parallel
@@ -96,6 +96,8 @@ class WorldModelTrainConfig:
     scene hash, so a scene held out of one is held out of all of them."""
     camera: str | None = None
     """Camera to read from the dataset (e.g. ``front``); default: the first camera whose frames exist."""
+    keys: FeatureKeys = FeatureKeys()
+    """Which dataset features are the actions and the states (--action-key, --state-key); saved with the run."""
     fit: Fit = "resize"
     """How frames become the model's square image when they are not square or larger than 256 px
     (they are then fitted to the model's `image_size`): resize (the whole frame, aspect ratio not kept) or
@@ -177,7 +179,7 @@ def train_world_model(data: Path, out: Path, config: WorldModelTrainConfig, resu
         FileNotFoundError: `config.init` has no checkpoint.
         DatasetError: a dataset lacks what training needs (the message names the file and field).
     """
-    datasets = [EpisodeDataset(path, config.camera) for path in (data, *config.extra_data)]
+    datasets = [EpisodeDataset(path, config.camera, keys=config.keys) for path in (data, *config.extra_data)]
     if config.init is not None and not resume:  # on resume the weights come from the run's own checkpoint
         config = dataclasses.replace(config, init=resolve_checkpoint(config.init))
     # A resumed run keeps the action range its weights were trained with, whatever `config` says.

@@ -30,7 +30,7 @@ import torch
 import torch.nn.functional as F
 from tqdm import tqdm
 
-from gymnast.data.lerobot import EpisodeDataset
+from gymnast.data.lerobot import EpisodeDataset, FeatureKeys
 from gymnast.data.schema import EXTERNAL
 from gymnast.policy.text import InstructionEncoder
 from gymnast.utils.atomic import write_json
@@ -66,6 +66,8 @@ class StateTrainConfig:
     extra_data: tuple[Path, ...] = ()
     """More datasets to train on (the same state and actions), e.g. the policy's own rollouts, split
     by the same scene hash."""
+    keys: FeatureKeys = FeatureKeys()
+    """Which dataset features are the actions and the states (--action-key, --state-key); saved with the run."""
     ridge: float = 1e-4
     """Start the dynamics' linear path at the ridge-regularised least-squares fit of the recorded
     steps, with this penalty per input (0: start it at zero)."""
@@ -206,9 +208,9 @@ def train_state_model(data: Path, out: Path, config: StateTrainConfig, resume: b
                       progress: bool = True) -> Path:
     """Trains (or resumes) a state-model run in `out` on `data`'s episodes recorded in the real
     world (or on another robot); returns the final checkpoint directory and writes ``eval.json``."""
-    dataset = EpisodeDataset(data)
+    dataset = EpisodeDataset(data, keys=config.keys)
     train_sources, heldout_sources = [], []
-    for source in (dataset, *(EpisodeDataset(path) for path in config.extra_data)):
+    for source in (dataset, *(EpisodeDataset(path, keys=config.keys) for path in config.extra_data)):
         usable = [i for i, info in enumerate(source.episodes) if info.env_variant in ("real", EXTERNAL)]
         train, heldout = split_episodes([source.episodes[i] for i in usable], config.heldout_fraction)
         train_sources.append((source, [usable[i] for i in train]))
