@@ -228,15 +228,22 @@ def object_fidelity(
 
 
 def make_ensemble(members: tuple[Path, ...], out: Path) -> None:
-    """Make an ensemble of world-model runs: OUT/ensemble.json lists them (relative to OUT), and OUT then
-    works wherever a world-model run does (--wm OUT); eval-wm also reports where the members disagree.
+    """Make an ensemble of world-model runs, or of state-model runs: OUT/ensemble.json lists them
+    (relative to OUT). An ensemble of world models works wherever a world-model run does (--wm OUT;
+    eval-wm also reports where the members disagree); one of state models wherever a state-model run
+    does (--reward state:OUT: the members' mean reward, a success only where all predict it).
 
     Args:
-        members: two or more world-model runs (or checkpoints); the first one's frames are the ensemble's.
+        members: two or more world-model runs (the first one's frames are the ensemble's), or two or
+            more `gymnast train-state` runs (or checkpoints).
         out: ensemble directory (created if missing).
     """
     from gymnast.world_model.ensemble import write_ensemble
+    from gymnast.world_model.state_model import is_state_model, write_state_ensemble
 
+    if any(is_state_model(member) for member in members):
+        print(f"ensemble of {len(write_state_ensemble(out, members))} state models: {out}")
+        return
     model = write_ensemble(out, members)
     print(f"ensemble of {len(model.members)} world models: {out}")
 

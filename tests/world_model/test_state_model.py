@@ -125,3 +125,14 @@ def test_an_ensemble_refuses_members_that_do_not_fit_together(tmp_path):
     with pytest.raises(ValueError, match="two or more"):
         write_state_ensemble(tmp_path / "ensemble", members[:1])
     assert not (tmp_path / "ensemble" / "ensemble.json").exists()
+
+
+def test_make_ensemble_over_state_runs_gives_a_state_reward(tmp_path, capsys):
+    from gymnast.cli import main
+    from gymnast.reward.select import make_reward
+    from gymnast.reward.spec import RewardSpec
+
+    members = [str(_saved(tmp_path, f"s{seed}", seed)) for seed in range(2)]
+    main(["make-ensemble", "--members", *members, "--out", str(tmp_path / "ensemble")])
+    assert "ensemble of 2 state models" in capsys.readouterr().out
+    assert len(make_reward(RewardSpec.parse(f"state:{tmp_path / 'ensemble'}")).models) == 2
