@@ -41,6 +41,20 @@ def test_grpo_practises_segments_from_keyframes_on_the_state_models_reward(rl_da
 
 
 @pytest.mark.slow
+def test_practice_in_the_real_world_from_keyframes_counts_the_replays_that_restore_them(rl_dataset, tmp_path):
+    out = tmp_path / "real"
+    main(["rl", "--policy", str(POLICY), "--env", "real", "--reward", "sim-dense", "--data", str(rl_dataset),
+          "--out", str(out), "--preset", "debug", "--keyframes", "uniform", "--horizon", "5", "--eval-horizon", "5",
+          "--eval-episodes", "1", "--workers", "1"])
+    summary = json.loads((out / "summary.json").read_text())
+    metrics = [json.loads(line) for line in (out / "metrics.jsonl").read_text().splitlines()]
+    rollouts = 2 * 2  # the debug preset's starts x group, one round a step (every group kept)
+    segments = sum(round(m["rollout/length"] * rollouts) for m in metrics if "rollout/length" in m)
+    assert all(m["rollout/rounds"] == 1 for m in metrics if "rollout/rounds" in m)
+    assert summary["real_interactions"] > segments  # the keyframes' prefixes were replayed for real
+
+
+@pytest.mark.slow
 def test_the_signal_of_segments_from_keyframes_is_held_against_their_real_replays(rl_dataset, state_run, tmp_path):
     out = tmp_path / "signal"
     main(["rl-signal", "--policy", str(POLICY), "--wm", str(WORLD_MODEL), "--reward", f"state:{state_run}",

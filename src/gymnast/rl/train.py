@@ -44,7 +44,7 @@ from gymnast.rl import grpo
 from gymnast.rl.config import RLConfig, RLRun
 from gymnast.rl.evaluate import evaluate_in_env, verdicts, watch_hacking
 from gymnast.rl.imitation import ImitationAnchor
-from gymnast.rl.inputs import check_other_robot, policy_dataset, policy_frames
+from gymnast.rl.inputs import check_other_robot, policy_dataset, policy_frames, policy_keys
 from gymnast.rl.rollout import (Rollouts, collect_rollouts, concat_rollouts, dataset_starts, heldout_starts,
                                 own_tasks, recorded_elsewhere, score_groups)
 from gymnast.rl.videos import write_group_video
@@ -84,10 +84,11 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
     check_fits(reward, str(run_spec.reward), env, demonstrations=from_dataset)
     data = Path(run_spec.data or policy_dataset(run_spec.policy)) if from_dataset else None
     scenes = parse_scenes(config.scenes) if config.scenes is not None else None
-    elsewhere = data is not None and recorded_elsewhere(data)
+    keys = policy_keys(run_spec.policy)  # the dataset read as the policy was trained on it
+    elsewhere = data is not None and recorded_elsewhere(data, keys)
     if elsewhere:
         check_other_robot(data, env, config)
-        tasks = own_tasks(data, config.tasks)
+        tasks = own_tasks(data, config.tasks, keys)
     else:
         tasks = tuple(dict.fromkeys(task for task, _ in scenes)) if scenes else resolve_tasks(config.tasks)
     if config.instruction is not None and len(tasks) != 1:
@@ -99,7 +100,7 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
     frames = policy_frames(run_spec.policy)
     keyframes = KeyframeConfig(sampling=config.keyframes, horizon=config.horizon, per_episode=config.keyframes_per_episode)
     pool = dataset_starts(data, tasks, policy.config.image_size, frames.get("fit", "resize"),
-                          frames.get("camera"), keyframes) if data else None
+                          frames.get("camera"), keyframes, keys) if data else None
     draw_starts = StartSampler(tasks, practice or pool, env_config, config.instruction)
     envs = EnvFactory(env, policy.chunk_size, env_config, config.gap, config.workers, world_model,
                       stop_above=config.disagreement_stop or None, runner=config.runner)
@@ -119,7 +120,7 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
     if config.imitation_coef > 0:
         demos = Path(run_spec.data or policy_dataset(run_spec.policy))  # the experts', whatever the starts
         anchor = ImitationAnchor.from_dataset(demos, tasks, policy.chunk_size, config.imitation_coef,
-                                              config.imitation_kl_gate, config.imitation_batch)
+                                              config.imitation_kl_gate, config.imitation_batch, keys)
     state = {"real_interactions": 0, "eval_real_interactions": 0, "watch_real_interactions": 0,
              "reset_frames": len(practice or ()), "curve": [], "wall_s": 0.0}
     start_step = 0
@@ -233,7 +234,8 @@ def rl_step(env: VectorEnv, policy, reward: Reward, draw_starts: Callable[[int, 
 
     Returns:
         (the kept rollouts or None, their (R,) scores or None, metrics), the metrics including
-        ``rollout/interactions``: the actions taken in every round.
+        ``rollout/interactions``: the actions taken in every round, the replays that restored its
+        keyframes included.
     """
     groups, size = config.starts_per_step, config.group_size
     kept: list[Rollouts] = []
@@ -252,7 +254,8 @@ def rl_step(env: VectorEnv, policy, reward: Reward, draw_starts: Callable[[int, 
         began = time.perf_counter()
         scores = score_groups(reward, rollouts, size)  # (R,)
         values["time/reward_s"] += time.perf_counter() - began
-        values["rollout/interactions"] += int(rollouts.lengths.sum())
+        # A keyframe is restored by replaying its prefix in the env the rollout runs in.
+        values["rollout/interactions"] += int(rollouts.lengths.sum()) + size * sum(len(s.prefix) for s in starts)
         if round_ == 0:  # the first round is an unbiased sample of the current policy
             finite = scores[torch.isfinite(scores)]
             values |= {"reward/mean": finite.mean().item() if len(finite) else float("nan"),
