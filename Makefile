@@ -6,6 +6,9 @@ STAMP := $(VENV)/.installed
 # This exact version from PyPI is the CPU build of torch: it installs without CUDA packages. The
 # library itself accepts any torch in pyproject.toml's range, such as a GPU user's CUDA build.
 TORCH_CPU := torch==2.13.0
+# LeRobot's policies (the [lerobot] extra brings what they import); lerobot itself pins torch < 2.11,
+# so it goes in without its dependencies, which would replace this torch (docs/lerobot.md).
+LEROBOT := lerobot==0.4.4
 DEMO := runs/demo
 
 .PHONY: demo test setup clean
@@ -16,6 +19,7 @@ $(STAMP): pyproject.toml Makefile
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet -e '.[dev]' '$(TORCH_CPU)'
+	$(BIN)/python -m pip install --quiet --no-deps '$(LEROBOT)'
 	@# A CUDA build of torch (or its nvidia-* wheels) would mean gigabytes nobody asked for.
 	@! $(BIN)/python -m pip list 2>/dev/null | grep -qi '^nvidia' || \
 		{ echo "set-up pulled CUDA packages; the CPU build is expected"; exit 1; }
