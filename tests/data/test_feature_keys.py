@@ -10,11 +10,13 @@ from pathlib import Path
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
-from robot_datasets import write_robot_dataset
+from robot_datasets import TASKS, write_robot_dataset
 
 from gymnast.cli import main
 from gymnast.data.features import FeatureNotFound
 from gymnast.data.lerobot import EpisodeDataset, FeatureKeys
+from gymnast.rl.inputs import policy_frames, policy_keys
+from gymnast.rl.rollout import dataset_starts, own_tasks
 from gymnast.world_model.train import saved_train_config
 
 PUBLISHED = {"action": "actions", "observation.state": "state", "observation.images.front": "image"}
@@ -126,3 +128,13 @@ def test_train_wm_reads_the_dataset_by_its_keys_and_saves_them_with_the_run(tmp_
     with pytest.raises(SystemExit):  # --resume continues with the keys saved, and refuses others
         main(["train-wm", "--out", str(out), "--resume", "--action-key", "action"])
     assert "--action-key action disagrees with the run" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_rl_reads_the_start_states_by_the_keys_the_policy_was_trained_with(tmp_path, capsys):
+    data, out = published(tmp_path / "data", episodes=4, steps=8), tmp_path / "sft"
+    main(["sft", "--data", str(data), "--out", str(out), "--preset", "debug", "--steps", "2", *THEIR_FLAGS])
+    assert policy_keys(out) == THEIR_KEYS and policy_frames(out)["camera"] == "image"
+    starts = dataset_starts(data, own_tasks(data, keys=THEIR_KEYS), keys=THEIR_KEYS)
+    assert {start.task for start in starts} == set(TASKS) and starts[0].frames.shape[-3:] == (24, 32, 3)
+    capsys.readouterr()

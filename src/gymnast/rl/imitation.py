@@ -15,7 +15,7 @@ from pathlib import Path
 
 import torch
 
-from gymnast.data.lerobot import EpisodeDataset
+from gymnast.data.lerobot import EpisodeDataset, FeatureKeys
 from gymnast.policy.sft import DEMO_BEHAVIOURS, DemoSet, load_demos, select_demos
 
 DEMOS_PER_TASK = 10
@@ -37,14 +37,14 @@ class ImitationAnchor:
 
     @classmethod
     def from_dataset(cls, data: Path, tasks: tuple[str, ...], chunk_size: int, coef: float, kl_gate: float,
-                     batch_size: int) -> ImitationAnchor:
+                     batch_size: int, keys: FeatureKeys = FeatureKeys()) -> ImitationAnchor:
         """The anchor on the first successful expert episodes of `tasks` in `data` (at most
         `DEMOS_PER_TASK` each, and at least one).
 
         Raises:
             ValueError: a task has no successful expert episode in `data`.
         """
-        dataset = EpisodeDataset(data)
+        dataset = EpisodeDataset(data, keys=keys)
         counts = {task: sum(1 for info in dataset.episodes if info.task == task and info.success
                             and info.behaviour in DEMO_BEHAVIOURS) for task in tasks}
         lacking = [task for task, count in counts.items() if count == 0]

@@ -9,6 +9,7 @@ import dataclasses
 import json
 from pathlib import Path
 
+from gymnast.data.lerobot import FeatureKeys
 from gymnast.envs.tasks import resolve_tasks
 from gymnast.rl.config import RLConfig, RLRun
 from gymnast.rl.rollout import recorded_elsewhere, tasks_with_starts
@@ -21,10 +22,10 @@ def with_tasks_from_data(run_spec: RLRun, config: RLConfig) -> RLConfig:
     dataset and keep the preset's, and named scenes name their own."""
     if config.fresh_scenes or config.scenes is not None:
         return config
-    data = Path(run_spec.data or policy_dataset(run_spec.policy))
-    if recorded_elsewhere(data):
+    data, keys = Path(run_spec.data or policy_dataset(run_spec.policy)), policy_keys(run_spec.policy)
+    if recorded_elsewhere(data, keys):
         return dataclasses.replace(config, tasks="")  # all of the other robot's own tasks
-    return dataclasses.replace(config, tasks=",".join(tasks_with_starts(data, resolve_tasks(config.tasks))))
+    return dataclasses.replace(config, tasks=",".join(tasks_with_starts(data, resolve_tasks(config.tasks), keys)))
 
 
 def policy_dataset(policy_run: str | Path) -> str:
@@ -40,13 +41,19 @@ def policy_dataset(policy_run: str | Path) -> str:
 
 
 def policy_frames(policy_run: str | Path) -> dict:
-    """How the policy's training frames were read: ``{"camera", "fit"}`` from its SFT settings (or
-    an RL run's, which keeps them); {} for a run from before they were saved (the defaults)."""
+    """How the policy's training frames were read: ``{"camera", "fit", "keys"}`` from its SFT settings
+    (or an RL run's, which keeps them); {} for a run from before they were saved (the defaults)."""
     for saved in _policy_configs(policy_run):
         for section in ("frames", "sft"):
             if section in saved:
-                return {key: saved[section][key] for key in ("camera", "fit") if key in saved[section]}
+                return {key: saved[section][key] for key in ("camera", "fit", "keys") if key in saved[section]}
     return {}
+
+
+def policy_keys(policy_run: str | Path) -> FeatureKeys:
+    """The dataset features the policy learnt from as actions and states (`policy_frames`), which
+    RL reads its start states and demonstrations by."""
+    return FeatureKeys(**policy_frames(policy_run).get("keys", {}))
 
 
 def _policy_configs(policy_run: str | Path) -> list[dict]:

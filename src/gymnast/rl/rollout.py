@@ -29,7 +29,7 @@ from gymnasium.vector import VectorEnv
 
 from gymnast.data.frames import Fit
 from gymnast.data.keyframes import KeyframeConfig, dataset_keyframes
-from gymnast.data.lerobot import EpisodeDataset
+from gymnast.data.lerobot import EpisodeDataset, FeatureKeys
 from gymnast.data.schema import EXTERNAL, EpisodeInfo
 from gymnast.envs.engine import run_batch
 from gymnast.envs.starts import Start, start_options
@@ -210,20 +210,20 @@ def concat_rollouts(parts: list[Rollouts]) -> Rollouts:
     return Rollouts(starts=tuple(start for part in parts for start in part.starts), **tensors)
 
 
-def recorded_elsewhere(data: Path) -> bool:
+def recorded_elsewhere(data: Path, keys: FeatureKeys = FeatureKeys()) -> bool:
     """Whether the dataset was recorded on another robot (a LeRobot dataset gymnast did not write):
     gymnast has no simulator of it, so only the world model can practise from its scenes."""
-    return any(info.env_variant == EXTERNAL for info in EpisodeDataset(data).episodes)
+    return any(info.env_variant == EXTERNAL for info in EpisodeDataset(data, keys=keys).episodes)
 
 
-def own_tasks(data: Path, named: str = "") -> tuple[str, ...]:
+def own_tasks(data: Path, named: str = "", keys: FeatureKeys = FeatureKeys()) -> tuple[str, ...]:
     """Another robot's tasks to practise: every task of the dataset that has a start state (`named`
     empty), or those `named`, comma-separated, exactly as the dataset writes them.
 
     Raises:
         ValueError: a named task is not one of the dataset's (the message lists them).
     """
-    have = tuple(dict.fromkeys(info.task for info in EpisodeDataset(data).episodes if _expert_solved(info)))
+    have = tuple(dict.fromkeys(info.task for info in EpisodeDataset(data, keys=keys).episodes if _expert_solved(info)))
     if not named:
         return have
     wanted = tuple(task.strip() for task in named.split(",") if task.strip())
@@ -247,21 +247,22 @@ def heldout_starts(starts: Sequence[Start], per_task: int, fraction: float = 0.1
     return chosen
 
 
-def tasks_with_starts(data: Path, wanted: Sequence[str]) -> tuple[str, ...]:
+def tasks_with_starts(data: Path, wanted: Sequence[str], keys: FeatureKeys = FeatureKeys()) -> tuple[str, ...]:
     """The tasks a run should train on when none were named: those of `wanted` (a preset's) that
     the dataset has start states for; if it has none of them, as many of its own (alphabetically).
 
     Raises:
         ValueError: the dataset has no start state of any task.
     """
-    have = sorted({info.task for info in EpisodeDataset(data).episodes if _expert_solved(info)})
+    have = sorted({info.task for info in EpisodeDataset(data, keys=keys).episodes if _expert_solved(info)})
     if not have:
         raise ValueError(f"{data} has no successful expert episode of any task to start from")
     return tuple(task for task in wanted if task in have) or tuple(have[: len(wanted)])
 
 
 def dataset_starts(data: Path, tasks: Sequence[str] | None = None, image_size: int | None = None,
-                   fit: Fit = "resize", camera: str | None = None, keyframes: KeyframeConfig | None = None
+                   fit: Fit = "resize", camera: str | None = None, keyframes: KeyframeConfig | None = None,
+                   keys: FeatureKeys = FeatureKeys()
                    ) -> list[Start]:
     """One start per (task, seed) scene of a dataset: its first frame, instruction and reference;
     or, with `keyframes` other than ``first``, keyframes of every episode of `tasks` recorded in the
@@ -280,12 +281,13 @@ def dataset_starts(data: Path, tasks: Sequence[str] | None = None, image_size: i
         fit: resize or crop, the models' training setting.
         camera: the dataset camera to read (default: the first whose frames exist).
         keyframes: where in the episodes to start (None or ``first``: first frames).
+        keys: the dataset features read as the actions and the states (the policy's, `policy_keys`).
 
     Raises:
         ValueError: no scene of `tasks` has a successful expert episode (no episode of `tasks`, for
             keyframes).
     """
-    dataset = EpisodeDataset(data, camera)
+    dataset = EpisodeDataset(data, camera, keys=keys)
     if image_size is not None:
         dataset = dataset.fitted(image_size, fit)
     if keyframes is not None and keyframes.sampling != "first":
