@@ -14,12 +14,23 @@ from torch import nn
 POLICY_FAMILIES = {
     "vla": "gymnast.policy.vla:EmbeddedVLA",
     "flow_vla": "gymnast.policy.flow_vla:FlowVLA",
+    "lerobot": "gymnast.policy.lerobot_load:LeRobotFamily",
 }
 """The key a family's ``spec()`` saves its architecture under -> the class that rebuilds it."""
 
+LEROBOT = "lerobot:"
+"""What marks a ``--policy`` as a LeRobot pretrained_model folder rather than a gymnast run."""
+
+
+def is_lerobot(policy: str | Path) -> bool:
+    """Whether a ``--policy`` value names a LeRobot folder (``lerobot:PATH``)."""
+    return str(policy).startswith(LEROBOT)
+
 
 def load_policy(run: str | Path) -> nn.Module:
-    """The newest checkpoint of a run directory (or a checkpoint directory itself), in eval mode.
+    """The newest checkpoint of a run directory (or a checkpoint directory itself), in eval mode;
+    or, for ``lerobot:PATH``, the LeRobot policy in that pretrained_model folder
+    (`gymnast.policy.lerobot_load`).
 
     Raises:
         FileNotFoundError: no checkpoint there (the message names the directory).
@@ -27,6 +38,10 @@ def load_policy(run: str | Path) -> nn.Module:
     """
     from gymnast.utils.checkpoint import load_model
 
+    if is_lerobot(run):  # parsed here, so every command taking --policy accepts it
+        from gymnast.policy.lerobot_load import load_lerobot
+
+        return load_lerobot(Path(str(run).removeprefix(LEROBOT)))
     return load_model(Path(run), build_policy)
 
 

@@ -1,0 +1,141 @@
+"""A new, untrained LeRobot ACT policy written as a pretrained_model folder, for trying the
+LeRobot path end to end without a trained one (docs/lerobot.md):
+
+    python -m gymnast.policy.lerobot_init OUT [--image-size 96] [--action-dim 4] [--chunk 5]
+
+The policy reads one camera image (``observation.image``, no state: gymnast shows none) and acts
+in A dimensions; actions are normalised by a mean of 0 and a standard deviation of 1, which is
+Meta-World's [-1, 1] range as it is. It is small (one encoder and one decoder layer of width 64)
+and its ResNet-18 backbone starts from random weights, since none can be downloaded here.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import torch
+
+from gymnast.policy.lerobot_import import require_lerobot
+
+
+def new_act(out: Path, image_size: int = 96, action_dim: int = 4, chunk: int = 5, predicted: int | None = None,
+            width: int = 64, action_std: float = 1.0, seed: int = 0) -> Path:
+    """Writes a randomly initialised ACT policy and its processors to `out`; returns `out`.
+
+    Args:
+        image_size: side of the square ``observation.image`` it reads.
+        action_dim: A, its action's size.
+        chunk: actions executed per call (``n_action_steps``), gymnast's K.
+        predicted: actions predicted per call (``chunk_size``); default `chunk`.
+        width: the transformer's width.
+        action_std: the actions' normalisation standard deviation (their mean is 0).
+        seed: the weights' seed.
+    """
+    require_lerobot()
+    from lerobot.configs.types import FeatureType, NormalizationMode, PolicyFeature
+    from lerobot.policies.act.configuration_act import ACTConfig
+    from lerobot.policies.act.modeling_act import ACTPolicy
+    from lerobot.policies.factory import make_pre_post_processors
+
+    config = ACTConfig(
+        input_features={"observation.image": PolicyFeature(FeatureType.VISUAL, (3, image_size, image_size))},
+        output_features={"action": PolicyFeature(FeatureType.ACTION, (action_dim,))},
+        chunk_size=predicted or chunk, n_action_steps=chunk, dim_model=width, n_heads=2, dim_feedforward=2 * width,
+        n_encoder_layers=1, n_decoder_layers=1, n_vae_encoder_layers=1, latent_dim=8,
+        pretrained_backbone_weights=None, device="cpu",
+        # Images reach the backbone as [0, 1]; actions are normalised by the statistics below.
+        normalization_mapping={"VISUAL": NormalizationMode.IDENTITY, "STATE": NormalizationMode.MEAN_STD,
+                               "ACTION": NormalizationMode.MEAN_STD})
+    torch.manual_seed(seed)
+    policy = ACTPolicy(config)
+    stats = {"action": {"mean": torch.zeros(action_dim), "std": torch.full((action_dim,), float(action_std))}}
+    preprocessor, postprocessor = make_pre_post_processors(config, dataset_stats=stats)
+    out = Path(out)
+    for part in (policy, preprocessor, postprocessor):
+        part.save_pretrained(out)
+    return out
+
+
+def new_smolvla(out: Path, image_size: int = 96, action_dim: int = 4, chunk: int = 5, predicted: int = 8,
+                steps: int = 3, action_std: float = 1.0, seed: int = 0) -> Path:
+    """Writes a tiny randomly initialised SmolVLA policy to `out`, with the tiny vision-language
+    model it is built on in ``out/vlm`` (SmolVLA reads its VLM's config, tokenizer and image
+    processor from ``vlm_model_name``; a real one comes from a model hub, which is not reachable
+    here). For exercising the flow path offline, not for acting well.
+
+    Args:
+        chunk: actions executed per call (``n_action_steps``), gymnast's K.
+        predicted: actions predicted per call (``chunk_size``).
+        steps: flow integration steps.
+    """
+    require_lerobot()
+    from lerobot.configs.types import FeatureType, NormalizationMode, PolicyFeature
+    from lerobot.policies.factory import make_pre_post_processors
+    from lerobot.policies.smolvla.configuration_smolvla import SmolVLAConfig
+    from lerobot.policies.smolvla.modeling_smolvla import SmolVLAPolicy
+
+    out = Path(out)
+    vlm = tiny_vlm(out / "vlm")
+    config = SmolVLAConfig(
+        input_features={"observation.image": PolicyFeature(FeatureType.VISUAL, (3, image_size, image_size))},
+        output_features={"action": PolicyFeature(FeatureType.ACTION, (action_dim,))},
+        chunk_size=predicted, n_action_steps=chunk, max_state_dim=8, max_action_dim=8, num_steps=steps,
+        resize_imgs_with_padding=(_VLM_IMAGE, _VLM_IMAGE), tokenizer_max_length=16, vlm_model_name=str(vlm.resolve()),
+        load_vlm_weights=False, num_vlm_layers=2, device="cpu",
+        normalization_mapping={"VISUAL": NormalizationMode.IDENTITY, "STATE": NormalizationMode.MEAN_STD,
+                               "ACTION": NormalizationMode.MEAN_STD})
+    torch.manual_seed(seed)
+    policy = SmolVLAPolicy(config)
+    stats = {"action": {"mean": torch.zeros(action_dim), "std": torch.full((action_dim,), float(action_std))}}
+    preprocessor, postprocessor = make_pre_post_processors(config, dataset_stats=stats)
+    for part in (policy, preprocessor, postprocessor):
+        part.save_pretrained(out)
+    return out
+
+
+_VLM_IMAGE = 32  # the tiny VLM's image side: 16 patches of 8 px, 4 image tokens after its pixel shuffle
+_WORDS = ("reach the goal push puck open close drawer window press button pick and place a to of "
+          "red green blue put on in").split()
+
+
+def tiny_vlm(out: Path) -> Path:
+    """Writes a tiny SmolVLM config, word-level tokenizer and image processor to `out`."""
+    from tokenizers import Tokenizer, models, pre_tokenizers
+    from transformers import (PreTrainedTokenizerFast, SmolVLMConfig, SmolVLMImageProcessor, SmolVLMProcessor,
+                              SmolVLMVideoProcessor)
+
+    special = {"fake_image_token": "<fake_token_around_image>", "image_token": "<image>",
+               "global_image_token": "<global-img>", "end_of_utterance_token": "<end_of_utterance>"}
+    vocab = {word: i for i, word in enumerate(dict.fromkeys(["<unk>", "<pad>", *special.values(), "\n", *_WORDS]))}
+    tokenizer = Tokenizer(models.WordLevel(vocab=vocab, unk_token="<unk>"))
+    tokenizer.pre_tokenizer = pre_tokenizers.WhitespaceSplit()
+    fast = PreTrainedTokenizerFast(tokenizer_object=tokenizer, unk_token="<unk>", pad_token="<pad>",
+                                   extra_special_tokens=special)
+    side = {"longest_edge": _VLM_IMAGE}
+    images = SmolVLMImageProcessor(do_resize=False, do_image_splitting=False, max_image_size=side, size=side)
+    SmolVLMProcessor(image_processor=images, tokenizer=fast, video_processor=SmolVLMVideoProcessor(),
+                     image_seq_len=4).save_pretrained(out)
+    SmolVLMConfig(
+        vision_config={"hidden_size": 32, "intermediate_size": 64, "num_hidden_layers": 1, "num_attention_heads": 2,
+                       "image_size": _VLM_IMAGE, "patch_size": 8},
+        text_config={"model_type": "llama", "hidden_size": 64, "intermediate_size": 128, "num_hidden_layers": 2,
+                     "num_attention_heads": 4, "num_key_value_heads": 2, "head_dim": 16, "vocab_size": len(vocab),
+                     "max_position_embeddings": 256},
+        scale_factor=2, image_token_id=vocab["<image>"], vocab_size=len(vocab)).save_pretrained(out)
+    return out
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("out", type=Path, help="the pretrained_model folder to write")
+    parser.add_argument("--image-size", type=int, default=96, help="side of the square camera image it reads")
+    parser.add_argument("--action-dim", type=int, default=4, help="action dimensions A")
+    parser.add_argument("--chunk", type=int, default=5, help="actions executed per call (gymnast's chunk K)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the random weights")
+    args = parser.parse_args(argv)
+    print(new_act(args.out, args.image_size, args.action_dim, args.chunk, seed=args.seed))
+
+
+if __name__ == "__main__":
+    main()

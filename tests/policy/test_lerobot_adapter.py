@@ -1,0 +1,79 @@
+"""LeRobot's policies behind gymnast's Policy contract: exact log-probabilities of what they
+sample, features they cannot be given refused by name, and the way back to LeRobot."""
+
+import pytest
+import torch
+
+from gymnast.policy.load import load_policy
+
+INSTRUCTIONS = ["reach the goal", "push the puck", "open the drawer"]
+
+
+@pytest.fixture(params=["act", "smolvla"])
+def folder(request, lerobot_act, lerobot_smolvla):
+    return {"act": lerobot_act, "smolvla": lerobot_smolvla}[request.param]
+
+
+def _images(seed: int = 0) -> torch.Tensor:
+    return torch.randint(0, 256, (len(INSTRUCTIONS), 96, 96, 3), dtype=torch.uint8,
+                         generator=torch.Generator().manual_seed(seed))
+
+
+def test_log_prob_recomputes_the_sampled_chunks_density_and_its_gradient_reaches_the_policy(folder):
+    policy = load_policy(f"lerobot:{folder}")
+    kind = {"act": "LeRobotGaussianPolicy", "smolvla": "LeRobotFlowPolicy"}[policy.config.type]
+    assert type(policy).__name__ == kind and (policy.chunk_size, policy.action_dim) == (5, 4)
+    sample = policy.sample(_images(), INSTRUCTIONS, 1.3, torch.Generator().manual_seed(0))
+    assert sample.actions.shape == (3, 5, 4) and sample.logp.shape == (3, 20)
+    logp = policy.log_prob(_images(), INSTRUCTIONS, sample.tokens, 1.3)
+    torch.testing.assert_close(logp, sample.logp, atol=1e-4, rtol=0)
+    logp.sum().backward()
+    assert any(p.grad is not None and p.grad.abs().sum() > 0 for p in policy.policy.parameters())
+    # Another temperature is another distribution: the same chunk gets another density.
+    assert not torch.allclose(policy.log_prob(_images(), INSTRUCTIONS, sample.tokens, 0.7), logp)
+
+
+def test_the_greedy_chunk_is_lerobots_own_prediction_after_a_round_trip_through_both_formats(folder, tmp_path):
+    from lerobot.policies.factory import get_policy_class, make_pre_post_processors
+
+    from gymnast.utils.checkpoint import save_checkpoint
+
+    policy = load_policy(f"lerobot:{folder}")
+    with torch.no_grad():  # weights that differ from the folder's, as after RL
+        for parameter in policy.policy.parameters():
+            parameter.add_(0.01 * torch.randn_like(parameter))
+    ours = policy.act(_images(1), INSTRUCTIONS)
+    save_checkpoint(tmp_path / "run", 1, policy, {"model": policy.spec()})
+    torch.testing.assert_close(load_policy(tmp_path / "run").act(_images(1), INSTRUCTIONS), ours, atol=1e-5, rtol=0)
+
+    exported = policy.export(tmp_path / "pretrained_model")
+    lerobot = get_policy_class(policy.config.type).from_pretrained(exported)
+    preprocessor, postprocessor = make_pre_post_processors(lerobot.config, pretrained_path=str(exported))
+    batch = preprocessor(policy.features.batch(_images(1), INSTRUCTIONS))
+    noise = {"noise": torch.zeros(3, 8, 8)} if policy.config.type == "smolvla" else {}
+    theirs = postprocessor(lerobot.predict_action_chunk(batch, **noise))[:, :5]
+    torch.testing.assert_close(theirs, ours, atol=1e-5, rtol=0)
+    assert not torch.allclose(load_policy(f"lerobot:{folder}").act(_images(1), INSTRUCTIONS), ours, atol=1e-3)
+
+
+def test_a_feature_gymnast_cannot_give_is_refused_by_name(lerobot_act):
+    from lerobot.configs.types import FeatureType, PolicyFeature
+    from lerobot.policies.act.configuration_act import ACTConfig
+
+    from gymnast.policy.lerobot_features import LeRobotFeatures
+
+    image = PolicyFeature(FeatureType.VISUAL, (3, 96, 96))
+    state = ACTConfig(input_features={"observation.image": image,
+                                      "observation.state": PolicyFeature(FeatureType.STATE, (6,))},
+                      output_features={"action": PolicyFeature(FeatureType.ACTION, (4,))})
+    with pytest.raises(ValueError, match=r"input feature observation.state \(STATE, shape \(6,\)\)"):
+        LeRobotFeatures.of(state, "p")
+    cameras = ACTConfig(input_features={"observation.images.top": image, "observation.images.wrist": image},
+                        output_features={"action": PolicyFeature(FeatureType.ACTION, (4,))})
+    with pytest.raises(ValueError, match="input feature observation.images.wrist"):
+        LeRobotFeatures.of(cameras, "p")
+
+
+def test_a_folder_without_a_lerobot_config_is_named(tmp_path):
+    with pytest.raises(FileNotFoundError, match=f"lerobot:{tmp_path}: no config.json"):
+        load_policy(f"lerobot:{tmp_path}")
