@@ -1,5 +1,6 @@
 """LeRobot's policies behind gymnast's Policy contract: exact log-probabilities of what they
-sample, features they cannot be given refused by name, and the way back to LeRobot."""
+sample, and features they cannot be given refused by name (the way back to LeRobot after RL is
+tests/rl/test_lerobot_rl.py's)."""
 
 import pytest
 import torch
@@ -31,29 +32,6 @@ def test_log_prob_recomputes_the_sampled_chunks_density_and_its_gradient_reaches
     assert any(p.grad is not None and p.grad.abs().sum() > 0 for p in policy.policy.parameters())
     # Another temperature is another distribution: the same chunk gets another density.
     assert not torch.allclose(policy.log_prob(_images(), INSTRUCTIONS, sample.tokens, 0.7), logp)
-
-
-def test_the_greedy_chunk_is_lerobots_own_prediction_after_a_round_trip_through_both_formats(folder, tmp_path):
-    from lerobot.policies.factory import get_policy_class, make_pre_post_processors
-
-    from gymnast.utils.checkpoint import save_checkpoint
-
-    policy = load_policy(f"lerobot:{folder}")
-    with torch.no_grad():  # weights that differ from the folder's, as after RL
-        for parameter in policy.policy.parameters():
-            parameter.add_(0.01 * torch.randn_like(parameter))
-    ours = policy.act(_images(1), INSTRUCTIONS)
-    save_checkpoint(tmp_path / "run", 1, policy, {"model": policy.spec()})
-    torch.testing.assert_close(load_policy(tmp_path / "run").act(_images(1), INSTRUCTIONS), ours, atol=1e-5, rtol=0)
-
-    exported = policy.export(tmp_path / "pretrained_model")
-    lerobot = get_policy_class(policy.config.type).from_pretrained(exported)
-    preprocessor, postprocessor = make_pre_post_processors(lerobot.config, pretrained_path=str(exported))
-    batch = preprocessor(policy.features.batch(_images(1), INSTRUCTIONS))
-    noise = {"noise": torch.zeros(3, 8, 8)} if policy.config.type == "smolvla" else {}
-    theirs = postprocessor(lerobot.predict_action_chunk(batch, **noise))[:, :5]
-    torch.testing.assert_close(theirs, ours, atol=1e-5, rtol=0)
-    assert not torch.allclose(load_policy(f"lerobot:{folder}").act(_images(1), INSTRUCTIONS), ours, atol=1e-3)
 
 
 def test_a_feature_gymnast_cannot_give_is_refused_by_name(lerobot_act):

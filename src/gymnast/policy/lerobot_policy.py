@@ -143,10 +143,16 @@ class LeRobotPolicy(nn.Module):
         # ACT names the padding action_is_pad; SmolVLA reads actions_id_pad.
         batch |= {"action_is_pad": pad.to(self.device), "actions_id_pad": pad.to(self.device)}
         seed = int(torch.randint(2**62, (1,), generator=generator)) if generator is not None else None
-        with torch.random.fork_rng(devices=[]):
-            if seed is not None:
-                torch.manual_seed(seed)
-            loss = self.policy.forward(batch)[0]
+        # In training mode, as LeRobot trains it (ACT's VAE encoder only runs then); back to eval
+        # after, since sampling and log-probabilities must see one and the same network.
+        self.policy.train()
+        try:
+            with torch.random.fork_rng(devices=[]):
+                if seed is not None:
+                    torch.manual_seed(seed)
+                loss = self.policy.forward(batch)[0]
+        finally:
+            self.policy.eval()
         return loss, {"train/loss": loss.item()}
 
     # -- persistence --------------------------------------------------------------------------------

@@ -11,6 +11,7 @@ from pathlib import Path
 
 from gymnast.data.lerobot import FeatureKeys
 from gymnast.envs.tasks import resolve_tasks
+from gymnast.policy.load import is_lerobot
 from gymnast.rl.config import RLConfig, RLRun
 from gymnast.rl.rollout import recorded_elsewhere, tasks_with_starts
 from gymnast.utils.checkpoint import resolve_checkpoint
@@ -57,7 +58,10 @@ def policy_keys(policy_run: str | Path) -> FeatureKeys:
 
 
 def _policy_configs(policy_run: str | Path) -> list[dict]:
-    """The policy run's config.json, then its checkpoint's (whichever exist)."""
+    """The policy run's config.json, then its checkpoint's (whichever exist); none for a LeRobot
+    folder, which records neither the dataset nor gymnast's frame settings."""
+    if is_lerobot(policy_run):
+        return []
     checkpoint = resolve_checkpoint(Path(policy_run))
     paths = (Path(policy_run) / "config.json", checkpoint / "config.json")
     return [json.loads(path.read_text()) for path in paths if path.exists()]

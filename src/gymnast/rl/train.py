@@ -39,6 +39,7 @@ from gymnast.envs.kinds import REAL
 from gymnast.data.keyframes import KeyframeConfig
 from gymnast.envs.starts import Start, StartSampler, evaluation_starts, own_instruction, scene_starts
 from gymnast.envs.tasks import parse_scenes, resolve_tasks
+from gymnast.policy.lerobot_policy import LeRobotPolicy
 from gymnast.reward.base import Reward, check_fits
 from gymnast.rl import grpo
 from gymnast.rl.config import RLConfig, RLRun
@@ -55,6 +56,9 @@ from gymnast.utils.metrics import MetricsLog
 from gymnast.utils.optim import warmup_cosine
 
 logger = logging.getLogger(__name__)
+
+LEROBOT_EXPORT = "lerobot/pretrained_model"
+"""Where a run of a LeRobot policy writes it back as a LeRobot pretrained_model folder."""
 
 
 def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False, progress: bool = True) -> dict:
@@ -201,6 +205,8 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
                 save_checkpoint(out, done, policy, resolved, optimizer,
                                 {"sampler": sampler.get_state(), "actions": actions.get_state()},
                                 {"schedule": schedule.state_dict(), "state": state})
+                if isinstance(policy, LeRobotPolicy):  # back to LeRobot: the newest weights as its own folder
+                    policy.export(out / LEROBOT_EXPORT)
     finally:  # worker processes and event files are released even when a step fails
         envs.close()
         eval_envs.close()
