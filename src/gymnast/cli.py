@@ -67,13 +67,16 @@ def evaluate_command(
     """Evaluate a policy in the real world on held-out seeds: success per task with 95% CIs.
 
     Args:
-        policy: an SFT/RL run directory (its newest checkpoint), or 'expert' for the scripted reference.
+        policy: an SFT/RL run directory (its newest checkpoint), 'expert' for the scripted reference, or
+            lerobot:PATH for a LeRobot pretrained_model folder (acts in this process: --workers 1).
         out: JSON report (per-episode records included); videos are saved beside it in <name>_videos/.
         config: tasks, episodes, perturbation, gap and workers.
     """
     from gymnast.eval.evaluate import evaluate, format_summary
+    from gymnast.policy.load import is_lerobot, load_policy
 
-    report = evaluate(policy, config, out)
+    # A LeRobot folder is no run directory for the workers to load: it acts in this process.
+    report = evaluate(load_policy(policy) if is_lerobot(policy) else policy, config, out)
     print(format_summary(report))
     print(f"report: {out}")
 
