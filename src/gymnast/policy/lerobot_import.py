@@ -7,16 +7,15 @@ the way: a torchvision whose compiled operators do not load beside this torch (P
 wheels are CUDA builds; with the CPU build of torch their extension fails to load), and then
 ``import torchvision`` fails on registering a fake kernel for ``torchvision::nms``, an operator
 that was never defined. Defining the schemas of its two such operators first lets it import;
-LeRobot's policies use only its pure-PyTorch parts (backbones, transforms), and those work.
+LeRobot's policies use only its pure-PyTorch parts (backbones, transforms), and those work
+(`gymnast.utils.torchvision_ops`).
 """
 
 from __future__ import annotations
 
 import functools
-import importlib.util
-from pathlib import Path
 
-import torch
+from gymnast.utils.torchvision_ops import allow_torchvision_import
 
 LEROBOT_VERSION = "0.4.4"
 """The lerobot release the adapter is written against and tested with."""
@@ -24,10 +23,6 @@ LEROBOT_VERSION = "0.4.4"
 INSTALL = ("pip install 'world-gymnast[lerobot]' && pip install --no-deps "
            f"lerobot=={LEROBOT_VERSION}")
 """How a user installs LeRobot beside gymnast (docs/lerobot.md says why in two steps)."""
-
-_SCHEMAS = {"nms": "nms(Tensor dets, Tensor scores, float iou_threshold) -> Tensor",
-            "qnms": "qnms(Tensor dets, Tensor scores, float iou_threshold) -> Tensor"}
-_library: torch.library.Library | None = None  # kept alive: dropping it would undefine the schemas
 
 
 @functools.lru_cache(maxsize=1)
@@ -38,30 +33,9 @@ def require_lerobot() -> None:
         ImportError: lerobot (or what its policies import) is missing; the message names the
             install command.
     """
-    _define_torchvision_schemas()
+    allow_torchvision_import()
     try:
         import lerobot.policies  # noqa: F401  (the package's own imports are what can fail)
     except ImportError as error:
         raise ImportError(f"--policy lerobot:PATH needs LeRobot {LEROBOT_VERSION} beside gymnast ({error}); "
                           f"install it with: {INSTALL}") from error
-
-
-def _define_torchvision_schemas() -> None:
-    """Defines torchvision's nms and qnms schemas when its compiled extension cannot load."""
-    global _library
-    spec = importlib.util.find_spec("torchvision")
-    if spec is None or spec.origin is None or _library is not None:
-        return
-    extension = next(Path(spec.origin).parent.glob("_C*.so"), None)
-    try:
-        if extension is not None:
-            torch.ops.load_library(str(extension))  # what torchvision itself does first
-            return
-    except OSError:  # built against another torch or CUDA: the operators stay undefined
-        pass
-    _library = torch.library.Library("torchvision", "DEF")
-    for schema in _SCHEMAS.values():
-        try:
-            _library.define(schema)
-        except RuntimeError:  # already defined in this process (by its user): nothing to add
-            pass

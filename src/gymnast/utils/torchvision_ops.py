@@ -45,7 +45,10 @@ def allow_torchvision_import() -> bool:
             pass  # built for another torch (or for CUDA): declare what its Python side expects
     library = torch.library.Library("torchvision", "DEF")
     for schema in _SCHEMAS:
-        library.define(schema)
+        try:
+            library.define(schema)
+        except RuntimeError:  # already declared in this process by its user: nothing to add
+            pass
     _KEPT.append(library)  # the declarations last as long as the Library object does
     return True
 
