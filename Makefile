@@ -17,9 +17,12 @@ $(STAMP): pyproject.toml Makefile
 	@$(PYTHON) -c 'import sys; sys.exit(sys.version_info < (3, 11))' || \
 		{ echo "gymnast needs Python >= 3.11 (found $$($(PYTHON) --version)); set PYTHON=python3.11"; exit 1; }
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[dev]' '$(TORCH_CPU)'
-	$(BIN)/python -m pip install --quiet --no-deps '$(LEROBOT)'
+	@# pip fetches only the installer, uv, and torch's own wheel, so that pip's configuration (an index,
+	@# a directory of wheels) still decides which build of torch comes; uv then resolves and installs
+	@# the rest in parallel, minutes faster than pip, the same versions, and keeps that torch.
+	$(BIN)/python -m pip install --quiet --no-deps uv '$(TORCH_CPU)'
+	$(BIN)/uv pip install --quiet --python $(BIN)/python -e '.[dev]' '$(TORCH_CPU)'
+	$(BIN)/uv pip install --quiet --python $(BIN)/python --no-deps '$(LEROBOT)'
 	@# A CUDA build of torch (or its nvidia-* wheels) would mean gigabytes nobody asked for.
 	@! $(BIN)/python -m pip list 2>/dev/null | grep -qi '^nvidia' || \
 		{ echo "set-up pulled CUDA packages; the CPU build is expected"; exit 1; }
