@@ -30,3 +30,22 @@ def tiny_dataset(tmp_path_factory) -> Path:
                            workers=1, env=EnvConfig(image_size=32, horizon=100))
     collect(config, out, progress=False)
     return out
+
+
+# LeRobot is part of `make test`'s install; if it is missing, these fail with the install command
+# (gymnast.policy.lerobot_import.require_lerobot) rather than skipping. The adapter's tests and the
+# RL tests share them: nothing writes into these folders.
+@pytest.fixture(scope="session")
+def lerobot_act(tmp_path_factory) -> Path:
+    """A randomly initialised LeRobot ACT (96 px image, 4-d actions, 5 executed of 8 predicted)."""
+    from gymnast.policy.lerobot_init import new_act
+
+    return new_act(tmp_path_factory.mktemp("act") / "pretrained_model", chunk=5, predicted=8, action_std=0.5)
+
+
+@pytest.fixture(scope="session")
+def lerobot_smolvla(tmp_path_factory) -> Path:
+    """A tiny randomly initialised LeRobot SmolVLA on a tiny VLM written beside it."""
+    from gymnast.policy.lerobot_init import new_smolvla
+
+    return new_smolvla(tmp_path_factory.mktemp("smolvla") / "pretrained_model", chunk=5, predicted=8, action_std=0.5)

@@ -23,35 +23,52 @@ ROBOTS = {
 }
 
 
+FIRST = next(iter(ROBOTS))
+
+
+def _train_every_model(root: Path, robot: str) -> dict[str, Path]:
+    """The robot's dataset (6 episodes of 10 steps) and train-wm, sft and train-judge on it, debug presets."""
+    paths = {"data": write_robot_dataset(root / "data", episodes=6, steps=10, **ROBOTS[robot])}
+    for command in ("train-wm", "sft", "train-judge"):
+        paths[command] = root / command
+        main([command, "--data", str(paths["data"]), "--out", str(paths[command]), "--preset", "debug"])
+    return paths
+
+
+@pytest.fixture(scope="module")
+def robot_models(tmp_path_factory) -> dict[str, Path]:
+    """The first robot's dataset (26-D actions, 120x160 frames, v2.1) and the three models trained on it."""
+    return _train_every_model(tmp_path_factory.mktemp("robot"), FIRST)
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("robot", ROBOTS)
-def test_another_robots_dataset_trains_every_model_with_the_debug_presets(robot, tmp_path, capsys):
-    data = write_robot_dataset(tmp_path / "data", episodes=6, steps=10, **ROBOTS[robot])
-    stats = EpisodeDataset(data).action_stats
-    for command in ("train-wm", "sft", "train-judge"):
-        main([command, "--data", str(data), "--out", str(tmp_path / command), "--preset", "debug"])
+def test_another_robots_dataset_trains_every_model_with_the_debug_presets(robot, request, tmp_path, capsys):
+    # The first robot's models are the ones the RL tests below practise with: trained once.
+    models = request.getfixturevalue("robot_models") if robot == FIRST else _train_every_model(tmp_path, robot)
+    stats = EpisodeDataset(models["data"]).action_stats
 
-    wm = load_world_model(tmp_path / "train-wm")
+    wm = load_world_model(models["train-wm"])
     assert (wm.image_size, wm.action_dim) == (96, stats.dim)  # non-square frames are fitted to the preset's size
     assert (wm.config.action_low, wm.config.action_high) == stats.action_range()
-    saved = json.loads((tmp_path / "train-wm" / "config.json").read_text())
+    saved = json.loads((models["train-wm"] / "config.json").read_text())
     assert saved["train"]["fit"] == "resize" and saved["train"]["camera"] is None
 
-    policy = load_policy(tmp_path / "sft")
+    policy = load_policy(models["sft"])
     assert (policy.config.image_size, policy.action_dim) == (96, stats.dim)
     assert (policy.tokenizer.low, policy.tokenizer.high) == stats.action_range()
     saved_stats = json.loads(json.dumps(stats.to_dict()))  # as JSON keeps them, with the weights
-    assert json.loads((tmp_path / "sft" / "config.json").read_text())["action_stats"] == saved_stats
+    assert json.loads((models["sft"] / "config.json").read_text())["action_stats"] == saved_stats
     assert saved["action_stats"] == saved_stats
 
-    judge = json.loads((tmp_path / "train-judge" / "config.json").read_text())
+    judge = json.loads((models["train-judge"] / "config.json").read_text())
     assert judge["model"]["image_size"] == 96 and judge["train"]["fit"] == "resize"
     capsys.readouterr()
 
 
 @pytest.mark.slow
 def test_the_flow_world_model_takes_another_robots_actions_and_frames(tmp_path, capsys):
-    data = write_robot_dataset(tmp_path / "data", episodes=6, steps=10, **ROBOTS[next(iter(ROBOTS))])
+    data = write_robot_dataset(tmp_path / "data", episodes=6, steps=10, **ROBOTS[FIRST])
     main(["train-wm", "--backend", "flow", "--data", str(data), "--out", str(tmp_path / "wm"), "--preset", "debug"])
     wm = load_world_model(tmp_path / "wm")
     stats = EpisodeDataset(data).action_stats
@@ -114,17 +131,6 @@ def test_the_frame_fit_is_a_flag_saved_with_the_run(command, section, tmp_path, 
     main([command, "--data", str(data), "--out", str(tmp_path / "run"), "--preset", "debug", "--fit", "crop"])
     assert json.loads((tmp_path / "run" / "config.json").read_text())[section]["fit"] == "crop"
     capsys.readouterr()
-
-
-@pytest.fixture(scope="module")
-def robot_models(tmp_path_factory) -> dict[str, Path]:
-    """Another robot's dataset (26-D actions, 120x160 frames, v2.1) and the three models trained on it."""
-    root = tmp_path_factory.mktemp("robot")
-    paths = {"data": write_robot_dataset(root / "data", episodes=6, steps=10, action_dim=26, action_scale=3.0)}
-    for command in ("train-wm", "sft", "train-judge"):
-        paths[command] = root / command
-        main([command, "--data", str(paths["data"]), "--out", str(paths[command]), "--preset", "debug"])
-    return paths
 
 
 def _rl_on_robot(models: dict[str, Path], out: Path, *extra: str) -> None:

@@ -14,14 +14,10 @@ from gymnast.utils.metrics import read_metrics
 from rl_helpers import JUDGE, WORLD_MODEL
 
 
-@pytest.fixture(scope="module")
-def folders(tmp_path_factory):
-    """A tiny ACT (Gaussian head) and a tiny SmolVLA (flow SDE), randomly initialised."""
-    from gymnast.policy.lerobot_init import new_act, new_smolvla
-
-    root = tmp_path_factory.mktemp("lerobot")
-    return {"act": new_act(root / "act", chunk=5, predicted=8, action_std=0.5),
-            "smolvla": new_smolvla(root / "smolvla", chunk=5, predicted=8, action_std=0.5)}
+@pytest.fixture
+def folders(lerobot_act, lerobot_smolvla):
+    """A tiny ACT (Gaussian head) and a tiny SmolVLA (flow SDE), randomly initialised (tests/conftest.py)."""
+    return {"act": lerobot_act, "smolvla": lerobot_smolvla}
 
 
 @pytest.mark.parametrize("kind", ["act", "smolvla"])
