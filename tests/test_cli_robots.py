@@ -148,7 +148,9 @@ def test_rl_in_imagination_practises_on_another_robots_own_tasks(robot_models, t
     tasks = {info.task for info in EpisodeDataset(robot_models["data"]).episodes}
     assert set(summary["curve"][0]) >= {f"eval/own_success/{task}" for task in tasks}  # its own tasks, evaluated
     saved = json.loads((out / "config.json").read_text())
-    assert saved["rl"]["tasks"] == "" and saved["frames"] == {"camera": None, "fit": "resize"}
+    assert saved["rl"]["tasks"] == ""
+    keys = {"action_key": "action", "state_key": "observation.state"}  # the policy's, as sft saved them
+    assert saved["frames"] == {"camera": None, "fit": "resize", "keys": keys}
     capsys.readouterr()
 
 
