@@ -36,7 +36,6 @@ def new_act(out: Path, image_size: int = 96, action_dim: int = 4, chunk: int = 5
     from lerobot.configs.types import FeatureType, NormalizationMode, PolicyFeature
     from lerobot.policies.act.configuration_act import ACTConfig
     from lerobot.policies.act.modeling_act import ACTPolicy
-    from lerobot.policies.factory import make_pre_post_processors
 
     config = ACTConfig(
         input_features={"observation.image": PolicyFeature(FeatureType.VISUAL, (3, image_size, image_size))},
@@ -47,14 +46,7 @@ def new_act(out: Path, image_size: int = 96, action_dim: int = 4, chunk: int = 5
         # Images reach the backbone as [0, 1]; actions are normalised by the statistics below.
         normalization_mapping={"VISUAL": NormalizationMode.IDENTITY, "STATE": NormalizationMode.MEAN_STD,
                                "ACTION": NormalizationMode.MEAN_STD})
-    torch.manual_seed(seed)
-    policy = ACTPolicy(config)
-    stats = {"action": {"mean": torch.zeros(action_dim), "std": torch.full((action_dim,), float(action_std))}}
-    preprocessor, postprocessor = make_pre_post_processors(config, dataset_stats=stats)
-    out = Path(out)
-    for part in (policy, preprocessor, postprocessor):
-        part.save_pretrained(out)
-    return out
+    return _save_new(ACTPolicy, config, Path(out), action_dim, action_std, seed)
 
 
 def new_smolvla(out: Path, image_size: int = 96, action_dim: int = 4, chunk: int = 5, predicted: int = 8,
@@ -71,7 +63,6 @@ def new_smolvla(out: Path, image_size: int = 96, action_dim: int = 4, chunk: int
     """
     require_lerobot()
     from lerobot.configs.types import FeatureType, NormalizationMode, PolicyFeature
-    from lerobot.policies.factory import make_pre_post_processors
     from lerobot.policies.smolvla.configuration_smolvla import SmolVLAConfig
     from lerobot.policies.smolvla.modeling_smolvla import SmolVLAPolicy
 
@@ -85,13 +76,7 @@ def new_smolvla(out: Path, image_size: int = 96, action_dim: int = 4, chunk: int
         load_vlm_weights=False, num_vlm_layers=2, device="cpu",
         normalization_mapping={"VISUAL": NormalizationMode.IDENTITY, "STATE": NormalizationMode.MEAN_STD,
                                "ACTION": NormalizationMode.MEAN_STD})
-    torch.manual_seed(seed)
-    policy = SmolVLAPolicy(config)
-    stats = {"action": {"mean": torch.zeros(action_dim), "std": torch.full((action_dim,), float(action_std))}}
-    preprocessor, postprocessor = make_pre_post_processors(config, dataset_stats=stats)
-    for part in (policy, preprocessor, postprocessor):
-        part.save_pretrained(out)
-    return out
+    return _save_new(SmolVLAPolicy, config, out, action_dim, action_std, seed)
 
 
 _VLM_IMAGE = 32  # the tiny VLM's image side: 16 patches of 8 px, 4 image tokens after its pixel shuffle
@@ -139,3 +124,17 @@ def main(argv: list[str] | None = None) -> None:
 
 if __name__ == "__main__":
     main()
+
+
+def _save_new(policy_class, config, out: Path, action_dim: int, action_std: float, seed: int) -> Path:
+    """Builds `policy_class(config)` from `seed` and writes it to `out` with its pre- and
+    post-processors, the actions normalised by a zero mean and `action_std`."""
+    from lerobot.policies.factory import make_pre_post_processors
+
+    torch.manual_seed(seed)
+    policy = policy_class(config)
+    stats = {"action": {"mean": torch.zeros(action_dim), "std": torch.full((action_dim,), float(action_std))}}
+    preprocessor, postprocessor = make_pre_post_processors(config, dataset_stats=stats)
+    for part in (policy, preprocessor, postprocessor):
+        part.save_pretrained(out)
+    return out
