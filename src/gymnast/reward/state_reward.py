@@ -80,13 +80,28 @@ class StateReward:
 
     def score(self, frames: torch.Tensor, instructions: Sequence[str], context: RewardContext) -> torch.Tensor:
         """(B,) the predicted dense return of each rollout (see the module docstring); frames unused."""
+        return self._score(self.imagine(instructions, context), context.actions.shape[1])
+
+    def verdict(self, instructions: Sequence[str], context: RewardContext) -> torch.Tensor:
+        """(B,) 1.0 where every member predicts success at some step."""
+        return self._verdict(self.imagine(instructions, context), context.actions.shape[1])
+
+    def read(self, instructions: Sequence[str], context: RewardContext, horizons: Sequence[int]
+             ) -> dict[int, tuple[torch.Tensor, torch.Tensor]]:
+        """`score` and `verdict` of the rollouts cut after each of `horizons` actions, from one
+        imagination of the whole: a state model steps causally, so its first h steps are those it
+        imagines for the rollout cut there."""
         rollouts = self.imagine(instructions, context)
-        succeeded = self._succeeded(rollouts)
-        returns = torch.stack([torch.where(succeeded, 1.0, r.rewards.clamp(0, 1)).mean(dim=1) for r in rollouts])
+        return {h: (self._score(rollouts, h), self._verdict(rollouts, h)) for h in horizons}
+
+    def _score(self, rollouts: list[StateRollout], steps: int) -> torch.Tensor:
+        """(B,) the members' mean predicted dense return over the first `steps` steps."""
+        succeeded = self._succeeded(rollouts)[:, :steps]
+        returns = torch.stack([torch.where(succeeded, 1.0, r.rewards[:, :steps].clamp(0, 1)).mean(dim=1)
+                               for r in rollouts])
         if len(rollouts) > 1:
             self._disagreement = float(returns.std(dim=0).mean())
         return returns.mean(dim=0)
 
-    def verdict(self, instructions: Sequence[str], context: RewardContext) -> torch.Tensor:
-        """(B,) 1.0 where every member predicts success at some step."""
-        return self._succeeded(self.imagine(instructions, context)).any(dim=1).float()
+    def _verdict(self, rollouts: list[StateRollout], steps: int) -> torch.Tensor:
+        return self._succeeded(rollouts)[:, :steps].any(dim=1).float()
