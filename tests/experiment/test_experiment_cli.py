@@ -101,12 +101,19 @@ def test_the_practice_signal_of_imagination_is_measured_and_reported(experiment:
     summary = json.loads((experiment / "summary.json").read_text())
     figures = summary["signal"]
     report = json.loads((experiment / "signal" / "signal.json").read_text())
-    # debug: one fresh reach scene, a group of the RL preset's size, the RL horizon
-    assert figures["rollouts"] == len(report["rollouts"]) == 2 and figures["horizon"] == 40
+    # debug: one reach start as the world-model arms draw theirs (the dataset's first frames), a group
+    # of the RL preset's size, the RL horizon
+    settings = json.loads((experiment / "config.json").read_text())["rl"]
+    assert report["settings"]["data"] == str(experiment / "data") and report["settings"]["keyframes"] == settings["keyframes"]
+    assert figures["rollouts"] == len(report["rollouts"]) == 2 and figures["horizon"] == settings["horizon"] == 40
     assert figures["real_interactions"] == report["interactions"] == 2 * 40
     longest = {row["readout"]: row for row in report["readouts"] if row["horizon"] == 40}
     assert figures["imagined"]["advantage_correlation"] == longest["score"]["advantage_correlation"]
     assert figures["real_dense"]["signal_groups"] == longest["real dense reward (reference)"]["signal_groups"]
+    # The debug experiment's only task is a weak one: the weak tasks' readout pools the same groups.
+    weak = summary["signal_weak"]
+    assert weak["tasks"] == ["reach-v3"] and weak["rollouts"] == 2
+    assert weak["real_dense"]["signal_groups"] == figures["real_dense"]["signal_groups"]
     assert "signal" in summary["stage_wall_s"]
     assert "](signal/signal.md)" in (experiment / "report.md").read_text()
 

@@ -153,3 +153,26 @@ def test_the_command_measures_the_committed_models_against_real_replays(tmp_path
     rows = {(row["readout"], row["horizon"]) for row in report["readouts"]}
     assert rows == {(name, h) for name in READOUTS for h in (10, 20)}
     assert "advantage correlation" in (out / "signal.md").read_text()
+
+
+def test_the_brief_of_some_tasks_pools_only_their_groups():
+    from gymnast.experiment.practice_signal import REAL_DENSE, SCORE, signal_brief, signal_table
+
+    def rollout(task: str, score: float, success: bool, dense: float) -> dict:
+        return {"task": task, "real": {"4": success}, "real_return": {"4": dense},
+                "readouts": {SCORE: {"4": score}, REAL_DENSE: {"4": dense}}}
+
+    # reach's imagined scores rank its groups as reality does; push's rank them backwards.
+    records = [rollout("reach-v3", 0.9, True, 0.8), rollout("reach-v3", 0.1, False, 0.2),
+               rollout("push-v3", 0.1, True, 0.7), rollout("push-v3", 0.9, False, 0.3)]
+    binary = {SCORE: False, REAL_DENSE: False}
+    report = {"settings": {"horizons": [4], "group_size": 2, "binary_readouts": []}, "rollouts": records,
+              "readouts": signal_table(records, [4], 2, binary), "interactions": 16}
+    everything = signal_brief(report)
+    assert everything["rollouts"] == 4 and everything["real_interactions"] == 16
+    assert everything["imagined"]["advantage_correlation"] == pytest.approx(0.0)
+    reach = signal_brief(report, ["reach-v3", "pick-place-v3"])
+    assert reach["tasks"] == ["reach-v3"] and reach["rollouts"] == 2
+    assert reach["imagined"]["advantage_correlation"] == pytest.approx(1.0)
+    assert signal_brief(report, ["push-v3"])["imagined"]["advantage_correlation"] == pytest.approx(-1.0)
+    assert signal_brief(report, ["peg-insert-side-v3"]) is None

@@ -105,8 +105,9 @@ class ExperimentConfig:
     worldgym_random: bool = True
     """WorldGym also rates uniformly random actions (the floor of the noise ladder)."""
     signal_scenes: int = 4
-    """Fresh scenes per task of the ``signal`` stage: GRPO groups of the SFT policy sampled in
-    imagination and replayed in the real world (`gymnast rl-signal`)."""
+    """Starts (GRPO groups) per task of the ``signal`` stage: the SFT policy sampled in imagination
+    from the held-out episodes' keyframes as `rl.keyframes` draws them, for `rl.horizon` actions, and
+    replayed in the real world (`gymnast rl-signal`)."""
     workers: int = 2
     """Simulator processes."""
     runner: str = "local"
@@ -136,6 +137,12 @@ class ExperimentConfig:
             raise ValueError(f"ExperimentConfig.dyna.rounds ({self.dyna.rounds}) must divide rl.steps "
                              f"({self.rl.steps}): Dyna spends the RL arms' step budget in equal rounds")
         parse_runner(self.runner)
+
+    @property
+    def weak_task_list(self) -> list[str]:
+        """The weak tasks this experiment has, in `tasks`' order."""
+        weak = set(resolve_tasks(self.weak_tasks)) if self.weak_tasks else set()
+        return [task for task in resolve_tasks(self.tasks) if task in weak]
 
     def resolved(self) -> ExperimentConfig:
         """Every stage told the experiment's tasks, workers, runner, device and seed (one place to set them)."""

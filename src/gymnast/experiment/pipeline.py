@@ -46,7 +46,7 @@ def run_experiment(config: ExperimentConfig, out: Path, reuse: dict[str, Path] |
     stages = Stages(out, reuse)
     data, sft, wm, judge = _models(stages, config, out, progress)
     stages.run("imagination", lambda: _imagination(sft, wm, judge, config, out, progress), out / "imagination")
-    stages.run("signal", lambda: _signal(sft, wm, judge, config, out, progress), out / "signal")
+    stages.run("signal", lambda: _signal(sft, wm, judge, data, config, out, progress), out / "signal")
     policies = {"sft": sft}
     for spec in ARMS[1:]:
         policies[spec.name] = _train_arm(stages, spec.name, config, out, sft, wm, judge, data, progress)
@@ -123,20 +123,26 @@ def _imagination(sft: Path, wm: Path, judge: Path, config: ExperimentConfig, out
     return imagination_brief(report)
 
 
-def _signal(sft: Path, wm: Path, judge: Path, config: ExperimentConfig, out: Path, progress: bool) -> dict:
-    """GRPO groups of the SFT policy sampled in imagination as the world-model arms sample them,
-    their judged advantages against the real outcomes of the same actions
-    (`gymnast.experiment.practice_signal`): would practice there push the policy the right way?"""
+def _signal(sft: Path, wm: Path, judge: Path, data: Path, config: ExperimentConfig, out: Path, progress: bool) -> dict:
+    """GRPO groups of the SFT policy sampled in imagination as the world-model arms sample them (the
+    same kind of starts, from the dataset's episodes as `rl.keyframes` draws them, the same horizon,
+    group size, temperature and reward), their judged advantages against the real outcomes of the
+    same actions (`gymnast.experiment.practice_signal`): would practice there push the policy the
+    right way? Read over every task and over the weak tasks among them (``weak``)."""
     from gymnast.experiment.practice_signal import SignalConfig, measure_signal_runs, signal_brief
     from gymnast.reward.spec import RewardSpec
+    from gymnast.world_model.evaluate import heldout_fraction
 
     group = config.rl.group_size
-    settings = SignalConfig(tasks=config.tasks, starts_per_task=config.signal_scenes, group_size=group,
+    # The starts come from the scenes the world model held out; a dataset too small to hold any out
+    # lends its others (with a warning), so a tiny experiment still measures.
+    settings = SignalConfig(tasks=config.tasks, starts_per_task=config.signal_scenes, data=str(data),
+                            keyframes=config.rl.keyframes, heldout_fraction=heldout_fraction(wm), group_size=group,
                             temperature=config.rl.temperature, horizons=(config.rl.horizon,),
                             batch=group * max(1, 64 // group), workers=config.workers, runner=config.runner,
                             seed=config.seed)
     report = measure_signal_runs(sft, wm, RewardSpec.judge(judge), settings, out / "signal", progress)
-    return signal_brief(report)
+    return {**signal_brief(report), "weak": signal_brief(report, config.weak_task_list)}
 
 
 def _trained(train, data: Path, target: Path, settings, progress: bool) -> dict:

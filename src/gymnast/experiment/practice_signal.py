@@ -222,8 +222,9 @@ def measure_signal(policy: Policy, world_model: WorldModel, reward: Reward, conf
         "settings": {**dataclasses.asdict(config), **(labels or {}), "task_list": list(tasks),
                      "reward_type": type(reward).__name__, "policy_type": type(policy).__name__,
                      "binary_readouts": [name for name, is_binary in binary.items() if is_binary]},
-        "readouts": signal_table(records, config, binary),
-        "per_task": {task: signal_table([r for r in records if r["task"] == task], config, binary) for task in tasks},
+        "readouts": signal_table(records, config.horizons, config.group_size, binary),
+        "per_task": {task: signal_table([r for r in records if r["task"] == task], config.horizons, config.group_size, binary)
+                     for task in tasks},
         "interactions": interactions,
         "seconds": seconds,
         "rollouts": records,
@@ -289,20 +290,16 @@ def read_out(reward: Reward, frames: torch.Tensor, instructions: Sequence[str], 
     reward as RL reads it) and, for a per-frame 0/1 judge, ``probability``, or for a grounded world
     model's reward head, its ``verdict``; (R,) each.
 
-    A per-frame judge is run once for all horizons. A reward reads only the video (a judge), or the
-    start state and the (R, T, A) actions of `context` (a state model's head); one that needs a
-    reference or a simulator cannot be read out.
+    A per-frame judge, or a state model, is run once for all horizons. A reward reads only the video
+    (a judge), or the start state and the (R, T, A) actions of `context` (a state model's head); one
+    that needs a reference or a simulator cannot be read out.
     """
     if reward.needs.start_state:
         if context is None or context.actions is None:
             raise ValueError(f"{type(reward).__name__} reads the start states and the actions: pass their context")
-
-        def cut(h: int) -> RewardContext:
-            return RewardContext(start_state=context.start_state, start_action=context.start_action,
-                                 actions=context.actions[:, :h])
-
-        return {SCORE: {h: reward.score(frames[:, : h + 1], instructions, cut(h)).float() for h in horizons},
-                VERDICT: {h: reward.verdict(instructions, cut(h)) for h in horizons}}
+        read = reward.read(instructions, context, horizons)  # one imagination serves every horizon
+        return {SCORE: {h: score.float() for h, (score, _) in read.items()},
+                VERDICT: {h: verdict for h, (_, verdict) in read.items()}}
     per_frame = getattr(reward, "frame_probabilities", None)
     if per_frame is None:  # a reward of whole videos: score each cut
         return {SCORE: {h: reward.score(frames[:, : h + 1], instructions, RewardContext()).float() for h in horizons}}
@@ -322,15 +319,15 @@ def dense_return(rewards: torch.Tensor, success_by_step: torch.Tensor) -> torch.
     return torch.nanmean(held.float(), dim=1).nan_to_num(0.0) / META_WORLD_MAX_STEP_REWARD
 
 
-def signal_table(records: list[dict], config: SignalConfig, binary: dict[str, bool]) -> list[dict]:
+def signal_table(records: list[dict], horizons: Sequence[int], group_size: int, binary: dict[str, bool]) -> list[dict]:
     """One row per readout and horizon: ``readout``, ``horizon`` and `signal_figures` over `records`
-    (whole groups, in order)."""
+    (whole groups of `group_size`, in order)."""
     rows = []
     for name, is_binary in binary.items():
-        for h in map(str, config.horizons):
-            values = torch.tensor([r["readouts"][name][h] for r in records]).view(-1, config.group_size)  # (B, G)
-            real = torch.tensor([r["real"][h] for r in records]).view(-1, config.group_size)  # (B, G)
-            returns = torch.tensor([r["real_return"][h] for r in records]).view(-1, config.group_size)  # (B, G)
+        for h in map(str, horizons):
+            values = torch.tensor([r["readouts"][name][h] for r in records]).view(-1, group_size)  # (B, G)
+            real = torch.tensor([r["real"][h] for r in records]).view(-1, group_size)  # (B, G)
+            returns = torch.tensor([r["real_return"][h] for r in records]).view(-1, group_size)  # (B, G)
             rows.append({"readout": name, "horizon": int(h), **signal_figures(values, real, is_binary, returns)})
     return rows
 
@@ -448,16 +445,33 @@ def _signed(value: float | None) -> str:
     return "-" if value is None else f"{value:+.2f}"
 
 
-def signal_brief(report: dict) -> dict:
+def signal_brief(report: dict, tasks: Sequence[str] | None = None) -> dict | None:
     """The main figures of a report at its longest horizon (what the experiment's summary.json
     keeps): for the reward's score on imagined video, the same on the real replay's video and the
     real dense reward, the advantage correlation with its interval and the real success of the
-    reinforced and discouraged rollouts; and the rollouts and real interactions behind them."""
-    horizon = max(report["settings"]["horizons"])
-    rows = {row["readout"]: row for row in report["readouts"] if row["horizon"] == horizon}
+    reinforced and discouraged rollouts; and the rollouts (and, over every task, the real
+    interactions) behind them.
+
+    Args:
+        report: `measure_signal`'s.
+        tasks: pool only these tasks' groups (e.g. the weak ones); None: every task. None is
+            returned where the report has none of them.
+    """
+    settings = report["settings"]
+    horizon = max(settings["horizons"])
+    if tasks is None:
+        records, table, scope = report["rollouts"], report["readouts"], {"real_interactions": report["interactions"]}
+    else:
+        records = [r for r in report["rollouts"] if r["task"] in tasks]
+        if not records:
+            return None
+        binary = {name: name in settings["binary_readouts"] for name in records[0]["readouts"]}
+        table = signal_table(records, [horizon], settings["group_size"], binary)
+        scope = {"tasks": sorted({r["task"] for r in records}, key=list(tasks).index)}
+    rows = {row["readout"]: row for row in table if row["horizon"] == horizon}
     keys = ("advantage_correlation", "correlation_ci_low", "correlation_ci_high", "return_correlation",
             "return_ci_low", "return_ci_high", "reinforced_real_success", "discouraged_real_success", "signal_groups")
-    return {"horizon": horizon, "rollouts": len(report["rollouts"]), "real_interactions": report["interactions"],
+    return {"horizon": horizon, "rollouts": len(records), **scope,
             **{label: {key: rows[name].get(key) for key in keys} for label, name in
                (("imagined", SCORE), ("real_video", SCORE + ON_REAL_VIDEO), ("real_dense", REAL_DENSE))
                if name in rows}}

@@ -12,20 +12,11 @@ from pathlib import Path
 
 from gymnast.experiment.arms import ARMS, PERTURBATIONS, ROBUSTNESS_ARMS, WM_ARMS, arm
 from gymnast.experiment.config import ExperimentConfig
+from gymnast.experiment.goals import experiment_goals
 from gymnast.experiment.stages import Stages
 from gymnast.utils.atomic import write_bytes, write_json
 
 logger = logging.getLogger(__name__)
-
-GOAL_OVER_SFT = 2.0
-"""World-Gymnast's claim we test: world-model RL at least doubles SFT's real success."""
-GOAL_WORLDGYM_R = 0.9
-"""The WorldGym correlation we aim for (World-Gymnast reports 0.78)."""
-GOAL_WATCH_FALSE_SUCCESS = 0.1
-"""At most this share of a world-model arm's judged successes may fail when replayed for real."""
-GOAL_DYNA_SHARE = 0.1
-"""Dyna should match RL in the real world with at most this share of its real interactions."""
-
 
 def _ratio(top: float | None, bottom: float | None) -> float | None:
     return None if top is None or not bottom else top / bottom
@@ -125,10 +116,9 @@ def _dyna_against_real_rl(stages: Stages, config: ExperimentConfig) -> dict | No
 def _weak_tasks(arms: dict[str, dict], config: ExperimentConfig) -> dict | None:
     """Each arm's success pooled over the weak tasks this experiment has, with a Wilson interval
     (every task has the same number of evaluation episodes)."""
-    from gymnast.envs.tasks import resolve_tasks
     from gymnast.eval.stats import wilson_interval
 
-    tasks = [task for task in resolve_tasks(config.weak_tasks) if task in arms["sft"]["per_task"]] if config.weak_tasks else []
+    tasks = config.weak_task_list
     if not tasks:
         return None
     episodes = config.eval_episodes * len(tasks)
@@ -157,7 +147,9 @@ def build_summary(stages: Stages, config: ExperimentConfig) -> dict:
     dataset = EpisodeDataset(stages.path("collect"))
     # The SFT policy's judged imagination against the real world (None in experiments older than the stage).
     imagination = _without_bookkeeping(stages.record("imagination")) if stages.done("imagination") else None
+    # Over every task and over the weak ones (an experiment older than the weak readout has only the first).
     signal = _without_bookkeeping(stages.record("signal")) if stages.done("signal") else None
+    signal_weak = signal.pop("weak", None) if signal else None
     summary = {
         "tasks": config.tasks,
         "arms": arms,
@@ -183,6 +175,7 @@ def build_summary(stages: Stages, config: ExperimentConfig) -> dict:
         "imagination_agreement": imagination["agreement"] if imagination else None,
         "imagination": imagination,
         "signal": signal,
+        "signal_weak": signal_weak,
         "dataset": {"episodes": len(dataset), "real_interactions": int(sum(dataset.lengths)), "path": str(dataset.root)},
         "rl_steps": config.rl.steps,
         "rollouts_per_step": config.rl.starts_per_step * config.rl.group_size,
@@ -190,32 +183,8 @@ def build_summary(stages: Stages, config: ExperimentConfig) -> dict:
         "stage_wall_s": {path.stem: json.loads(path.read_text()).get("wall_s")
                          for path in sorted((stages.out / "stages").glob("*.json"))},
     }
-    best_wm = max(success[name] for name in WM_ARMS if name in success)
-    summary["goals"] = {
-        "wm_rl_at_least_2x_sft": summary["wm_rl_over_sft"] is not None and summary["wm_rl_over_sft"] >= GOAL_OVER_SFT,
-        "wm_rl_beats_sim_rl": success["rl_wm_judge"] > success["rl_sim"],
-        "any_wm_arm_beats_sft": best_wm > success["sft"],
-        "worldgym_r_at_least_0.9": worldgym["pearson"] is not None and worldgym["pearson"] >= GOAL_WORLDGYM_R,
-        "wm_rl_2x_sft_on_weak_tasks": _doubles_separately(weak["arms"]["rl_wm_judge"], weak["arms"]["sft"]) if weak else None,
-        "dyna_reaches_real_rl_with_10pct": _dyna_goal(arms),
-        "watch_false_success_at_most_10pct": {name: value is not None and value <= GOAL_WATCH_FALSE_SUCCESS
-                                              for name, value in summary["watch_false_success"].items()},
-    }
+    summary["goals"] = experiment_goals(arms, weak, worldgym["pearson"], summary["watch_false_success"])
     return summary
-
-
-def _doubles_separately(arm_row: dict, sft: dict) -> bool:
-    """At least twice SFT's success, with 95% intervals that do not overlap."""
-    return arm_row["success"] >= GOAL_OVER_SFT * sft["success"] and arm_row["ci_low"] > sft["ci_high"]
-
-
-def _dyna_goal(arms: dict[str, dict]) -> bool | None:
-    """Dyna's final real success at least RL in the real world's, with at most 10% of its real
-    interactions for training."""
-    if "dyna" not in arms:
-        return None
-    dyna, real = arms["dyna"], arms["rl_real"]
-    return dyna["success"] >= real["success"] and dyna["real_interactions"] <= GOAL_DYNA_SHARE * real["real_interactions"]
 
 
 def _without_bookkeeping(record: dict) -> dict:

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from gymnast.experiment.dyna_report import dyna_table
 from gymnast.experiment.formatting import ci, pct
+from gymnast.experiment.goals import GOAL_DYNA_SHARE, GOAL_OVER_SFT
 
 
 def _ratio(value: float | None) -> str:
@@ -30,18 +31,22 @@ def _arms_table(summary: dict) -> list[str]:
 
 def _verdict(summary: dict) -> list[str]:
     arms, goals = summary["arms"], summary["goals"]
-    sft, wm, sim, verified = arms["sft"], arms["rl_wm_judge"], arms["rl_sim"], arms["rl_wm_verified"]
+    sft, wm, sim, verified, real = (arms[name] for name in ("sft", "rl_wm_judge", "rl_sim", "rl_wm_verified", "rl_real"))
     met = {True: "met", False: "not met"}
+    learned = goals.get("rl_real_beats_sft")  # None in experiments from before the goal
     return [
         (f"- World-model RL with the judge (World-Gymnast) reached {pct(wm['success'])} against SFT's "
          f"{pct(sft['success'])}: {_ratio(summary['wm_rl_over_sft'])} SFT ({_significance(wm, sft)}). "
-         f"Goal of at least 2x: **{met[goals['wm_rl_at_least_2x_sft']]}**."),
+         f"Goal of at least 2x: **{goal_in_words(goals['wm_rl_at_least_2x_sft'], wm['success'] >= GOAL_OVER_SFT * sft['success'])}**."),
         (f"- Against RL in the software simulator ({pct(sim['success'])}): {_ratio(summary['wm_rl_over_sim_rl'])} "
-         f"({_significance(wm, sim)}). Goal of beating it: **{met[goals['wm_rl_beats_sim_rl']]}**."),
+         f"({_significance(wm, sim)}). Goal of beating it: "
+         f"**{goal_in_words(goals['wm_rl_beats_sim_rl'], wm['success'] > sim['success'])}**."),
         (f"- World-model RL with the verified reward (VLA-RFT) reached {pct(verified['success'])}: "
          f"{_ratio(summary['wm_rl_verified_over_sft'])} SFT ({_significance(verified, sft)})."),
-        (f"- RL in the real world, which spent {arms['rl_real']['real_interactions']:,} real interactions on training, "
-         f"reached {pct(arms['rl_real']['success'])} ({_significance(arms['rl_real'], sft)} with SFT)."),
+        (f"- RL in the real world, which spent {real['real_interactions']:,} real interactions on training, "
+         f"reached {pct(real['success'])} ({_significance(real, sft)} with SFT)"
+         + ("." if learned is None else
+            f". Goal of beating SFT (the recipe learns): **{goal_in_words(learned, real['success'] > sft['success'])}**.")),
         (f"- WorldGym: Pearson r = {_num(summary['worldgym_pearson'])}, Spearman = {_num(summary['worldgym_spearman'])} over "
          f"{len(summary['worldgym'])} policies. Goal r >= 0.9: **{met[goals['worldgym_r_at_least_0.9']]}**."),
         *_weak_tasks_verdict(summary), *_dyna_verdict(summary), *_watch_verdict(summary),
@@ -52,11 +57,12 @@ def _weak_tasks_verdict(summary: dict) -> list[str]:
     weak = summary.get("weak_tasks")  # None in experiments from before the field, or without weak tasks
     if not weak:
         return []
-    pooled, met = weak["arms"], {True: "met", False: "not met"}
+    pooled = weak["arms"]
+    ahead = pooled["rl_wm_judge"]["success"] >= GOAL_OVER_SFT * pooled["sft"]["success"]
     rows = ", ".join(f"{summary['arms'][name]['title'].split(' (')[0]} {pct(row['success'])}" for name, row in pooled.items())
     return [(f"- On the weak tasks ({', '.join(task.removesuffix('-v3') for task in weak['tasks'])}; "
              f"{pooled['sft']['episodes']} episodes per arm): {rows}. World-model RL (judge) at least 2x SFT with separate "
-             f"intervals: **{met[summary['goals']['wm_rl_2x_sft_on_weak_tasks']]}**.")]
+             f"intervals: **{goal_in_words(summary['goals']['wm_rl_2x_sft_on_weak_tasks'], ahead)}**.")]
 
 
 def _dyna_verdict(summary: dict) -> list[str]:
@@ -65,11 +71,12 @@ def _dyna_verdict(summary: dict) -> list[str]:
         return []
     dyna, real = arms["dyna"], arms["rl_real"]
     share = dyna["real_interactions"] / real["real_interactions"] if real["real_interactions"] else None
-    met = {True: "met", False: "not met"}
+    ahead = (dyna["success"] >= real["success"] and dyna["success"] > arms["sft"]["success"]
+             and share is not None and share <= GOAL_DYNA_SHARE)
     return [(f"- Dyna reached {pct(dyna['success'])} with {dyna['real_interactions']:,} real interactions for training "
              f"({pct(share)} of RL in the real world's {real['real_interactions']:,}, which reached {pct(real['success'])}; "
-             f"{_significance(dyna, real)}). Goal of matching it with at most 10% of its interactions: "
-             f"**{met[summary['goals']['dyna_reaches_real_rl_with_10pct']]}**.")]
+             f"{_significance(dyna, real)}). Goal of matching it with at most 10% of its interactions, having learned "
+             f"(above SFT, intervals apart): **{goal_in_words(summary['goals']['dyna_reaches_real_rl_with_10pct'], ahead)}**.")]
 
 
 def _watch_verdict(summary: dict) -> list[str]:
@@ -80,6 +87,14 @@ def _watch_verdict(summary: dict) -> list[str]:
     held = all(summary["goals"]["watch_false_success_at_most_10pct"][name] for name in judged)
     return [(f"- Reward-hacking watch at the end of training, judged successes that failed when replayed for real: {rows}. "
              f"Goal of at most 10%: **{'met' if held else 'not met'}**.")]
+
+
+def goal_in_words(met: bool, ahead: bool) -> str:
+    """A comparison goal in words: met only when the 95% intervals say so; a lead they do not
+    confirm is "not significant at this size" (more evaluation episodes may settle it)."""
+    if met:
+        return "met"
+    return "not significant at this size" if ahead else "not met"
 
 
 def _significance(a: dict, b: dict) -> str:
@@ -150,30 +165,39 @@ def _imagination(summary: dict) -> list[str]:
 
 
 def _signal(summary: dict) -> list[str]:
-    """Whether GRPO's update in imagination is the one the real outcomes of the same actions would give."""
+    """Whether GRPO's update in imagination is the one the real outcomes of the same actions would
+    give, over every task and over the weak ones."""
     figures = summary.get("signal")
     if not figures:
         return ["Not measured in this experiment (it predates the `signal` stage).", ""]
 
-    def row(name: str, block: dict) -> str:
-        low, high = block["correlation_ci_low"], block["correlation_ci_high"]
-        interval = "" if low is None else f" [{low:+.2f}, {high:+.2f}]"
-        correlation = "-" if block["advantage_correlation"] is None else f"{block['advantage_correlation']:+.2f}"
-        return (f"| {name} | **{correlation}**{interval} | {pct(block['reinforced_real_success'])} / "
-                f"{pct(block['discouraged_real_success'])} | {pct(block['signal_groups'])} |")
+    def rows(block: dict) -> list[str]:
+        lines = []
+        for name, key in (("the judge on imagined video (what the arm trains on)", "imagined"),
+                          ("the judge on the real replay's video (reference)", "real_video"),
+                          ("the real world's dense reward (reference)", "real_dense")):
+            figures_of = block[key]
+            low, high = figures_of["correlation_ci_low"], figures_of["correlation_ci_high"]
+            interval = "" if low is None else f" [{low:+.2f}, {high:+.2f}]"
+            value = figures_of["advantage_correlation"]
+            correlation = "-" if value is None else f"{value:+.2f}"
+            lines.append(f"| {name} | **{correlation}**{interval} | {pct(figures_of['reinforced_real_success'])} / "
+                         f"{pct(figures_of['discouraged_real_success'])} | {pct(figures_of['signal_groups'])} |")
+        return lines
 
-    return [
-        (f"{figures['rollouts']} rollouts of the SFT policy sampled in GRPO groups in the world model (fresh scenes, "
-         f"{figures['horizon']} actions), scored, and the same actions replayed in the real world. Advantage "
-         "correlation: 1 = the update in imagination is the one the real outcomes would give; 0 = noise "
-         "(docs/rl.md, `gymnast rl-signal`)."), "",
-        "| readout | advantage correlation [95% CI] | real success of reinforced / discouraged rollouts | groups ranked |",
-        "|---|---|---|---|",
-        row("the judge on imagined video (what the arm trains on)", figures["imagined"]),
-        row("the judge on the real replay's video (reference)", figures["real_video"]),
-        row("the real world's dense reward (reference)", figures["real_dense"]), "",
-        "Per task: [signal/signal.md](signal/signal.md).", "",
+    header = ["| readout | advantage correlation [95% CI] | real success of reinforced / discouraged rollouts "
+              "| groups ranked |", "|---|---|---|---|"]
+    lines = [
+        (f"{figures['rollouts']} rollouts of the SFT policy sampled in GRPO groups in the world model from the starts "
+         f"the world-model arms practise from ({figures['horizon']} actions), scored, and the same actions replayed "
+         "in the real world. Advantage correlation: 1 = the update in imagination is the one the real outcomes "
+         "would give; 0 = noise (docs/rl.md, `gymnast rl-signal`)."), "", *header, *rows(figures), "",
     ]
+    weak = summary.get("signal_weak")
+    if weak:
+        lines += [f"The weak tasks alone ({', '.join(weak['tasks'])}; {weak['rollouts']} rollouts):", "",
+                  *header, *rows(weak), ""]
+    return [*lines, "Per task: [signal/signal.md](signal/signal.md).", ""]
 
 
 def _fidelity(model: dict | None) -> list[str]:
