@@ -91,6 +91,12 @@ class EpisodeInfo:
             )
 
     @property
+    def in_real_world(self) -> bool:
+        """Recorded in the real world, or on another robot: what its states and frames show
+        happened, unlike an episode of the software simulator with its sim-to-real gap."""
+        return self.env_variant in ("real", EXTERNAL)
+
+    @property
     def key(self) -> str:
         """Identifies the episode's recipe, so a resumed collection knows what is already done."""
         return episode_key(self.env_variant, self.task, self.behaviour, self.noise, self.seed)

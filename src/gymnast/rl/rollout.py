@@ -291,7 +291,7 @@ def dataset_starts(data: Path, tasks: Sequence[str] | None = None, image_size: i
     if image_size is not None:
         dataset = dataset.fitted(image_size, fit)
     if keyframes is not None and keyframes.sampling != "first":
-        episodes = [i for i, info in enumerate(dataset.episodes) if info.env_variant in ("real", EXTERNAL)
+        episodes = [i for i, info in enumerate(dataset.episodes) if info.in_real_world
                     and (not tasks or info.task in tasks)]
         starts = dataset_keyframes(dataset, episodes, keyframes)
         if not starts:

@@ -31,7 +31,6 @@ import torch.nn.functional as F
 from tqdm import tqdm
 
 from gymnast.data.lerobot import EpisodeDataset, FeatureKeys
-from gymnast.data.schema import EXTERNAL
 from gymnast.policy.text import InstructionEncoder
 from gymnast.utils.atomic import write_json
 from gymnast.utils.checkpoint import resume_training, save_training, write_run_config
@@ -211,7 +210,7 @@ def train_state_model(data: Path, out: Path, config: StateTrainConfig, resume: b
     dataset = EpisodeDataset(data, keys=config.keys)
     train_sources, heldout_sources = [], []
     for source in (dataset, *(EpisodeDataset(path, keys=config.keys) for path in config.extra_data)):
-        usable = [i for i, info in enumerate(source.episodes) if info.env_variant in ("real", EXTERNAL)]
+        usable = [i for i, info in enumerate(source.episodes) if info.in_real_world]
         train, heldout = split_episodes([source.episodes[i] for i in usable], config.heldout_fraction)
         train_sources.append((source, [usable[i] for i in train]))
         heldout_sources.append((source, [usable[i] for i in heldout]))
