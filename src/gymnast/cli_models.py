@@ -336,6 +336,8 @@ def eval_judge(
     wm: Path | None = None,
     heldout_fraction: float = 0.1,
     device: str = "auto",
+    camera: str | None = None,
+    keys: Annotated[KeyFlags, tyro.conf.arg(name="")] = KeyFlags(),
 ) -> None:
     """Measure a 0/1 judge (judge:RUN or vlm:MODEL@BASE_URL) on held-out episodes: TPR and FPR on
     real videos and, with --wm, on the world model's re-imagining of the same episodes.
@@ -347,10 +349,15 @@ def eval_judge(
         wm: world-model run whose imagined videos are judged too.
         heldout_fraction: the held-out share of scenes (the world model's, so its videos are unseen).
         device: where a learned judge and the world model run: auto (CUDA when torch sees a GPU), cpu, cuda or cuda:N.
+        camera: the dataset camera to judge, by name (front: observation.images.front) or by feature key
+            (image, observation.images.top); default: its first video (else image) feature.
+        keys: which dataset features are the actions (re-imagined with --wm) and the states (default:
+            LeRobot's action and observation.state).
     """
     from gymnast.reward.select import measure_judge
 
-    report = measure_judge(RewardSpec.parse(reward), data, out, wm, heldout_fraction, device)
+    report = measure_judge(RewardSpec.parse(reward), data, out, wm, heldout_fraction, device, camera,
+                           feature_keys(keys))
     print(json.dumps(report, indent=2))
 
 

@@ -5,6 +5,7 @@ import json
 
 import pytest
 import torch
+from robot_datasets import write_robot_dataset
 
 from gymnast.cli import main
 from gymnast.data.lerobot import EpisodeDataset
@@ -86,6 +87,13 @@ def test_cli_eval_judge_measures_a_judge_through_its_name(tiny_dataset, tmp_path
           "--heldout-fraction", "0.25"])
     report = json.loads(out.read_text())
     assert report["real_positives"] + report["real_negatives"] > 0 and report["real_unscored"] == 0
+    assert report["camera"] == "front"
+    # Another robot's dataset with two cameras: the one named is judged, its actions read by their key.
+    robot = write_robot_dataset(tmp_path / "robot", episodes=6, steps=10, height=96, width=96, cameras=("front", "wrist"))
+    main(["eval-judge", "--reward", f"judge:{tmp_path / 'judge'}", "--data", str(robot), "--out", str(out),
+          "--heldout-fraction", "0.5", "--camera", "wrist", "--action-key", "action"])
+    report = json.loads(out.read_text())
+    assert report["camera"] == "wrist" and report["real_positives"] + report["real_negatives"] > 0
     with pytest.raises(SystemExit):
         main(["eval-judge", "--reward", "sim", "--data", str(tiny_dataset), "--out", str(out)])
     assert "measures judges" in capsys.readouterr().err

@@ -9,11 +9,12 @@ because it builds the judge from its spec.
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import torch
 
-from gymnast.data.lerobot import EpisodeDataset
+from gymnast.data.lerobot import EpisodeDataset, FeatureKeys
 from gymnast.reward.base import Reward
 from gymnast.reward.spec import RewardSpec
 from gymnast.utils.atomic import write_json
@@ -53,11 +54,11 @@ def make_reward(spec: RewardSpec, world_model: WorldModel | None = None) -> Rewa
 
 
 def measure_judge(reward: RewardSpec, data: Path, out: Path, wm: Path | None = None, heldout_fraction: float = 0.1,
-                  device: str = "auto") -> dict:
+                  device: str = "auto", camera: str | None = None, keys: FeatureKeys = FeatureKeys()) -> dict:
     """`evaluate_judge` of the 0/1 judge `reward` (judge:RUN or vlm:MODEL@BASE_URL) on the episodes of
-    the held-out scenes of `data`, and with `wm` on its re-imaginings of them, or `evaluate_progress`
-    of a progress judge (which gives degrees, not verdicts); written to `out` (JSON). A learned
-    judge and the world model run on `device`."""
+    the held-out scenes of `data` (its `camera`, its actions and states read by `keys`), and with `wm`
+    on its re-imaginings of them, or `evaluate_progress` of a progress judge (which gives degrees,
+    not verdicts); written to `out` (JSON). A learned judge and the world model run on `device`."""
     from gymnast.reward.progress_judge import evaluate_progress
     from gymnast.reward.train_judge import evaluate_judge, heldout_videos
 
@@ -68,7 +69,14 @@ def measure_judge(reward: RewardSpec, data: Path, out: Path, wm: Path | None = N
     if isinstance(judge, torch.nn.Module):  # a learned judge; a VLM runs wherever its server does
         judge.to(where)
     measure = evaluate_judge if judge.binary else evaluate_progress
-    report = measure(judge, heldout_videos(EpisodeDataset(data), heldout_fraction, wm, where))
-    report |= {"reward": str(reward), "data": str(data), "wm": str(wm) if wm else None}
+    dataset = EpisodeDataset(data, camera, keys=keys)
+    if reward.kind == "judge" and dataset.image_shape[0] != judge.config.image_size:
+        # Frames of another size are fitted as the judge's training fitted them (its saved `fit`).
+        from gymnast.utils.checkpoint import resolve_checkpoint
+
+        saved = json.loads((resolve_checkpoint(reward.run) / "config.json").read_text())
+        dataset = dataset.fitted(judge.config.image_size, saved.get("train", {}).get("fit", "resize"))
+    report = measure(judge, heldout_videos(dataset, heldout_fraction, wm, where))
+    report |= {"reward": str(reward), "data": str(data), "wm": str(wm) if wm else None, "camera": dataset.camera_key}
     write_json(out, report)
     return report
