@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import shutil
 import time
@@ -12,6 +13,7 @@ import pytest
 from gymnast.cli import main
 from gymnast.data.lerobot import EpisodeDataset
 from gymnast.experiment.arms import ARM_NAMES
+from gymnast.experiment.config import EXPERIMENT_PRESETS
 
 pytestmark = pytest.mark.slow
 
@@ -19,8 +21,22 @@ pytestmark = pytest.mark.slow
 OWN_SENTENCE = "move the gripper onto the red dot"
 
 
+# The debug preset with half its RL horizon (20 actions, not 40): every rollout, evaluation, watch
+# and replay of the pipeline is as many steps long, and rendering them is most of the run's time.
+HORIZON = 20
+
+
+@pytest.fixture(scope="module", autouse=True)
+def shorter_debug_preset():
+    """`--preset debug` means the shorter preset for every test here, reruns included."""
+    debug = EXPERIMENT_PRESETS["debug"]
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setitem(EXPERIMENT_PRESETS, "debug", dataclasses.replace(debug, rl=dataclasses.replace(debug.rl, horizon=HORIZON)))
+        yield
+
+
 @pytest.fixture(scope="module")
-def experiment(tmp_path_factory) -> Path:
+def experiment(shorter_debug_preset, tmp_path_factory) -> Path:
     root = tmp_path_factory.mktemp("experiment")
     sentences = root / "sentences.txt"
     sentences.write_text(f"# the language check in our own words\nreach-v3: {OWN_SENTENCE}\n")
@@ -93,7 +109,7 @@ def test_the_sft_policy_imagination_is_measured_against_the_real_world(experimen
     assert summary["imagination_agreement"] == figures["agreement"] in (0.0, 1.0)
     assert "imagination" in summary["stage_wall_s"]
     report = json.loads((experiment / "imagination" / "imagination.json").read_text())
-    assert report["overall"]["agreement"] == figures["agreement"] and report["settings"]["horizon"] == 40
+    assert report["overall"]["agreement"] == figures["agreement"] and report["settings"]["horizon"] == HORIZON
     assert "](imagination/imagination.md)" in (experiment / "report.md").read_text()
 
 
@@ -105,9 +121,9 @@ def test_the_practice_signal_of_imagination_is_measured_and_reported(experiment:
     # of the RL preset's size, the RL horizon
     settings = json.loads((experiment / "config.json").read_text())["rl"]
     assert report["settings"]["data"] == str(experiment / "data") and report["settings"]["keyframes"] == settings["keyframes"]
-    assert figures["rollouts"] == len(report["rollouts"]) == 2 and figures["horizon"] == settings["horizon"] == 40
-    assert figures["real_interactions"] == report["interactions"] == 2 * 40
-    longest = {row["readout"]: row for row in report["readouts"] if row["horizon"] == 40}
+    assert figures["rollouts"] == len(report["rollouts"]) == 2 and figures["horizon"] == settings["horizon"] == HORIZON
+    assert figures["real_interactions"] == report["interactions"] == 2 * HORIZON
+    longest = {row["readout"]: row for row in report["readouts"] if row["horizon"] == HORIZON}
     assert figures["imagined"]["advantage_correlation"] == longest["score"]["advantage_correlation"]
     assert figures["real_dense"]["signal_groups"] == longest["real dense reward (reference)"]["signal_groups"]
     # The debug experiment's only task is a weak one: the weak tasks' readout pools the same groups.
