@@ -100,9 +100,9 @@ def test_flow_matching_fits_expert_chunks_and_ignores_padding():
     generator = torch.Generator().manual_seed(0)
     before = (model.eval().act(obs, texts) - experts).abs().max()
     model.train()
-    optimizer = torch.optim.Adam(model.parameters(), lr=1e-3)
+    optimizer = torch.optim.Adam(model.parameters(), lr=3e-3)
     losses = []
-    for _ in range(200):
+    for _ in range(100):  # the last 50 steps' loss: about a quarter of the first 10's
         loss = model.flow_loss(obs, texts, experts, valid, generator)
         optimizer.zero_grad()
         loss.backward()

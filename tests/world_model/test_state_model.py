@@ -20,8 +20,9 @@ from gymnast.world_model.train_state import StateTrainConfig, episode_tensors, s
 @pytest.fixture(scope="module")
 def state_run(tiny_dataset, tmp_path_factory):
     out = tmp_path_factory.mktemp("state")
-    train_state_model(tiny_dataset, out, StateTrainConfig(steps=300, batch_size=32, unroll=8, heldout_fraction=0.0,
-                                                          checkpoint_every=150), progress=False)
+    # 100 steps bring the loss below a twentieth of the untrained model's; one step leaves it above half.
+    train_state_model(tiny_dataset, out, StateTrainConfig(steps=100, batch_size=32, unroll=8, heldout_fraction=0.0,
+                                                          checkpoint_every=50), progress=False)
     return out
 
 
@@ -50,14 +51,15 @@ def test_a_saved_state_model_imagines_exactly_what_it_did_before(state_run):
 
 def test_a_resumed_run_goes_on_from_its_last_checkpoint(tiny_dataset, state_run, tmp_path):
     saved = json.loads((state_run / "config.json").read_text())
-    assert saved["train"]["steps"] == 300 and (state_run / "checkpoints" / "000150").is_dir()
+    assert saved["train"]["steps"] == 100 and (state_run / "checkpoints" / "000050").is_dir()
     out = tmp_path / "again"
-    config = StateTrainConfig(steps=150, batch_size=32, unroll=8, heldout_fraction=0.0, checkpoint_every=150)
+    config = StateTrainConfig(steps=50, batch_size=32, unroll=8, heldout_fraction=0.0, checkpoint_every=50)
     train_state_model(tiny_dataset, out, config, progress=False)
-    longer = StateTrainConfig(steps=300, batch_size=32, unroll=8, heldout_fraction=0.0, checkpoint_every=150)
+    longer = StateTrainConfig(steps=100, batch_size=32, unroll=8, heldout_fraction=0.0, checkpoint_every=50)
     train_state_model(tiny_dataset, out, longer, resume=True, progress=False)
     steps = [json.loads(line)["step"] for line in (out / "metrics.jsonl").read_text().splitlines()]
-    assert steps == sorted(steps) and steps[-1] == 250 and (out / "checkpoints" / "000300").is_dir()
+    # metrics every 50 steps: step 0 from the first run, step 50 from the resumed one, none twice
+    assert steps == [0, 50] and (out / "checkpoints" / "000100").is_dir()
 
 
 def test_the_reward_head_scores_rollouts_from_their_start_states_and_actions(state_run):
