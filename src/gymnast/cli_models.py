@@ -534,21 +534,22 @@ def imagination(
 
 
 def rl_signal(
-    policy: Path,
-    wm: Path,
-    reward: str,
     out: Path,
-    tasks: str = "reach-v3,push-v3,pick-place-v3,peg-insert-side-v3",
+    policy: Path | None = None,
+    wm: Path | None = None,
+    reward: str | None = None,
+    like: Path | None = None,
+    tasks: str | None = None,
     starts_per_task: int = 8,
-    group_size: int = 8,
-    temperature: float = 1.0,
-    horizons: tuple[int, ...] = (50, 100, 150),
-    batch: int = 64,
+    group_size: int | None = None,
+    temperature: float | None = None,
+    horizons: tuple[int, ...] | None = None,
+    batch: int | None = None,
     workers: int = 2,
     runner: str = "local",
-    seed: int = 0,
+    seed: int | None = None,
     data: Path | None = None,
-    keyframes: Literal["first", "uniform", "near_success", "failures"] = "uniform",
+    keyframes: Literal["first", "uniform", "near_success", "failures"] | None = None,
     heldout_fraction: float = 0.1,
 ) -> None:
     """Measure whether RL in imagination would push the policy where the real world would: GRPO
@@ -557,32 +558,46 @@ def rl_signal(
     and the real dense return) by horizon; writes OUT/signal.json and OUT/signal.md.
 
     Args:
-        policy: SFT/RL run (or checkpoint) directory.
-        wm: world-model run (or checkpoint) directory.
-        reward: a reward of the video alone: judge:RUN or vlm:MODEL@BASE_URL (key from OPENAI_API_KEY);
-            or a grounded world model's reward head, state:RUN (from `gymnast train-state`).
         out: report directory.
-        tasks: task names and/or sets, comma-separated (default: the four weak tasks).
+        policy: SFT/RL run (or checkpoint) directory (default: --like's).
+        wm: world-model run (or checkpoint) directory (default: --like's).
+        reward: a reward of the video alone: judge:RUN or vlm:MODEL@BASE_URL (key from OPENAI_API_KEY);
+            or a grounded world model's reward head, state:RUN (from `gymnast train-state`) (default: --like's).
+        like: an RL run in imagination whose practice is measured: its policy, world model, reward,
+            tasks, starts (its dataset's keyframes), horizon, group size, temperature and seed, each
+            unless given here.
+        tasks: task names and/or sets, comma-separated (default: --like's, else the four weak tasks).
         starts_per_task: starts (GRPO groups) per task.
-        group_size: rollouts per scene.
-        temperature: the policy's sampling temperature.
-        horizons: horizons read out (the largest is the rollouts' length).
-        batch: rollouts stepped together (a multiple of the group size).
+        group_size: rollouts per scene (default: --like's, else 8).
+        temperature: the policy's sampling temperature (default: --like's, else 1).
+        horizons: horizons read out, the largest the rollouts' length (default: --like's horizon, else 50 100 150).
+        batch: rollouts stepped together, a multiple of the group size (default: 64 or the nearest multiple).
         workers: simulator processes for the real-world replays.
         runner: where they run: local, ray or ray:ADDRESS (see `gymnast eval --help`).
-        seed: seed of the scenes and of the policy's samples.
+        seed: seed of the scenes and of the policy's samples (default: --like's, else 0).
         data: start from keyframes of this dataset's held-out episodes (segments as short as
             --horizons), restored in the real world by replaying the actions that led there;
-            without it, from fresh scenes' first frames.
+            without it (and without --like), from fresh scenes' first frames.
         keyframes: how keyframes are drawn: first, uniform, near_success (the frames before the first
-            success) or failures (episodes that failed).
+            success) or failures (episodes that failed) (default: --like's, else uniform).
         heldout_fraction: the share of --data's scenes the models held out, where keyframes come from;
             0 for a dataset they never trained on (e.g. the policy's own rollouts on new seeds).
     """
-    from gymnast.experiment.practice_signal import SignalConfig, measure_signal_runs
+    from gymnast.experiment.practice_signal import SignalConfig, measure_signal_runs, practice_of
 
-    config = SignalConfig(tasks=tasks, starts_per_task=starts_per_task, group_size=group_size, temperature=temperature,
-                          horizons=tuple(horizons), batch=batch, workers=workers, runner=runner, seed=seed,
-                          data=str(data or ""), keyframes=keyframes, heldout_fraction=heldout_fraction)
-    measure_signal_runs(policy, wm, RewardSpec.parse(reward), config, out)
+    inputs, settings = practice_of(like) if like is not None else ({}, {})
+    given = {"policy": policy, "wm": wm, "reward": reward}
+    inputs |= {name: str(value) for name, value in given.items() if value is not None}
+    missing = [f"--{name}" for name in given if name not in inputs]
+    if missing:
+        raise ValueError(f"rl-signal needs {', '.join(missing)} (or --like RUN, an RL run in imagination)")
+    chosen = {"tasks": tasks, "group_size": group_size, "temperature": temperature, "seed": seed,
+              "horizons": None if horizons is None else tuple(horizons), "batch": batch,
+              "data": None if data is None else str(data), "keyframes": keyframes}
+    settings |= {name: value for name, value in chosen.items() if value is not None}
+    if batch is None and "group_size" in settings:
+        settings["batch"] = settings["group_size"] * max(1, 64 // settings["group_size"])
+    config = SignalConfig(**settings, starts_per_task=starts_per_task, workers=workers, runner=runner,
+                          heldout_fraction=heldout_fraction)
+    measure_signal_runs(inputs["policy"], inputs["wm"], RewardSpec.parse(inputs["reward"]), config, out)
     print((out / "signal.md").read_text())

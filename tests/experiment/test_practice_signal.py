@@ -176,3 +176,30 @@ def test_the_brief_of_some_tasks_pools_only_their_groups():
     assert reach["imagined"]["advantage_correlation"] == pytest.approx(1.0)
     assert signal_brief(report, ["push-v3"])["imagined"]["advantage_correlation"] == pytest.approx(-1.0)
     assert signal_brief(report, ["peg-insert-side-v3"]) is None
+
+
+def test_the_signal_of_an_rl_run_is_measured_on_the_practice_it_does(tmp_path, capsys):
+    import dataclasses
+
+    from gymnast.envs.kinds import IMAGINED, REAL
+    from gymnast.experiment.practice_signal import practice_of
+    from gymnast.rl.config import RLConfig, RLRun
+    from gymnast.utils.checkpoint import write_run_config
+
+    def rl_run(name: str, env, reward: str, data: str | None, **settings) -> Path:
+        run = RLRun("runs/sft", env, RewardSpec.parse(reward), wm="runs/wm" if env.imagined else None, data=data)
+        write_run_config(tmp_path / name, {"rl": dataclasses.asdict(RLConfig(**settings)), "run": run.to_json()})
+        return tmp_path / name
+
+    practice = rl_run("imagined", IMAGINED, "state:runs/state", "data/rollouts", tasks="reach-v3", group_size=6,
+                      temperature=1.2, horizon=20, keyframes="failures", seed=3)
+    inputs, settings = practice_of(practice)
+    assert inputs == {"policy": "runs/sft", "wm": "runs/wm", "reward": "state:runs/state"}
+    config = SignalConfig(**settings)  # settings a SignalConfig takes
+    assert (config.tasks, config.group_size, config.temperature, config.horizons, config.seed) == ("reach-v3", 6, 1.2, (20,), 3)
+    assert (config.data, config.keyframes, config.batch) == ("data/rollouts", "failures", 60)
+    with pytest.raises(ValueError, match="not in imagination"):
+        practice_of(rl_run("real", REAL, "sim-dense", None))
+    with pytest.raises(SystemExit):
+        main(["rl-signal", "--out", str(tmp_path / "signal"), "--wm", "runs/wm"])
+    assert "rl-signal needs --policy, --reward (or --like RUN" in capsys.readouterr().err

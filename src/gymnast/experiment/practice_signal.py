@@ -477,6 +477,31 @@ def signal_brief(report: dict, tasks: Sequence[str] | None = None) -> dict | Non
                if name in rows}}
 
 
+def practice_of(run: Path) -> tuple[dict[str, str], dict]:
+    """What the RL run in `run` practises with, as `measure_signal_runs` takes it: its policy, world
+    model and reward (``policy``, ``wm``, ``reward``), and the `SignalConfig` settings of its
+    practice: tasks, starts (its dataset's keyframes, drawn as it draws them), horizon, group size,
+    temperature and seed. The signal is then measured on the practice the run does, not on a
+    neighbour of it.
+
+    Raises:
+        ValueError: the run does not practise in imagination (nothing to measure).
+    """
+    from gymnast.rl.config import saved_rl_settings
+    from gymnast.utils.settings import saved_settings
+
+    spec, rl = saved_rl_settings(run)
+    if not spec.env.imagined:
+        raise ValueError(f"{run} practises in the {spec.env.name} world, not in imagination: there is no imagined "
+                         "signal to hold against the real one")
+    # Without a dataset of its own, RL starts from the one the policy was trained on.
+    data = spec.data or saved_settings(Path(spec.policy)).get("data") or ""
+    settings = {"tasks": rl.tasks, "group_size": rl.group_size, "temperature": rl.temperature,
+                "horizons": (rl.horizon,), "batch": rl.group_size * max(1, 64 // rl.group_size), "seed": rl.seed,
+                "data": str(data), "keyframes": rl.keyframes}
+    return {"policy": spec.policy, "wm": str(spec.wm), "reward": str(spec.reward)}, settings
+
+
 def measure_signal_runs(policy: str | Path, wm: str | Path, reward: RewardSpec, config: SignalConfig,
                         out: Path | None = None, progress: bool = True) -> dict:
     """`measure_signal` of saved runs: a policy run, a world-model run and a reward spec that reads
