@@ -43,3 +43,20 @@ def test_goals_separated_by_their_intervals_are_met():
     assert goal_in_words(goals["wm_rl_beats_sft"], ahead=True) == "met"
     rows["dyna"]["real_interactions"] = 20_000  # 20% of the real-world arm's: too many
     assert not _goals(rows)["dyna_reaches_real_rl_with_10pct"]
+
+
+def test_the_printed_table_says_a_lead_is_not_significant_at_this_size():
+    import json
+    from pathlib import Path
+
+    from gymnast.experiment.report import format_table
+
+    # The committed headline's summary, with the demo's case: 45% against 40%, 20 episodes each.
+    summary = json.loads((Path(__file__).resolve().parents[2] / "results" / "headline" / "summary.json").read_text())
+    summary["arms"] = {name: row | _row(8, 20) for name, row in summary["arms"].items()}
+    summary["arms"]["rl_wm_judge"] |= _row(9, 20)
+    summary["goals"] = experiment_goals(summary["arms"], None, 0.5, summary["watch_false_success"])
+    summary["weak_tasks"] = None
+    text = format_table(summary)
+    assert "Goal of beating it: not significant at this size." in text and "**" not in text
+    assert "Goal of beating SFT (the recipe learns): not met." in text  # 40% against 40%

@@ -220,7 +220,10 @@ def write_report(out: Path, stages: Stages, config: ExperimentConfig) -> dict:
 
 
 def format_table(summary: dict) -> str:
-    """The arms as aligned text: success, 95% CI, real interactions, wall time."""
+    """The arms as aligned text (success, 95% CI, real interactions, wall time), then the result in
+    sentences, each goal met, not met or "not significant at this size" as report.md says it."""
+    from gymnast.experiment.report_text import verdict_lines
+
     rows = [("arm", "success", "95% CI", "real interactions", "wall time")]
     for row in summary["arms"].values():
         wall = f"{row['wall_s'] / 60:.1f} min" if row["wall_s"] is not None else ("reused" if row["reused"] else "-")
@@ -232,7 +235,7 @@ def format_table(summary: dict) -> str:
     ratios = (f"world-model RL (judge) / SFT: {_fmt_ratio(summary['wm_rl_over_sft'])}; "
               f"/ software-sim RL: {_fmt_ratio(summary['wm_rl_over_sim_rl'])}; "
               f"WorldGym Pearson r: {_fmt(summary['worldgym_pearson'])}, Spearman: {_fmt(summary['worldgym_spearman'])}")
-    return "\n".join(lines + ["", ratios])
+    return "\n".join([*lines, "", ratios, "", *(line.replace("**", "") for line in verdict_lines(summary))])
 
 
 def _fmt_ratio(value: float | None) -> str:

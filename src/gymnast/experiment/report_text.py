@@ -29,7 +29,8 @@ def _arms_table(summary: dict) -> list[str]:
     return lines
 
 
-def _verdict(summary: dict) -> list[str]:
+def verdict_lines(summary: dict) -> list[str]:
+    """The result in sentences, each goal called met only where the intervals say so (markdown)."""
     arms, goals = summary["arms"], summary["goals"]
     sft, wm, sim, verified, real = (arms[name] for name in ("sft", "rl_wm_judge", "rl_sim", "rl_wm_verified", "rl_real"))
     met = {True: "met", False: "not met"}
@@ -265,7 +266,7 @@ def report_markdown(summary: dict, plots: dict[str, str]) -> str:
         f"{summary['rl_steps']} RL steps of {summary['rollouts_per_step']} rollouts each. Every policy is measured in the "
         f"real world on {summary['eval_episodes_per_task']} evaluation seeds per task (never recorded in any dataset), "
         "greedy, with 95% Wilson intervals."), "",
-        "## Result", "", *_arms_table(summary), "", *_verdict(summary), "",
+        "## Result", "", *_arms_table(summary), "", *verdict_lines(summary), "",
         (f"Real interactions are counted beyond the shared dataset ({dataset['episodes']} episodes, "
         f"{dataset['real_interactions']:,} real interactions), which every arm uses. Evaluations and the reward-hacking "
         "watch also act in the real world; they are counted apart."), "",
