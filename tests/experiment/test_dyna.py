@@ -22,6 +22,16 @@ pytestmark = pytest.mark.slow
 POLICY = Path(__file__).resolve().parents[2] / "results" / "sft" / "policy"  # small, at 96 px
 
 
+@pytest.fixture(scope="module", autouse=True)
+def one_rl_step_per_round():
+    """`--preset debug` with one RL step per round, not two, for every test here (reruns included):
+    the rounds, their rollouts and fine-tuning are the same, the RL half as long."""
+    debug = DYNA_PRESETS["debug"]
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setitem(DYNA_PRESETS, "debug", dataclasses.replace(debug, rl=dataclasses.replace(debug.rl, steps=1)))
+        yield
+
+
 @pytest.fixture(scope="module")
 def models(tmp_path_factory) -> dict[str, Path]:
     """A tiny world model and judge trained on a few reach-v3 episodes at the policy's 96 px."""
@@ -36,7 +46,7 @@ def models(tmp_path_factory) -> dict[str, Path]:
 
 
 @pytest.fixture(scope="module")
-def dyna_run(models, tmp_path_factory) -> Path:
+def dyna_run(one_rl_step_per_round, models, tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("dyna") / "run"
     main(["dyna", "--preset", "debug", "--out", str(out), "--policy", str(POLICY), "--wm", str(models["wm"]),
           "--judge", str(models["judge"]), "--data", str(models["data"])])
@@ -63,7 +73,7 @@ def test_rounds_report_real_success_against_counted_real_interactions(dyna_run: 
     first = DYNA_PRESETS["debug"].first_rollout_seed
     assert scenes == [[first], [first + 1]]
     curve = summary["real_rl"]["curve"]
-    assert [point["step"] for point in curve] == [0, 2, 4, 6]  # evaluated at every round's boundary
+    assert [point["step"] for point in curve] == [0, 1, 2, 3]  # evaluated at every round's boundary (1 step each)
     assert curve[-1]["real_interactions"] == summary["real_rl_real_interactions"] > 0
     assert (dyna_run / "dyna.png").stat().st_size > 0
     assert (dyna_run / "dyna.md").read_text().count("| Dyna |") == 4
