@@ -458,9 +458,9 @@ def experiment(
     runner: str | None = None,
     device: str | None = None,
 ) -> None:
-    """The headline comparison: data, SFT, world model, judge, six arms, real-world evaluation and
-    the WorldGym check, then OUT/report.md, OUT/summary.json and OUT/plots/. Rerunning the same
-    command skips the stages that finished and continues an interrupted one.
+    """The headline comparison: data, SFT, world model, judge, state model, eight arms, real-world
+    evaluation and the WorldGym check, then OUT/report.md, OUT/summary.json and OUT/plots/.
+    Rerunning the same command skips the stages that finished and continues an interrupted one.
 
     Args:
         out: experiment directory.
@@ -468,8 +468,8 @@ def experiment(
             (MT10 at the papers' budget, for one GPU and its host's cores; docs/gpu.md).
         resume: continue the experiment in OUT with the settings saved there (whatever its preset).
         reuse: a stage to take from an earlier run instead of running it, as STAGE=DIR (collect=DATASET,
-            sft=RUN, world_model=RUN, judge=RUN); repeat for several, e.g. --reuse collect=data/mt10
-            --reuse world_model=runs/wm_full.
+            sft=RUN, world_model=RUN, judge=RUN, state_model=RUN or an ensemble of them); repeat for
+            several, e.g. --reuse collect=data/mt10 --reuse world_model=runs/wm_full.
         workers: simulator processes (default: the preset's, one per core on 2 cores).
         sentences: a file of `task: sentence` lines, your own wording of the tasks: the language
             check gives the policies these instead of the held-out paraphrases.

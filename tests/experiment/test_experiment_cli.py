@@ -71,7 +71,7 @@ def test_dyna_counts_its_rollouts_and_is_watched_every_round(experiment: Path):
     assert json.loads((experiment / "stages" / "arm_dyna.json").read_text())["path"] == str(rounds[-1] / "rl")
     assert [point["step"] for point in summary["curves"]["dyna"]] == [0, 1, 2]
     assert [row["step"] for row in summary["watch"]["dyna"]] == [1, 2]
-    assert set(summary["watch_false_success"]) == {"rl_wm_judge", "rl_wm_verified", "dyna"}
+    assert set(summary["watch_false_success"]) == {"rl_wm_judge", "rl_wm_verified", "rl_wm_state", "dyna"}
     weak = summary["weak_tasks"]
     assert weak["tasks"] == ["reach-v3"] and set(weak["arms"]) == set(ARM_NAMES)
     assert weak["arms"]["dyna"]["success"] == summary["arms"]["dyna"]["per_task"]["reach-v3"]["success"]
@@ -130,6 +130,14 @@ def test_the_practice_signal_of_imagination_is_measured_and_reported(experiment:
     weak = summary["signal_weak"]
     assert weak["tasks"] == ["reach-v3"] and weak["rollouts"] == 2
     assert weak["real_dense"]["signal_groups"] == figures["real_dense"]["signal_groups"]
+    # The state model's reward head is read on the same starts and rollouts: the same real outcomes.
+    state = json.loads((experiment / "signal_state" / "signal.json").read_text())
+    assert [r["real_return"] for r in state["rollouts"]] == [r["real_return"] for r in report["rollouts"]]
+    assert state["settings"]["reward"] == f"state:{experiment / 'state_model'}"
+    assert figures["imagined_state"] == weak["imagined_state"]  # one task: the same groups
+    # ... and it rewards the grounded arm.
+    arm = json.loads((experiment / "arms" / "rl_wm_state" / "config.json").read_text())["run"]
+    assert arm["env"] == "imagined" and arm["reward"] == f"state:{experiment / 'state_model'}"
     assert "signal" in summary["stage_wall_s"]
     assert "](signal/signal.md)" in (experiment / "report.md").read_text()
 

@@ -1,9 +1,11 @@
-"""The seven arms of the headline comparison: what each one trains, where and with which reward.
+"""The eight arms of the headline comparison: what each one trains, where and with which reward.
 
 Every arm starts from the same SFT policy; the RL arms share one step budget and one `RLConfig`.
 The simulators (software and real) start each group from a fresh scene, which only a simulator
-can set up; the world-model arms start from the dataset's real first frames, as a world model
-only continues real frames (and the verified reward needs the dataset's expert actions). Dyna
+can set up; the world-model arms start from the dataset's real frames (its first frames, or
+keyframes as `rl.keyframes` draws them), as a world model only continues real frames (and the
+verified reward needs the dataset's expert actions). Their rewards: the judge (World-Gymnast's),
+the verified comparison (VLA-RFT's) and the state model's reward head (grounded). Dyna
 splits the same steps into rounds, between which it records a few counted real rollouts and
 fine-tunes the world model and the judge on them (`gymnast.experiment.dyna`).
 """
@@ -29,7 +31,7 @@ class Arm:
         name: key in summary.json and the stage names.
         title: what the report calls it.
         env: where it practises (None: no practice, or imitation only).
-        reward: its reward's kind (``judge`` and ``verified`` are bound to the experiment's own models).
+        reward: its reward's kind (``judge``, ``state`` and ``verified`` are bound to the experiment's own models).
         dyna: practises in rounds with real rollouts and fine-tuning between them (`dyna_setup`).
     """
 
@@ -50,11 +52,12 @@ ARMS = (
     Arm("rl_sim", "RL in the software simulator (dense reward)", SIM, "sim-dense"),
     Arm("rl_wm_judge", "RL in the world model, judge (World-Gymnast)", IMAGINED, "judge"),
     Arm("rl_wm_verified", "RL in the world model, verified (VLA-RFT)", IMAGINED, "verified"),
+    Arm("rl_wm_state", "RL in the world model, state model's reward (grounded)", IMAGINED, "state"),
     Arm("rl_real", "RL in the real world (dense reward; upper bound)", REAL, "sim-dense"),
     Arm("dyna", "Dyna: world-model RL (judge) with a few real rollouts (World-Gymnast)", IMAGINED, "judge", dyna=True),
 )
 ARM_NAMES = tuple(arm.name for arm in ARMS)
-WM_ARMS = ("rl_wm_judge", "rl_wm_verified", "dyna")
+WM_ARMS = ("rl_wm_judge", "rl_wm_verified", "rl_wm_state", "dyna")
 """The arms that practise in the world model; `rl_wm_judge` is World-Gymnast's without real
 interactions, the one the goals over SFT and the software simulator are about."""
 ROBUSTNESS_ARMS = ("sft", "rl_wm_judge", "rl_wm_verified")
@@ -70,10 +73,12 @@ def arm(name: str) -> Arm:
     raise KeyError(f"no arm {name!r}; arms are {list(ARM_NAMES)}")
 
 
-def rl_setup(spec: Arm, config: ExperimentConfig, sft: Path, wm: Path, judge: Path, data: Path
-             ) -> tuple[RLRun, RLConfig]:
-    """The `gymnast rl` run an RL arm is: its env and reward on the experiment's models."""
-    reward = RewardSpec.judge(judge) if spec.reward == "judge" else RewardSpec(spec.reward)
+def rl_setup(spec: Arm, config: ExperimentConfig, sft: Path, wm: Path, judge: Path, data: Path,
+             state: Path | None = None) -> tuple[RLRun, RLConfig]:
+    """The `gymnast rl` run an RL arm is: its env and reward on the experiment's models (`state`:
+    the state-model run, for the arm its reward head rewards)."""
+    models = {"judge": judge, "state": state}
+    reward = RewardSpec(spec.reward, run=models[spec.reward]) if spec.reward in models else RewardSpec(spec.reward)
     imagined = spec.env.imagined
     run = RLRun(str(sft), spec.env, reward, wm=str(wm) if imagined else None, data=str(data))
     rl = dataclasses.replace(config.rl, fresh_scenes=not imagined,

@@ -22,6 +22,7 @@ from gymnast.policy.sft import SFT_PRESETS, SFTConfig
 from gymnast.reward.train_judge import JUDGE_PRESETS, JudgeTrainConfig
 from gymnast.rl.config import RL_PRESETS, RLConfig
 from gymnast.world_model.train import WM_PRESETS, WorldModelTrainConfig
+from gymnast.world_model.train_state import StateTrainConfig
 
 
 @dataclass(frozen=True)
@@ -64,7 +65,7 @@ WEAK_TASKS = "reach-v3,push-v3,pick-place-v3,peg-insert-side-v3"
 
 @dataclass(frozen=True)
 class ExperimentConfig:
-    """The whole pipeline: data, models, the seven arms and how they are measured."""
+    """The whole pipeline: data, models, the eight arms and how they are measured."""
 
     tasks: str = "mt10"
     """Tasks of every stage (names or sets, comma-separated)."""
@@ -76,6 +77,8 @@ class ExperimentConfig:
     """The world model the imagined arms practise in."""
     judge: JudgeTrainConfig = field(default_factory=lambda: JUDGE_PRESETS["full"])
     """The learned judge (World-Gymnast's reward, and the WorldGym estimates)."""
+    state_model: StateTrainConfig = field(default_factory=lambda: StateTrainConfig(steps=2000))
+    """The grounded state model, whose reward head rewards the ``rl_wm_state`` arm (docs/world_model.md)."""
     rl: RLConfig = field(default_factory=lambda: RLConfig(steps=12, starts_per_step=8, group_size=8, lr=3e-5,
                                                           eval_every=6, eval_episodes=5, video_every=6))
     """Shared by every RL arm: step budget, batch, learning rate, learning-curve evaluations
@@ -152,6 +155,7 @@ class ExperimentConfig:
             sft=dataclasses.replace(self.sft, tasks="", seed=self.seed, device=self.device),
             world_model=dataclasses.replace(self.world_model, device=self.device),
             judge=dataclasses.replace(self.judge, device=self.device),
+            state_model=dataclasses.replace(self.state_model, seed=self.seed),
             rl=dataclasses.replace(self.rl, tasks=self.tasks, gap=self.gap, workers=self.workers, runner=self.runner,
                                    seed=self.seed, device=self.device),
         )
@@ -165,6 +169,7 @@ def _debug() -> ExperimentConfig:
         sft=dataclasses.replace(SFT_PRESETS["debug"], demos_per_task=2),
         world_model=WM_PRESETS["debug"],
         judge=JUDGE_PRESETS["debug"],
+        state_model=StateTrainConfig(steps=20, batch_size=16, unroll=4, checkpoint_every=20),
         rl=rl,
         iter_sft=IterSFTConfig(group_size=2, steps=2),
         dyna=DynaArmConfig(rounds=2, rollouts_per_task=1, wm_steps=2, judge_steps=2),
@@ -186,6 +191,7 @@ def _demo() -> ExperimentConfig:
         # Clips of 16 future frames, not 32: half the cost of a step, the demo's costliest stage.
         world_model=dataclasses.replace(WM_PRESETS["demo"], steps=150, future=16, video_every=150, validate_every=75),
         judge=dataclasses.replace(JUDGE_PRESETS["demo"], steps=150),
+        state_model=StateTrainConfig(steps=200, batch_size=64, checkpoint_every=200),
         rl=RLConfig(steps=2, starts_per_step=4, group_size=4, lr=3e-5, eval_every=2, eval_episodes=4,
                     watch_every=2, watch_rollouts=8, video_every=2, checkpoint_every=2),
         iter_sft=IterSFTConfig(group_size=2, steps=100),

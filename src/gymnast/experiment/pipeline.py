@@ -4,8 +4,9 @@ Stages, in order, each done once (`gymnast.experiment.stages`; a rerun skips fin
 
 1. ``collect``: expert demonstrations and failures recorded in the real world.
 2. ``sft``: the SFT policy every arm starts from.
-3. ``world_model``, ``judge``, ``world_model_eval``: the world model, the learned judge (trained on
-   real and re-imagined episodes) and the world model's fidelity on held-out episodes.
+3. ``world_model``, ``judge``, ``state_model``, ``world_model_eval``: the world model, the learned
+   judge (trained on real and re-imagined episodes), the grounded state model whose reward head
+   rewards one arm, and the world model's fidelity on held-out episodes.
    ``imagination``: the SFT policy's judged imagined rollouts against the same actions replayed
    in the real world (`gymnast.experiment.imagination`); ``signal``: whether GRPO's update in
    imagination is the one the real outcomes would give (`gymnast.experiment.practice_signal`).
@@ -29,6 +30,7 @@ from gymnast.envs.parallel import kept_workers
 from gymnast.experiment.arms import ARMS, PERTURBATIONS, ROBUSTNESS_ARMS, arm, dyna_setup, rl_setup
 from gymnast.experiment.config import ExperimentConfig
 from gymnast.experiment.stages import Stages
+from gymnast.reward.spec import RewardSpec
 from gymnast.utils.atomic import write_json
 from gymnast.utils.device import resolve_device
 from gymnast.utils.settings import from_json, saved_settings
@@ -44,12 +46,15 @@ def run_experiment(config: ExperimentConfig, out: Path, reuse: dict[str, Path] |
     out.mkdir(parents=True, exist_ok=True)
     _save_settings(out, config)
     stages = Stages(out, reuse)
-    data, sft, wm, judge = _models(stages, config, out, progress)
+    data, sft, wm, judge, state = _models(stages, config, out, progress)
     stages.run("imagination", lambda: _imagination(sft, wm, judge, config, out, progress), out / "imagination")
-    stages.run("signal", lambda: _signal(sft, wm, judge, data, config, out, progress), out / "signal")
+    stages.run("signal", lambda: _signal(sft, wm, RewardSpec.judge(judge), data, config, out / "signal", progress),
+               out / "signal")
+    stages.run("signal_state", lambda: _signal(sft, wm, RewardSpec("state", run=state), data, config,
+                                               out / "signal_state", progress), out / "signal_state")
     policies = {"sft": sft}
     for spec in ARMS[1:]:
-        policies[spec.name] = _train_arm(stages, spec.name, config, out, sft, wm, judge, data, progress)
+        policies[spec.name] = _train_arm(stages, spec.name, config, out, sft, wm, judge, state, data, progress)
     # The real world as the dataset saw it (a reused dataset may have its own image size).
     env = EnvConfig(image_size=EpisodeDataset(data).image_shape[0], horizon=config.rl.horizon)
     # The arms are trained: their evaluations share one set of simulator processes.
@@ -66,12 +71,14 @@ def run_experiment(config: ExperimentConfig, out: Path, reuse: dict[str, Path] |
     return write_report(out, stages, config)
 
 
-def _models(stages: Stages, config: ExperimentConfig, out: Path, progress: bool) -> tuple[Path, Path, Path, Path]:
-    """The dataset, SFT policy, world model and judge, trained here or reused."""
+def _models(stages: Stages, config: ExperimentConfig, out: Path, progress: bool
+            ) -> tuple[Path, Path, Path, Path, Path]:
+    """The dataset, SFT policy, world model, judge and state model, trained here or reused."""
     from gymnast.data.collect import collect
     from gymnast.policy.sft import train_sft
     from gymnast.reward.train_judge import train_judge
     from gymnast.world_model.train import train_world_model
+    from gymnast.world_model.train_state import train_state_model
 
     stages.run("collect", lambda: {"success": collect(config.collect, out / "data", progress)}, out / "data")
     data = stages.path("collect")
@@ -86,8 +93,10 @@ def _models(stages: Stages, config: ExperimentConfig, out: Path, progress: bool)
         return {"metrics": {k: v for k, v in report.items() if k.startswith(("real", "imagined"))}}
 
     stages.run("judge", judge_stage, out / "judge")
+    stages.run("state_model", lambda: _trained(train_state_model, data, out / "state_model", config.state_model,
+                                               progress), out / "state_model")
     stages.run("world_model_eval", lambda: _world_model_fidelity(wm, data, out, progress, config.device), out / "world_model_eval.json")
-    return data, stages.path("sft"), wm, stages.path("judge")
+    return data, stages.path("sft"), wm, stages.path("judge"), stages.path("state_model")
 
 
 FIDELITY_KEYS = ("psnr_h1", "psnr_h8", "psnr_h32", "copy_last_psnr_h32", "moving_psnr_h32", "copy_last_moving_psnr_h32",
@@ -123,14 +132,14 @@ def _imagination(sft: Path, wm: Path, judge: Path, config: ExperimentConfig, out
     return imagination_brief(report)
 
 
-def _signal(sft: Path, wm: Path, judge: Path, data: Path, config: ExperimentConfig, out: Path, progress: bool) -> dict:
+def _signal(sft: Path, wm: Path, reward: RewardSpec, data: Path, config: ExperimentConfig, out: Path,
+            progress: bool) -> dict:
     """GRPO groups of the SFT policy sampled in imagination as the world-model arms sample them (the
     same kind of starts, from the dataset's episodes as `rl.keyframes` draws them, the same horizon,
-    group size, temperature and reward), their judged advantages against the real outcomes of the
+    group size and temperature), scored by an arm's `reward`, against the real outcomes of the
     same actions (`gymnast.experiment.practice_signal`): would practice there push the policy the
     right way? Read over every task and over the weak tasks among them (``weak``)."""
     from gymnast.experiment.practice_signal import SignalConfig, measure_signal_runs, signal_brief
-    from gymnast.reward.spec import RewardSpec
     from gymnast.world_model.evaluate import heldout_fraction
 
     group = config.rl.group_size
@@ -141,7 +150,7 @@ def _signal(sft: Path, wm: Path, judge: Path, data: Path, config: ExperimentConf
                             temperature=config.rl.temperature, horizons=(config.rl.horizon,),
                             batch=group * max(1, 64 // group), workers=config.workers, runner=config.runner,
                             seed=config.seed)
-    report = measure_signal_runs(sft, wm, RewardSpec.judge(judge), settings, out / "signal", progress)
+    report = measure_signal_runs(sft, wm, reward, settings, out, progress)
     return {**signal_brief(report), "weak": signal_brief(report, config.weak_task_list)}
 
 
@@ -156,7 +165,7 @@ def _has_checkpoint(run: Path) -> bool:
 
 
 def _train_arm(stages: Stages, name: str, config: ExperimentConfig, out: Path, sft: Path, wm: Path, judge: Path,
-               data: Path, progress: bool) -> Path:
+               state: Path, data: Path, progress: bool) -> Path:
     """Trains one arm (Iter-SFT, an RL arm or Dyna) in ``out/arms/<name>``; returns the directory of
     its final policy (Dyna's: its last round's RL run)."""
     from gymnast.experiment.iter_sft import train_iter_sft
@@ -170,7 +179,7 @@ def _train_arm(stages: Stages, name: str, config: ExperimentConfig, out: Path, s
             return _dyna_arm(config, sft, wm, judge, data, target, progress)
         if not spec.is_rl:
             return {"imagined": train_iter_sft(sft, wm, judge, data, target, config, progress), "real_interactions": 0}
-        run, rl = rl_setup(spec, config, sft, wm, judge, data)
+        run, rl = rl_setup(spec, config, sft, wm, judge, data, state)
         summary = train_rl(run, target, rl, resume=_has_checkpoint(target), progress=progress)
         summary.pop("curve")
         return summary

@@ -150,6 +150,11 @@ def build_summary(stages: Stages, config: ExperimentConfig) -> dict:
     # Over every task and over the weak ones (an experiment older than the weak readout has only the first).
     signal = _without_bookkeeping(stages.record("signal")) if stages.done("signal") else None
     signal_weak = signal.pop("weak", None) if signal else None
+    if signal and stages.done("signal_state"):  # the state model's reward on the same starts and rollouts
+        state = stages.record("signal_state")
+        signal["imagined_state"] = state["imagined"]
+        if signal_weak and state.get("weak"):
+            signal_weak["imagined_state"] = state["weak"]["imagined"]
     summary = {
         "tasks": config.tasks,
         "arms": arms,

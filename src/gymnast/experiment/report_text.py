@@ -44,6 +44,7 @@ def verdict_lines(summary: dict) -> list[str]:
          f"**{goal_in_words(goals['wm_rl_beats_sim_rl'], wm['success'] > sim['success'])}**."),
         (f"- World-model RL with the verified reward (VLA-RFT) reached {pct(verified['success'])}: "
          f"{_ratio(summary['wm_rl_verified_over_sft'])} SFT ({_significance(verified, sft)})."),
+        *_grounded_verdict(arms),
         (f"- RL in the real world, which spent {real['real_interactions']:,} real interactions on training, "
          f"reached {pct(real['success'])} ({_significance(real, sft)} with SFT)"
          + ("." if learned is None else
@@ -52,6 +53,14 @@ def verdict_lines(summary: dict) -> list[str]:
          f"{len(summary['worldgym'])} policies. Goal r >= 0.9: **{met[goals['worldgym_r_at_least_0.9']]}**."),
         *_weak_tasks_verdict(summary), *_dyna_verdict(summary), *_watch_verdict(summary),
     ]
+
+
+def _grounded_verdict(arms: dict) -> list[str]:
+    grounded, sft = arms.get("rl_wm_state"), arms["sft"]  # None in experiments from before the arm
+    if grounded is None:
+        return []
+    return [(f"- World-model RL with the state model's reward (grounded) reached {pct(grounded['success'])} "
+             f"({_significance(grounded, sft)} with SFT).")]
 
 
 def _weak_tasks_verdict(summary: dict) -> list[str]:
@@ -174,9 +183,12 @@ def _signal(summary: dict) -> list[str]:
 
     def rows(block: dict) -> list[str]:
         lines = []
-        for name, key in (("the judge on imagined video (what the arm trains on)", "imagined"),
+        for name, key in (("the judge on imagined video (what World-Gymnast's arm trains on)", "imagined"),
+                          ("the state model's reward head on the imagined states (the grounded arm's)", "imagined_state"),
                           ("the judge on the real replay's video (reference)", "real_video"),
                           ("the real world's dense reward (reference)", "real_dense")):
+            if key not in block:  # experiments older than a readout
+                continue
             figures_of = block[key]
             low, high = figures_of["correlation_ci_low"], figures_of["correlation_ci_high"]
             interval = "" if low is None else f" [{low:+.2f}, {high:+.2f}]"

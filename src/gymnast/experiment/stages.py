@@ -21,7 +21,7 @@ from gymnast.utils.atomic import write_json
 
 logger = logging.getLogger(__name__)
 
-REUSABLE = ("collect", "sft", "world_model", "judge")
+REUSABLE = ("collect", "sft", "world_model", "judge", "state_model")
 """Stages whose output another run can provide: a dataset or a trained model directory."""
 
 
