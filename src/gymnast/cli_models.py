@@ -100,6 +100,7 @@ def train_state(
     ridge: float = 1e-4,
     last_action: bool = True,
     extra_data: tuple[Path, ...] = (),
+    init: Path | None = None,
     keys: Annotated[KeyFlags, tyro.conf.arg(name="")] = KeyFlags(),
 ) -> None:
     """Train the grounded state model on a dataset's recorded states, rewards and success flags: the
@@ -118,6 +119,8 @@ def train_state(
             ridge penalty (0: at zero).
         last_action: condition each step on the action before it too.
         extra_data: more datasets to train on, e.g. the policy's own rollouts (`gymnast collect --policy`).
+        init: fine-tune: start from the weights of this state-model run or checkpoint (its architecture
+            and normalisation kept), e.g. on the policy's newest rollouts with --extra-data.
         keys: which dataset features are the actions and the states (default: LeRobot's action and
             observation.state); saved with the run.
     """
@@ -130,7 +133,7 @@ def train_state(
         raise ValueError("train-state needs --data (or --resume to continue the run in --out)")
     else:
         config = StateTrainConfig(steps=steps, unroll=unroll, seed=seed, ridge=ridge, last_action=last_action,
-                                  extra_data=extra_data, keys=feature_keys(keys))
+                                  extra_data=extra_data, keys=feature_keys(keys), init=init)
     checkpoint = train_state_model(data, out, config, resume=resume)
     print(f"state model: {checkpoint}; held-out errors: {out / 'eval.json'}")
 

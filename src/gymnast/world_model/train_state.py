@@ -34,12 +34,12 @@ from gymnast.data.lerobot import EpisodeDataset, FeatureKeys
 from gymnast.data.schema import EXTERNAL
 from gymnast.policy.text import InstructionEncoder
 from gymnast.utils.atomic import write_json
-from gymnast.utils.checkpoint import resume_training, save_training, write_run_config
+from gymnast.utils.checkpoint import resolve_checkpoint, resume_training, save_training, write_run_config
 from gymnast.utils.metrics import MetricsLog
 from gymnast.utils.optim import gradient_step, warmup_cosine
 from gymnast.world_model.data import split_episodes
 from gymnast.world_model.metrics import pearson
-from gymnast.world_model.state_model import REWARD_SCALE, StateModel, StateModelConfig
+from gymnast.world_model.state_model import REWARD_SCALE, StateModel, StateModelConfig, load_state_model
 
 logger = logging.getLogger(__name__)
 
@@ -77,6 +77,11 @@ class StateTrainConfig:
     """Steps between checkpoints (and at the end)."""
     seed: int = 0
     """Seed of the initial weights and of the windows drawn."""
+    init: Path | None = None
+    """Start from the weights of this state-model run or checkpoint (fine-tuning, e.g. on the
+    policy's newest rollouts between rounds of practice) instead of a fresh model: its architecture
+    and its normalisation of states and actions are kept, so `hidden`, `last_action` and `ridge` are
+    its own. The optimiser and the learning-rate schedule start afresh."""
 
     def __post_init__(self) -> None:
         for name in ("steps", "batch_size", "unroll", "hidden", "checkpoint_every"):
@@ -201,7 +206,8 @@ def fit_linear_path(model: StateModel, episodes: EpisodeTensors, ridge: float) -
 
 def _settings(config: StateTrainConfig) -> dict:
     """The config as JSON (paths as strings)."""
-    return dataclasses.asdict(config) | {"extra_data": [str(path) for path in config.extra_data]}
+    return dataclasses.asdict(config) | {"extra_data": [str(path) for path in config.extra_data],
+                                         "init": None if config.init is None else str(config.init)}
 
 
 def train_state_model(data: Path, out: Path, config: StateTrainConfig, resume: bool = False,
@@ -219,16 +225,9 @@ def train_state_model(data: Path, out: Path, config: StateTrainConfig, resume: b
     encoder = InstructionEncoder()
     episodes = episode_tensors(train_sources, None, encoder, progress)
     torch.manual_seed(config.seed)
-    stats = dataset.action_stats
-    spans = all(high > low for low, high in zip(stats.min, stats.max))  # else actions are taken as they are
-    model = StateModel(StateModelConfig(state_dim=episodes.states.shape[-1], action_dim=episodes.actions.shape[-1],
-                                        hidden=config.hidden, last_action=config.last_action, action_low=tuple(stats.min) if spans else (),
-                                        action_high=tuple(stats.max) if spans else ()))
-    real = torch.cat([episodes.states[i, : n + 1] for i, n in enumerate(episodes.lengths.tolist())])
-    deltas = torch.cat([episodes.states[i, 1: n + 1] - episodes.states[i, :n] for i, n in enumerate(episodes.lengths.tolist())])
-    model.set_statistics(real, deltas)
-    if config.ridge > 0:
-        fit_linear_path(model, episodes, config.ridge)
+    if config.init is not None and not resume:  # on resume the weights come from the run's own checkpoint
+        config = dataclasses.replace(config, init=resolve_checkpoint(config.init))
+    model = _initial_model(config, dataset, episodes)
     optimizer = torch.optim.AdamW(model.parameters(), lr=config.lr, weight_decay=1e-4)
     schedule = torch.optim.lr_scheduler.LambdaLR(optimizer, warmup_cosine(min(200, config.steps // 10), config.steps))
     sampler = torch.Generator().manual_seed(config.seed)
@@ -262,6 +261,33 @@ def train_state_model(data: Path, out: Path, config: StateTrainConfig, resume: b
         logger.info("state model on %d held-out episodes: %s %s", len(heldout), error,
                     {h: round(v[error], 3) for h, v in report["horizons"].items()})
     return checkpoint or out
+
+
+def _initial_model(config: StateTrainConfig, dataset: EpisodeDataset, episodes: EpisodeTensors) -> StateModel:
+    """A fresh model, normalised by the training episodes and with its linear path fitted to them;
+    or `config.init`'s, which keeps its own normalisation (its weights expect it).
+
+    Raises:
+        ValueError: `config.init`'s states or actions are not this data's.
+    """
+    state_dim, action_dim = episodes.states.shape[-1], episodes.actions.shape[-1]
+    if config.init is not None:
+        model = load_state_model(config.init)
+        if (model.config.state_dim, model.config.action_dim) != (state_dim, action_dim):
+            raise ValueError(f"--init {config.init}: its model takes {model.config.state_dim}-d states and "
+                             f"{model.config.action_dim}-d actions; this data has {state_dim} and {action_dim}")
+        return model.train()
+    stats = dataset.action_stats
+    spans = all(high > low for low, high in zip(stats.min, stats.max))  # else actions are taken as they are
+    model = StateModel(StateModelConfig(state_dim=state_dim, action_dim=action_dim, hidden=config.hidden,
+                                        last_action=config.last_action, action_low=tuple(stats.min) if spans else (),
+                                        action_high=tuple(stats.max) if spans else ()))
+    real = torch.cat([episodes.states[i, : n + 1] for i, n in enumerate(episodes.lengths.tolist())])
+    deltas = torch.cat([episodes.states[i, 1: n + 1] - episodes.states[i, :n] for i, n in enumerate(episodes.lengths.tolist())])
+    model.set_statistics(real, deltas)
+    if config.ridge > 0:
+        fit_linear_path(model, episodes, config.ridge)
+    return model
 
 
 class LinearHandBaseline:
