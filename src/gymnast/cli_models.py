@@ -586,7 +586,7 @@ def rl_signal(
         heldout_fraction: the share of --data's scenes the models held out, where keyframes come from;
             0 for a dataset they never trained on (e.g. the policy's own rollouts on new seeds).
     """
-    from gymnast.experiment.practice_signal import SignalConfig, measure_signal_runs, practice_of
+    from gymnast.experiment.practice_signal import SignalConfig, batch_for, measure_signal_runs, practice_of
 
     inputs, settings = practice_of(like) if like is not None else ({}, {})
     given = {"policy": policy, "wm": wm, "reward": reward}
@@ -599,7 +599,7 @@ def rl_signal(
               "data": None if data is None else str(data), "keyframes": keyframes}
     settings |= {name: value for name, value in chosen.items() if value is not None}
     if batch is None and "group_size" in settings:
-        settings["batch"] = settings["group_size"] * max(1, 64 // settings["group_size"])
+        settings["batch"] = batch_for(settings["group_size"])
     config = SignalConfig(**settings, starts_per_task=starts_per_task, workers=workers, runner=runner,
                           heldout_fraction=heldout_fraction)
     measure_signal_runs(inputs["policy"], inputs["wm"], RewardSpec.parse(inputs["reward"]), config, out)

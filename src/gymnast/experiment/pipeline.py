@@ -139,7 +139,7 @@ def _signal(sft: Path, wm: Path, reward: RewardSpec, data: Path, config: Experim
     group size and temperature), scored by an arm's `reward`, against the real outcomes of the
     same actions (`gymnast.experiment.practice_signal`): would practice there push the policy the
     right way? Read over every task and over the weak tasks among them (``weak``)."""
-    from gymnast.experiment.practice_signal import SignalConfig, measure_signal_runs, signal_brief
+    from gymnast.experiment.practice_signal import SignalConfig, batch_for, measure_signal_runs, signal_brief
     from gymnast.world_model.evaluate import heldout_fraction
 
     group = config.rl.group_size
@@ -148,7 +148,7 @@ def _signal(sft: Path, wm: Path, reward: RewardSpec, data: Path, config: Experim
     settings = SignalConfig(tasks=config.tasks, starts_per_task=config.signal_scenes, data=str(data),
                             keyframes=config.rl.keyframes, heldout_fraction=heldout_fraction(wm), group_size=group,
                             temperature=config.rl.temperature, horizons=(config.rl.horizon,),
-                            batch=group * max(1, 64 // group), workers=config.workers, runner=config.runner,
+                            batch=batch_for(group), workers=config.workers, runner=config.runner,
                             seed=config.seed)
     report = measure_signal_runs(sft, wm, reward, settings, out, progress)
     return {**signal_brief(report), "weak": signal_brief(report, config.weak_task_list)}

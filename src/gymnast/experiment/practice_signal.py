@@ -90,6 +90,11 @@ BOOTSTRAP = 1000
 """Resamplings of the groups behind each correlation's interval."""
 
 
+def batch_for(group_size: int) -> int:
+    """Rollouts stepped together for groups of `group_size`: about 64, in whole groups."""
+    return group_size * max(1, 64 // group_size)
+
+
 @dataclass(frozen=True)
 class SignalConfig:
     """Which scenes, how many rollouts, and the horizons read out."""
@@ -497,7 +502,7 @@ def practice_of(run: Path) -> tuple[dict[str, str], dict]:
     # Without a dataset of its own, RL starts from the one the policy was trained on.
     data = spec.data or saved_settings(Path(spec.policy)).get("data") or ""
     settings = {"tasks": rl.tasks, "group_size": rl.group_size, "temperature": rl.temperature,
-                "horizons": (rl.horizon,), "batch": rl.group_size * max(1, 64 // rl.group_size), "seed": rl.seed,
+                "horizons": (rl.horizon,), "batch": batch_for(rl.group_size), "seed": rl.seed,
                 "data": str(data), "keyframes": rl.keyframes}
     return {"policy": spec.policy, "wm": str(spec.wm), "reward": str(spec.reward)}, settings
 

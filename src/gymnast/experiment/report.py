@@ -18,6 +18,7 @@ from gymnast.utils.atomic import write_bytes, write_json
 
 logger = logging.getLogger(__name__)
 
+
 def _ratio(top: float | None, bottom: float | None) -> float | None:
     return None if top is None or not bottom else top / bottom
 

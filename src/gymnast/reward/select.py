@@ -9,7 +9,6 @@ because it builds the judge from its spec.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import torch
@@ -60,7 +59,7 @@ def measure_judge(reward: RewardSpec, data: Path, out: Path, wm: Path | None = N
     on its re-imaginings of them, or `evaluate_progress` of a progress judge (which gives degrees,
     not verdicts); written to `out` (JSON). A learned judge and the world model run on `device`."""
     from gymnast.reward.progress_judge import evaluate_progress
-    from gymnast.reward.train_judge import evaluate_judge, heldout_videos
+    from gymnast.reward.train_judge import evaluate_judge, heldout_videos, saved_judge_config
 
     if reward.kind not in ("judge", "vlm"):
         raise ValueError(f"eval-judge measures judges (judge:RUN or vlm:MODEL@BASE_URL), got {str(reward)!r}")
@@ -72,10 +71,7 @@ def measure_judge(reward: RewardSpec, data: Path, out: Path, wm: Path | None = N
     dataset = EpisodeDataset(data, camera, keys=keys)
     if reward.kind == "judge" and dataset.image_shape[0] != judge.config.image_size:
         # Frames of another size are fitted as the judge's training fitted them (its saved `fit`).
-        from gymnast.utils.checkpoint import resolve_checkpoint
-
-        saved = json.loads((resolve_checkpoint(reward.run) / "config.json").read_text())
-        dataset = dataset.fitted(judge.config.image_size, saved.get("train", {}).get("fit", "resize"))
+        dataset = dataset.fitted(judge.config.image_size, saved_judge_config(reward.run).fit)
     report = measure(judge, heldout_videos(dataset, heldout_fraction, wm, where))
     report |= {"reward": str(reward), "data": str(data), "wm": str(wm) if wm else None, "camera": dataset.camera_key}
     write_json(out, report)
