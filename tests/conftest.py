@@ -32,6 +32,15 @@ def tiny_dataset(tmp_path_factory) -> Path:
     return out
 
 
+@pytest.fixture(scope="session")
+def two_camera_demos(tmp_path_factory) -> Path:
+    """Scripted reach-v3 experts recorded from the front and the gripper cameras at 32 px."""
+    out = tmp_path_factory.mktemp("two_camera_demos")
+    collect(CollectConfig(tasks="reach-v3", episodes_per_task=2, noise=(0.0,), failure_fraction=0.0, workers=1,
+                          env=EnvConfig(image_size=32, horizon=100, cameras=("front", "gripper"))), out, progress=False)
+    return out
+
+
 # LeRobot is part of `make test`'s install; if it is missing, these fail with the install command
 # (gymnast.policy.lerobot_import.require_lerobot) rather than skipping. The adapter's tests and the
 # RL tests share them: nothing writes into these folders.

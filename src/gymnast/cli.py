@@ -15,7 +15,7 @@ from gymnast.cli_models import (KeyFlags, Preset, eval_judge, eval_wm, experimen
                                 key_overrides, make_ensemble, object_fidelity, practice_summary, rl, rl_signal,
                                 serve_judge, train_judge, train_state, train_wm, worldgym)
 from gymnast.cli_settings import resolve, saved_inputs
-from gymnast.config import EnvConfig
+from gymnast.config import CameraNames, EnvConfig
 from gymnast.data.frames import Fit
 from gymnast.data.collect import CollectConfig
 from gymnast.data.summary import format_success_table
@@ -92,6 +92,7 @@ def sft(
     tasks: str | None = None,
     seed: int | None = None,
     camera: str | None = None,
+    cameras: CameraNames = (),
     policy_type: Literal["tokens", "flow"] | None = None,
     fit: Fit | None = None,
     device: str | None = None,
@@ -111,6 +112,8 @@ def sft(
         seed: override the seed.
         camera: the dataset camera to read, by name (front: observation.images.front) or by feature key
             (image, observation.images.top); default: its first video (else image) feature.
+        cameras: several dataset cameras the policy sees side by side, the primary first (e.g.
+            front,gripper); saved with the policy, so eval and rl render the same views. Default: --camera alone.
         policy_type: the policy family: tokens (the tokenized VLA, the default) or flow (the
             flow-matching VLA of VLA-RFT). Saved with the checkpoint; rl and eval read it there.
         fit: how frames that are not the model's square size are fitted: resize (squash the whole
@@ -124,7 +127,8 @@ def sft(
     config, inputs = resolve(
         "sft", out, resume, SFT_PRESETS[preset], inputs={"data": data}, required=("data",),
         overrides={"demos_per_task": demos_per_task, "steps": steps, "tasks": tasks, "seed": seed,
-                   "vla.vision": vision, "camera": camera, "policy": policy_type, "fit": fit, "device": device,
+                   "vla.vision": vision, "camera": camera, "cameras": cameras or None, "policy": policy_type,
+                   "fit": fit, "device": device,
                    **key_overrides(keys)},
         saved=lambda: (saved_sft_config(out), saved_inputs(out, "data")))
     checkpoint = train_sft(inputs["data"], out, config, resume=resume)

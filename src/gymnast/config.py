@@ -82,8 +82,8 @@ class EnvConfig:
     camera: CameraPose = field(default_factory=CameraPose)
     """The fixed free camera that shows the arm, the objects and the goal (the front view)."""
     cameras: CameraNames = ("front",)
-    """Views rendered into every observation (front, gripper), comma-separated; the first is the
-    primary view, obs["image"], and a dataset's frames (see gymnast.envs.metaworld)."""
+    """Views rendered into every observation (front, gripper), comma-separated, the primary first:
+    obs["image"] shows them side by side and a dataset records each (see gymnast.envs.metaworld)."""
 
     def __post_init__(self) -> None:
         if self.image_size < 16:

@@ -1,5 +1,6 @@
 """Several cameras: the extra views are rendered only when asked, the primary view never changes,
-and the gripper view magnifies what the gripper reaches for."""
+the observed image shows the views side by side, and the gripper view magnifies what the gripper
+reaches for."""
 
 from __future__ import annotations
 
@@ -24,8 +25,11 @@ def test_the_front_frames_are_the_same_whatever_other_cameras_are_rendered():
     try:
         first, second = one.reset(seed=3)[0], two.reset(seed=3)[0]
         for _ in range(12):
-            assert list(second["images"]) == ["front", "gripper"] and second["image"] is second["images"]["front"]
-            np.testing.assert_array_equal(first["image"], second["image"])
+            assert list(second["images"]) == ["front", "gripper"] and second["image"].shape == (32, 64, 3)
+            np.testing.assert_array_equal(second["image"][:, :32], second["images"]["front"])
+            np.testing.assert_array_equal(second["image"][:, 32:], second["images"]["gripper"])
+            np.testing.assert_array_equal(first["image"], second["images"]["front"])
+            assert first["image"] is first["images"]["front"]  # one camera: its frame, as always
             action = expert(one.env_state)
             first, second = one.step(action)[0], two.step(action)[0]
         assert list(first["images"]) == ["front"]  # nothing else is rendered unless asked for

@@ -189,8 +189,8 @@ def record_episode(job: EpisodeJob, make_actor: ActorFactory | None = None) -> E
 class _ViewRecorder:
     """The env as the rollout engine plays it, keeping every observation's camera views on the way.
 
-    The engine records the primary view (``obs["image"]``) alone; the other views come from the
-    very same observations, so every camera of an episode shows the same instants.
+    The engine records ``obs["image"]``, every view side by side; each view is kept here on its own
+    from the very same observations, so every camera of an episode shows the same instants.
     """
 
     def __init__(self, env: MetaWorldEnv) -> None:

@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from gymnast.envs.experts import SCRIPTED_BEHAVIOURS
+from gymnast.utils.images import tile_views
 
 POLICY = "policy"
 EXTERNAL = "external"
@@ -161,3 +162,10 @@ class Episode:
     def length(self) -> int:
         """Number of steps (actions) T."""
         return len(self.actions)
+
+    @property
+    def observed_frames(self) -> np.ndarray:
+        """(T+1, H, V*W, 3) uint8: every camera read, side by side in `views`' order, as the env
+        shows them to a policy of these cameras (`gymnast.utils.images.tile_views`); `frames`
+        where one camera was read."""
+        return tile_views(list(self.views.values())) if len(self.views) > 1 else self.frames

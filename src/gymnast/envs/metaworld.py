@@ -9,9 +9,10 @@ plays the software simulator when built with a `SimGap` other than ``none``.
 
 Cameras: the env renders the views `EnvConfig.cameras` names (`gymnast.envs.cameras`), and only
 those, each costing one more render per step. ``obs["images"]`` maps every view's name to its
-frame, in that order; ``obs["image"]`` is the first (primary) view's frame, the same array, which
-is all the policy, the world model, the judge and the rollout engine read. With the default
-``("front",)`` the frames are those of the one camera the env has always had.
+frame, in that order; ``obs["image"]`` is the views side by side, (H, V*W, 3)
+(`gymnast.utils.images.tile_views`), which is what the policy, the world model, the judge and the
+rollout engine read. With the default ``("front",)`` it is the one camera's frame, the same array,
+as it has always been; a dataset records each view as its own video.
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ from gymnast.envs.instructions import GOAL_MARKER_TASKS, instruction_for
 from gymnast.envs.perturb import Perturbation, get_perturbation, random_offset
 from gymnast.envs.render import Marker, SceneRenderer
 from gymnast.envs.tasks import DATA_SEEDS, check_task
+from gymnast.utils.images import tile_views
 
 ACTION_DIM = 4
 STATE_DIM = 4  # hand xyz + gripper opening
@@ -43,8 +45,8 @@ _MAX_LAYOUT_TRIES = 100
 class MetaWorldEnv(gym.Env):
     """One Meta-World v3 task, observed through a camera.
 
-    Observation: ``{"image": (H, W, 3) uint8, "images": {camera: (H, W, 3) uint8}, "state": (4,)
-    float32}``; ``image`` is the first camera's frame (see the module docstring).
+    Observation: ``{"image": (H, V*W, 3) uint8, "images": {camera: (H, W, 3) uint8}, "state": (4,)
+    float32}``; ``image`` is the V cameras' frames side by side (see the module docstring).
     Action: (4,) float32 in [-1, 1]: hand displacement xyz (scaled by 1 cm) and gripper effort.
     Reward: Meta-World's dense shaped reward. ``terminated`` means the task succeeded (when
     `EnvConfig.terminate_on_success`), ``truncated`` that the horizon was reached.
@@ -106,7 +108,7 @@ class MetaWorldEnv(gym.Env):
         image_space = gym.spaces.Box(0, 255, (size, size, 3), np.uint8)
         self.observation_space = gym.spaces.Dict(
             {
-                "image": image_space,
+                "image": gym.spaces.Box(0, 255, (size, len(self.config.cameras) * size, 3), np.uint8),
                 "images": gym.spaces.Dict({name: image_space for name in self.config.cameras}),
                 "state": gym.spaces.Box(
                     np.append(self._mw._HAND_SPACE.low, -1.0).astype(np.float32),
@@ -266,7 +268,7 @@ class MetaWorldEnv(gym.Env):
         for name, renderer in self._renderers.items():
             renderer.camera = camera_pose(name, self.config, self.gap, gripper)  # the gripper view moves
             images[name] = renderer.render(self._mw.data, markers)
-        self._frame = images[self.config.cameras[0]]
+        self._frame = tile_views([images[name] for name in self.config.cameras])
         return {"image": self._frame, "images": images, "state": self._env_state[:STATE_DIM].astype(np.float32)}
 
     def _info(self, success: bool) -> dict[str, Any]:

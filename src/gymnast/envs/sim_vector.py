@@ -75,8 +75,8 @@ class _Episodes:
     def step(self, actions: np.ndarray) -> dict[str, np.ndarray]:
         """Runs each episode's (K, A) actions open-loop until the chunk or the episode ends."""
         b, k = actions.shape[:2]
-        size = self._args["config"].image_size
-        frames = np.empty((b, k, size, size, 3), np.uint8)
+        config = self._args["config"]
+        frames = np.empty((b, k, config.image_size, len(config.cameras) * config.image_size, 3), np.uint8)
         rewards = np.full((b, k), np.nan)
         executed = np.zeros(b, np.int64)
         for i, episode in enumerate(self._episodes):
@@ -100,7 +100,7 @@ class _Episodes:
 class SimVectorEnv(VectorEnv):
     """B Meta-World episodes (of any tasks) stepped one action chunk at a time; no autoreset.
 
-    Observation: ``{"image": (B, H, W, 3) uint8}``. Action: (B, K, A) float32 in [-1, 1].
+    Observation: ``{"image": (B, H, W, 3) uint8}``, W the views side by side. Action: (B, K, A) float32 in [-1, 1].
     ``rewards`` (B,) are the dense rewards summed over the actions executed in the chunk;
     ``terminated`` (B,) means success, ``truncated`` (B,) the horizon; whichever ended an episode
     stays True. ``infos``: ``instruction`` (B,) str, ``task`` (B,) str, ``seed`` (B,) int,
@@ -134,7 +134,8 @@ class SimVectorEnv(VectorEnv):
         self.config = config or EnvConfig()
         self.num_envs = num_envs
         size = self.config.image_size
-        self.single_observation_space = Dict({"image": Box(0, 255, (size, size, 3), np.uint8)})
+        width = len(self.config.cameras) * size  # the views side by side (gymnast.envs.metaworld)
+        self.single_observation_space = Dict({"image": Box(0, 255, (size, width, 3), np.uint8)})
         self.single_action_space = Box(-1.0, 1.0, (chunk_size, ACTION_DIM), np.float32)
         self.observation_space = batch_space(self.single_observation_space, num_envs)
         self.action_space = batch_space(self.single_action_space, num_envs)

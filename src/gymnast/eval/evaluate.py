@@ -38,6 +38,7 @@ from gymnast.envs.perturb import get_perturbation
 from gymnast.envs.tasks import eval_seed, resolve_tasks
 from gymnast.envs.workers import parse_runner
 from gymnast.eval.stats import success_summary
+from gymnast.policy.load import policy_env_config
 from gymnast.utils.atomic import atomic_path, write_json
 from gymnast.utils.device import resolve_device
 from gymnast.utils.video import BROWSER_CODEC, encode_video
@@ -231,6 +232,7 @@ def evaluate(policy: str | Policy, config: EvalConfig, out: str | Path, progress
     """
     out = Path(out)
     label, in_process = _resolve_policy(policy, config)
+    config = dataclasses.replace(config, env=policy_env_config(config.env, in_process or label))  # the policy's cameras
     if label == EXPERT and config.temperature > 0:
         raise ValueError(f"the scripted expert has no action tokens to sample; temperature={config.temperature} "
                          f"is for learned policies (leave it at 0 with --policy expert)")

@@ -18,7 +18,8 @@ the tokenized VLA's per-token log-probabilities: the rollout's mask of unexecute
 GRPO's ratio and clipping apply unchanged. What `sample` records in place of tokens is the path
 itself, (B, (S + 1) * N), from which `log_prob` recomputes the density.
 
-Legend: B batch, K chunk length, A action dimensions, N = K * A, S integration steps, D width.
+Legend: B batch, K chunk length, A action dimensions, N = K * A, S integration steps, D width,
+V cameras, P vision tokens per camera.
 """
 
 from __future__ import annotations
@@ -54,6 +55,7 @@ class FlowVLAConfig(PolicyArchitecture):
     """(A,) action value that +1 stands for."""
 
     def __post_init__(self) -> None:
+        super().__post_init__()
         if self.steps < 1:
             raise ValueError(f"FlowVLAConfig.steps must be at least 1, got {self.steps}")
         if not 0 < self.sigma_min < self.sigma_init < self.sigma_max:
@@ -80,7 +82,7 @@ class FlowVLA(ObservationConditioned):
     """
 
     def __init__(self, config: FlowVLAConfig, pretrained_vision: bool = True) -> None:
-        super().__init__(config.vision, config.width, config.image_size, pretrained_vision)
+        super().__init__(config.vision, config.width, config.image_size, pretrained_vision, len(config.cameras))
         self.config = config
         self.chunk_size, self.action_dim = config.chunk_size, config.action_dim
         width = config.width
@@ -99,7 +101,7 @@ class FlowVLA(ObservationConditioned):
 
     def field(self, memory: torch.Tensor, x: torch.Tensor, t: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """The velocity and the noise at flow time `t` (B,) of the noisy chunk `x` (B, K, A), given
-        the observation `memory` (B, 1 + P, D): two (B, K, A) tensors, the second in
+        the observation `memory` (B, 1 + V*P, D): two (B, K, A) tensors, the second in
         [sigma_min, sigma_max]."""
         tokens = self.action_in(x) + self.action_position + self.time_mlp(_time_embedding(t, self.config.width))[:, None]
         features = self.norm(self.decoder(tokens, memory))  # (B, K, D)
@@ -107,7 +109,7 @@ class FlowVLA(ObservationConditioned):
         return self.velocity(features), sigma
 
     def observe(self, obs: torch.Tensor, instructions: Sequence[str], bf16_vision: bool = False) -> torch.Tensor:
-        """(B, 1 + P, D) the memory every integration step of a chunk attends to."""
+        """(B, 1 + V*P, D) the memory every integration step of a chunk attends to."""
         return self.memory(obs, self.embed_instructions(instructions, len(obs)), bf16_vision)
 
     # -- the Policy protocol ------------------------------------------------------------------------

@@ -6,10 +6,16 @@ the others.
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
+import json
 from pathlib import Path
 
 from torch import nn
+
+from gymnast.config import EnvConfig
+from gymnast.policy.observation import PolicyArchitecture
+from gymnast.utils.checkpoint import resolve_checkpoint
 
 POLICY_FAMILIES = {
     "vla": "gymnast.policy.vla:EmbeddedVLA",
@@ -52,3 +58,29 @@ def build_policy(spec: dict) -> nn.Module:
         raise ValueError(f"the saved model spec has keys {sorted(spec)}; a policy's has one of {sorted(POLICY_FAMILIES)}")
     module, name = POLICY_FAMILIES[family].split(":")
     return getattr(importlib.import_module(module), name).from_spec(spec)
+
+
+def policy_env_config(env: EnvConfig, policy: str | Path | object) -> EnvConfig:
+    """`env` rendering the views the policy acts on (`PolicyArchitecture.env_cameras`): a policy of
+    several cameras is shown them side by side, read from its run's saved spec without building it;
+    the scripted expert, LeRobot policies and one-camera policies get `env` as it is.
+
+    Raises:
+        ValueError: `env` names other cameras than the default (front) and the policy's.
+    """
+    if not isinstance(policy, (str, Path)):  # a policy object
+        config = getattr(policy, "config", None)
+        cameras = config.env_cameras if isinstance(config, PolicyArchitecture) else env.cameras
+    elif is_lerobot(policy) or not Path(policy).is_dir():  # the expert, a LeRobot folder
+        cameras = env.cameras
+    else:
+        spec = json.loads((resolve_checkpoint(Path(policy)) / "config.json").read_text()).get("model", {})
+        family = next((spec[name] for name in POLICY_FAMILIES if name in spec), {})
+        names = {field.name for field in dataclasses.fields(PolicyArchitecture)}
+        cameras = PolicyArchitecture(**{key: value for key, value in family.items() if key in names}).env_cameras
+    if cameras == env.cameras:
+        return env
+    if env.cameras != EnvConfig().cameras:
+        raise ValueError(f"the environment renders cameras {','.join(env.cameras)}, but the policy {policy} acts on "
+                         f"{','.join(cameras)}; leave --cameras out to render the policy's own")
+    return dataclasses.replace(env, cameras=cameras)

@@ -1,16 +1,22 @@
-"""What every embedded policy sees: the camera image as vision tokens, read in the light of the
+"""What every embedded policy sees: the camera images as vision tokens, read in the light of the
 instruction.
 
-The image becomes a grid of P vision tokens (`gymnast.policy.vision`) with learned positions,
-modulated by the instruction's MiniLM embedding (FiLM), and one more token carries the
-instruction itself: the (B, 1 + P, D) memory an action decoder attends to. The tokenized VLA and
+Each camera's image becomes a grid of P vision tokens (`gymnast.policy.vision`) with learned
+positions, modulated by the instruction's MiniLM embedding (FiLM), and one more token carries the
+instruction itself: the (B, 1 + V*P, D) memory an action decoder attends to. The tokenized VLA and
 the flow-matching VLA share it, so they differ only in how they turn it into actions.
+
+Several cameras arrive side by side in one (B, H, V*W, 3) image, as the env and the datasets'
+episodes carry them (`gymnast.utils.images.tile_views`). The encoder splits it back into the V
+squares and runs one shared trunk over each (a convolution across the seam would mix two
+unrelated pictures); the learned positions, one set per view, tell the decoder which camera a
+token came from.
 
 The encoder runs where the policy's parameters are: images and instructions come from the host
 and are copied there, and what the policies hand back to the host (actions, tokens,
 log-probabilities of samples) is on the host again.
 
-Legend: B batch, H/W image size, P vision tokens, D width.
+Legend: B batch, H/W one view's image size, V views, P vision tokens per view, D width.
 """
 
 from __future__ import annotations
@@ -44,7 +50,22 @@ class PolicyArchitecture:
     action_dim: int = 4
     """Action dimensions A."""
     image_size: int = 96
-    """Side of the square input image."""
+    """Side of each camera's square input image."""
+    cameras: tuple[str, ...] = ("front",)
+    """The cameras the policy sees, side by side in its input image, the primary first (their names
+    in the dataset it was trained on)."""
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "cameras", tuple(self.cameras))  # a list when read back from JSON
+        if not self.cameras or len(set(self.cameras)) < len(self.cameras):
+            raise ValueError(f"a policy's cameras must be one or more distinct names, got {list(self.cameras)}")
+
+    @property
+    def env_cameras(self) -> tuple[str, ...]:
+        """The simulator's views that show this policy what it was trained on: its cameras where it
+        has several; else the front view, as before cameras were a setting (a one-camera policy may
+        come from a dataset whose camera has another name)."""
+        return self.cameras if len(self.cameras) > 1 else ("front",)
 
 
 def shared_architecture(config: PolicyArchitecture) -> dict:
@@ -58,16 +79,18 @@ class ObservationConditioned(nn.Module):
     Args:
         vision: image encoder name (`gymnast.policy.vision.VISION_ENCODERS`).
         width: token width D.
-        image_size: side of the square input image (a multiple of 16).
+        image_size: side of each view's square image (a multiple of 16).
         pretrained_vision: load ImageNet weights where the encoder has them.
+        views: cameras V, side by side in the input image.
     """
 
-    def __init__(self, vision: str, width: int, image_size: int, pretrained_vision: bool) -> None:
+    def __init__(self, vision: str, width: int, image_size: int, pretrained_vision: bool, views: int = 1) -> None:
         super().__init__()
         grid = image_size // 16
-        self.observed_shape = (image_size, image_size, 3)
+        self.views = views
+        self.observed_shape = (image_size, views * image_size, 3)
         self.vision = make_vision_encoder(vision, width, pretrained=pretrained_vision)
-        self.vision_position = nn.Parameter(torch.zeros(1, grid * grid, width))
+        self.vision_position = nn.Parameter(torch.zeros(1, views * grid * grid, width))
         self.text_film = nn.Linear(EMBEDDING_DIM, 2 * width)
         self.text_token = nn.Linear(EMBEDDING_DIM, width)
         self.text = InstructionEncoder()
@@ -79,7 +102,7 @@ class ObservationConditioned(nn.Module):
         return to_device(self.text(instructions), self.vision_position.device).to(self.vision_position.dtype)
 
     def memory(self, images: torch.Tensor, text: torch.Tensor, bf16_vision: bool = False) -> torch.Tensor:
-        """(B, H, W, 3) uint8 images and (B, 384) instruction embeddings -> (B, 1 + P, D).
+        """(B, H, V*W, 3) uint8 images and (B, 384) instruction embeddings -> (B, 1 + V*P, D).
 
         `bf16_vision` runs the image encoder under bfloat16 autocast where the device computes
         bfloat16 natively: about 1.4x faster for the convolutions on such a CPU, while the small
@@ -88,9 +111,11 @@ class ObservationConditioned(nn.Module):
         if tuple(images.shape[1:]) != self.observed_shape:
             raise ValueError(f"images must be (B, {', '.join(map(str, self.observed_shape))}), got {tuple(images.shape)}")
         images = to_device(images, self.vision_position.device)  # the camera's frames live on the host
+        batch, height = images.shape[:2]
+        squares = images.view(batch, height, self.views, height, 3).transpose(1, 2).flatten(0, 1)  # (B*V, H, W, 3)
         with bf16_autocast(images.device, bf16_vision):
-            tokens = self.vision(to_float_image(images))
-        tokens = tokens.float() + self.vision_position  # (B, P, D)
+            tokens = self.vision(to_float_image(squares))  # (B*V, P, D)
+        tokens = tokens.float().reshape(batch, -1, tokens.shape[-1]) + self.vision_position  # (B, V*P, D)
         scale, shift = self.text_film(text).unsqueeze(1).chunk(2, dim=-1)
         tokens = tokens * (1 + scale) + shift
-        return torch.cat([self.text_token(text).unsqueeze(1), tokens], dim=1)  # (B, 1 + P, D)
+        return torch.cat([self.text_token(text).unsqueeze(1), tokens], dim=1)  # (B, 1 + V*P, D)

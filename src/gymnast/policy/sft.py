@@ -50,6 +50,10 @@ class SFTConfig:
     """Successful expert episodes per task to imitate (few-shot keeps SFT imperfect)."""
     camera: str | None = None
     """Camera to read from the dataset (e.g. ``front``); default: the first camera whose frames exist."""
+    cameras: tuple[str, ...] = ()
+    """Several cameras the policy sees side by side, the primary first (e.g. ``front,gripper``; each
+    fitted to the square image alone); default: `camera` alone. Saved with the policy, so that
+    evaluation and RL render the same views."""
     keys: FeatureKeys = FeatureKeys()
     """Which dataset features are the actions and the states (--action-key, --state-key); saved with the run."""
     fit: Fit = "resize"
@@ -145,7 +149,7 @@ def load_demos(dataset: EpisodeDataset, indices: list[int], chunk_size: int) -> 
         padded = torch.cat([actions, torch.zeros(chunk_size - 1, actions.shape[1])])
         chunks.append(padded.unfold(0, chunk_size, 1).transpose(1, 2))  # (T, K, A)
         valid.append(torch.arange(steps).unsqueeze(1) + torch.arange(chunk_size) < steps)  # (T, K)
-        images.append(torch.from_numpy(episode.frames[:steps]))
+        images.append(torch.from_numpy(episode.observed_frames[:steps]))  # every camera read, side by side
         if episode.info.instruction not in instructions:
             instructions.append(episode.info.instruction)
         instruction.append(torch.full((steps,), instructions.index(episode.info.instruction)))
@@ -153,10 +157,16 @@ def load_demos(dataset: EpisodeDataset, indices: list[int], chunk_size: int) -> 
     return DemoSet(torch.cat(images), torch.cat(chunks), torch.cat(valid), torch.cat(instruction), instructions, infos)
 
 
-def random_shift(images: torch.Tensor, pad: int, generator: torch.Generator) -> torch.Tensor:
-    """Shifts each (H, W, 3) uint8 image by up to `pad` pixels (DrQ-style augmentation)."""
+def random_shift(images: torch.Tensor, pad: int, generator: torch.Generator, views: int = 1) -> torch.Tensor:
+    """Shifts each (H, W, 3) uint8 image by up to `pad` pixels (DrQ-style augmentation); an image of
+    `views` cameras side by side has each camera's square shifted alone, as if each camera moved."""
     if pad == 0:
         return images
+    if views > 1:
+        batch, height, width, _ = images.shape
+        squares = images.view(batch, height, views, width // views, 3).transpose(1, 2).flatten(0, 1)
+        shifted = random_shift(squares, pad, generator)  # (B*V, H, W/V, 3)
+        return shifted.view(batch, views, height, width // views, 3).transpose(1, 2).reshape(images.shape)
     batch, height, width, _ = images.shape
     padded = F.pad(images.permute(0, 3, 1, 2).float(), (pad,) * 4, mode="replicate")
     dx, dy = (torch.randint(0, 2 * pad + 1, (2, batch), generator=generator)).unbind(0)
@@ -177,7 +187,7 @@ def train_sft(data: Path, out: Path, config: SFTConfig, resume: bool = False, pr
         extra: more samples (say, a policy's own successful rollouts), drawn 1:1 with the
             demonstrations: half of every batch comes from each.
     """
-    dataset = EpisodeDataset(data, config.camera, keys=config.keys)
+    dataset = EpisodeDataset(data, config.camera, config.cameras or None, keys=config.keys)
     size = model_image_size(dataset.camera_shape, config.vla.image_size)
     if init is not None:
         from gymnast.policy.load import load_policy
@@ -187,8 +197,12 @@ def train_sft(data: Path, out: Path, config: SFTConfig, resume: bool = False, pr
         if size != config.vla.image_size or dataset.action_dim != config.vla.action_dim:
             raise ValueError(f"{data} makes {size}px images and {dataset.action_dim}-D actions, but the policy "
                              f"in {init} sees {config.vla.image_size}px images and acts in {config.vla.action_dim}-D")
+        if len(dataset.cameras) != len(config.vla.cameras):
+            raise ValueError(f"{data} is read with cameras {','.join(dataset.cameras)}, but the policy in {init} "
+                             f"sees {len(config.vla.cameras)}: {','.join(config.vla.cameras)}; pass --cameras to match")
     stats = dataset.action_stats  # read before training starts: a dataset without actions fails here
-    config = dataclasses.replace(config, vla=dataclasses.replace(config.vla, image_size=size, action_dim=dataset.action_dim))
+    config = dataclasses.replace(config, vla=dataclasses.replace(config.vla, image_size=size, action_dim=dataset.action_dim,
+                                                                 cameras=dataset.cameras))
     dataset = dataset.fitted(size, config.fit)
     demos = load_demos(dataset, select_demos(dataset, config.demos_per_task, config.tasks), config.vla.chunk_size)
     logger.info("SFT on %d demonstrations (%d samples, %d instructions)%s", len(demos.episodes), len(demos.images),
@@ -235,7 +249,7 @@ def _train(out: Path, config: SFTConfig, model: nn.Module, demos: DemoSet, extra
     checkpoint = None
     for step in bar:
         batch = draw(sampler)  # the global batch (and its augmentation): every process draws it
-        images = random_shift(pool.images[batch], config.shift_augment, sampler)[share]
+        images = random_shift(pool.images[batch], config.shift_augment, sampler, len(config.vla.cameras))[share]
         batch = batch[share]
         texts = [pool.instructions[i] for i in pool.instruction[batch].tolist()]
         valid = pool.valid[batch]

@@ -6,8 +6,8 @@ through a small transformer decoder without a causal mask, so the whole chunk is
 parallel in one forward pass, as in OpenVLA-OFT. Each query ends in a 256-way categorical over
 its action dimension's bins.
 
-Legend: B batch, H/W image size, K chunk length, A action dimensions, N = K * A tokens,
-P vision tokens, D width, V bins.
+Legend: B batch, H/W image size (W: every camera's side by side), K chunk length, A action
+dimensions, N = K * A tokens, P vision tokens (of all cameras), D width, V bins.
 """
 
 from __future__ import annotations
@@ -53,7 +53,7 @@ class EmbeddedVLA(ObservationConditioned):
                 f"tokenizer has {tokenizer.action_dim} dims x {tokenizer.bins} bins, "
                 f"config wants {config.action_dim} x {config.bins}"
             )
-        super().__init__(config.vision, config.width, config.image_size, pretrained_vision)
+        super().__init__(config.vision, config.width, config.image_size, pretrained_vision, len(config.cameras))
         self.config, self.tokenizer = config, tokenizer
         self.chunk_size, self.action_dim = config.chunk_size, config.action_dim
         self.queries = nn.Parameter(torch.randn(1, config.num_tokens, config.width) * 0.02)
@@ -67,7 +67,7 @@ class EmbeddedVLA(ObservationConditioned):
     # -- the network -----------------------------------------------------------------------------
 
     def forward(self, images: torch.Tensor, text: torch.Tensor, bf16_vision: bool = False) -> torch.Tensor:
-        """(B, H, W, 3) uint8 images and (B, 384) instruction embeddings -> (B, N, V) logits."""
+        """(B, H, W, 3) uint8 images (W: the views side by side) and (B, 384) instruction embeddings -> (B, N, V) logits."""
         memory = self.memory(images, text, bf16_vision)  # (B, 1 + P, D)
         queries = self.queries.expand(len(images), -1, -1)  # (B, N, D)
         return self.head(self.norm(self.decoder(queries, memory)))

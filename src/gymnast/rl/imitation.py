@@ -37,14 +37,16 @@ class ImitationAnchor:
 
     @classmethod
     def from_dataset(cls, data: Path, tasks: tuple[str, ...], chunk_size: int, coef: float, kl_gate: float,
-                     batch_size: int, keys: FeatureKeys = FeatureKeys()) -> ImitationAnchor:
+                     batch_size: int, keys: FeatureKeys = FeatureKeys(),
+                     cameras: tuple[str, ...] | None = None) -> ImitationAnchor:
         """The anchor on the first successful expert episodes of `tasks` in `data` (at most
-        `DEMOS_PER_TASK` each, and at least one).
+        `DEMOS_PER_TASK` each, and at least one), seen through `cameras` where the policy has
+        several (default: the dataset's first camera).
 
         Raises:
             ValueError: a task has no successful expert episode in `data`.
         """
-        dataset = EpisodeDataset(data, keys=keys)
+        dataset = EpisodeDataset(data, cameras=cameras, keys=keys)
         counts = {task: sum(1 for info in dataset.episodes if info.task == task and info.success
                             and info.behaviour in DEMO_BEHAVIOURS) for task in tasks}
         lacking = [task for task, count in counts.items() if count == 0]

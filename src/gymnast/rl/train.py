@@ -63,7 +63,7 @@ LEROBOT_EXPORT = "lerobot/pretrained_model"
 
 def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False, progress: bool = True) -> dict:
     """Trains (or resumes) an RL run in `out`; returns the summary (also RUN/summary.json)."""
-    from gymnast.policy.load import load_policy
+    from gymnast.policy.load import load_policy, policy_env_config
     from gymnast.reward.select import make_reward
     from gymnast.world_model.base import load_world_model
     from gymnast.world_model.ensemble import EnsembleWorldModel
@@ -77,6 +77,10 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
         raise ValueError(f"{levers[0]} acts on imagined rollouts; --env {env} imagines none")
     device = resolve_device(config.device)
     policy = load_policy(run_spec.policy).to(device)
+    cameras = getattr(policy.config, "cameras", ())
+    if env.imagined and len(cameras) > 1:
+        raise ValueError(f"the policy {run_spec.policy} sees cameras {','.join(cameras)} side by side, and the world "
+                         f"model imagines one camera's frames; practise it with --env real or sim")
     world_model = load_world_model(run_spec.wm).to(device) if run_spec.wm else None
     if levers and not isinstance(world_model, EnsembleWorldModel):
         raise ValueError(f"{levers[0]} needs a world-model ensemble to disagree (gymnast "
@@ -98,7 +102,7 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
     if config.instruction is not None and len(tasks) != 1:
         raise ValueError(f"--instruction is one sentence for one task, but --tasks {config.tasks} names {len(tasks)}; "
                          "practise one task at a time")
-    env_config = EnvConfig(image_size=policy.config.image_size, horizon=config.horizon)
+    env_config = policy_env_config(EnvConfig(image_size=policy.config.image_size, horizon=config.horizon), policy)
     practice = own_instruction(scene_starts(scenes, env_config), config.instruction) if scenes else None
     # Start frames as the policy saw its training frames: the same camera, fitted the same way.
     frames = policy_frames(run_spec.policy)
@@ -124,7 +128,8 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
     if config.imitation_coef > 0:
         demos = Path(run_spec.data or policy_dataset(run_spec.policy))  # the experts', whatever the starts
         anchor = ImitationAnchor.from_dataset(demos, tasks, policy.chunk_size, config.imitation_coef,
-                                              config.imitation_kl_gate, config.imitation_batch, keys)
+                                              config.imitation_kl_gate, config.imitation_batch, keys,
+                                              cameras if len(cameras) > 1 else None)
     state = {"real_interactions": 0, "eval_real_interactions": 0, "watch_real_interactions": 0,
              "reset_frames": len(practice or ()), "curve": [], "wall_s": 0.0}
     start_step = 0

@@ -1,4 +1,5 @@
-"""Contact sheets: many frames on one labelled image, for people who would rather look than read."""
+"""Frames put side by side: several cameras' views as one observation, and contact sheets (many
+frames on one labelled image, for people who would rather look than read)."""
 
 from __future__ import annotations
 
@@ -10,6 +11,24 @@ import numpy as np
 from PIL import Image, ImageDraw
 
 from gymnast.utils.atomic import write_bytes
+
+
+def tile_views(views: Sequence[np.ndarray]) -> np.ndarray:
+    """Several cameras' (..., H, W, 3) frames of one instant (or of one episode) side by side: (..., H, V*W, 3).
+
+    One view is returned as it is. Views travel tiled because every pipe of the rollout engine,
+    the videos and the datasets' episodes carries one frame per step; a model that sees several
+    views splits the frame back into V squares (`gymnast.policy.observation`).
+
+    Raises:
+        ValueError: no view, or views of different shapes.
+    """
+    if not views:
+        raise ValueError("tile_views needs at least one view")
+    shapes = {tuple(view.shape) for view in views}
+    if len(shapes) > 1:
+        raise ValueError(f"views to tile need one shape, got {sorted(shapes)}")
+    return views[0] if len(views) == 1 else np.concatenate(list(views), axis=-2)
 
 
 def contact_sheet(
