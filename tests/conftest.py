@@ -36,7 +36,7 @@ def tiny_dataset(tmp_path_factory) -> Path:
 def two_camera_demos(tmp_path_factory) -> Path:
     """Scripted reach-v3 experts recorded from the front and the gripper cameras at 32 px."""
     out = tmp_path_factory.mktemp("two_camera_demos")
-    collect(CollectConfig(tasks="reach-v3", episodes_per_task=2, noise=(0.0,), failure_fraction=0.0, workers=1,
+    collect(CollectConfig(tasks="reach-v3", episodes_per_task=4, noise=(0.0,), failure_fraction=0.0, workers=1,
                           env=EnvConfig(image_size=32, horizon=100, cameras=("front", "gripper"))), out, progress=False)
     return out
 

@@ -13,7 +13,7 @@ from typing import Annotated, Literal
 import tyro
 
 from gymnast.cli_settings import flags_of, resolve, saved_inputs
-from gymnast.config import CommaFloats
+from gymnast.config import CameraNames, CommaFloats
 from gymnast.data.frames import Fit
 from gymnast.data.lerobot_format import FeatureKeys
 from gymnast.experiment.worldgym import DEFAULT_NOISE
@@ -262,6 +262,7 @@ def train_judge(
     extra_data: tuple[Path, ...] = (),
     init: Path | None = None,
     camera: str | None = None,
+    cameras: CameraNames = (),
     fit: Fit | None = None,
     device: str | None = None,
     keys: Annotated[KeyFlags, tyro.conf.arg(name="")] = KeyFlags(),
@@ -283,6 +284,8 @@ def train_judge(
         init: a judge run (or checkpoint) to fine-tune instead of starting from random weights.
         camera: the dataset camera to read, by name (front: observation.images.front) or by feature key
             (image, observation.images.top); default: its first video (else image) feature.
+        cameras: several dataset cameras the per-frame judges see side by side, the primary first
+            (e.g. front,gripper; not with --wm, whose world model imagines one). Default: --camera alone.
         fit: how frames that are not the model's square size are fitted: resize (squash the whole
             frame) or crop (the central square); saved with the run.
         device: auto (CUDA when torch sees a GPU, else the CPU), cpu, cuda or cuda:N; --resume may change it.
@@ -294,8 +297,8 @@ def train_judge(
 
     config, inputs = resolve(
         "train-judge", out, resume, JUDGE_PRESETS[preset], inputs={"data": data, "wm": wm}, required=("data",),
-        overrides={"steps": steps, "kind": kind, "extra_data": extra_data or None, "init": init, "camera": camera, "fit": fit,
-                   "device": device, **key_overrides(keys)},
+        overrides={"steps": steps, "kind": kind, "extra_data": extra_data or None, "init": init, "camera": camera,
+                   "cameras": cameras or None, "fit": fit, "device": device, **key_overrides(keys)},
         saved=lambda: (saved_judge_config(out), saved_inputs(out, "data", "wm")))
     report = train(inputs["data"], out, config, wm=inputs["wm"], resume=resume)
     print(json.dumps({k: v for k, v in report.items() if k.startswith(("real", "imagined"))}, indent=2))

@@ -20,6 +20,7 @@ import numpy as np
 from gymnast.envs.engine import run_batch
 from gymnast.envs.imagined import BatchedImaginedEnv
 from gymnast.envs.metaworld import ACTION_DIM, MetaWorldEnv
+from gymnast.utils.images import tile_views
 
 if TYPE_CHECKING:
     from gymnast.policy.base import Policy
@@ -53,6 +54,7 @@ class PolicyActor:
             if not (value >= 0 and math.isfinite(value)):  # also refuses NaN
                 raise ValueError(f"{name} must be a finite number >= 0, got {value}")
         self._policy, self._temperature, self._noise = policy, temperature, noise
+        self._cameras = getattr(getattr(policy, "config", None), "env_cameras", None)  # None: whatever obs["image"] shows
         # Two streams, so the sampled tokens do not depend on whether noise is drawn, and back.
         self._generator = torch.Generator().manual_seed(seed)
         self._rng = np.random.default_rng(seed)
@@ -63,7 +65,19 @@ class PolicyActor:
         return self._policy.chunk_size
 
     def __call__(self, env: MetaWorldEnv, obs: dict[str, np.ndarray]) -> np.ndarray:
-        return self.chunk(obs["image"], env.instruction, env.task)
+        return self.chunk(self.seen(obs, env.task), env.instruction, env.task)
+
+    def seen(self, obs: dict, task: str) -> np.ndarray:
+        """What the policy sees of an observation: its cameras side by side. The env may render
+        more cameras than the policy sees (its rollouts recorded for a judge of several views)."""
+        views = obs.get("images")
+        if self._cameras is None or views is None or tuple(views) == self._cameras:
+            return obs["image"]
+        missing = [name for name in self._cameras if name not in views]
+        if missing:
+            raise ValueError(f"the policy sees cameras {','.join(self._cameras)}, but the env of {task} renders "
+                             f"{','.join(views)}: add {','.join(missing)} to --cameras")
+        return tile_views([views[name] for name in self._cameras])
 
     def chunk(self, image: np.ndarray, instruction: str, task: str) -> np.ndarray:
         """(K, A) float32 actions in [-1, 1] for one (H, W, 3) uint8 image, real or imagined."""

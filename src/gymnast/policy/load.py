@@ -63,10 +63,12 @@ def build_policy(spec: dict) -> nn.Module:
 def policy_env_config(env: EnvConfig, policy: str | Path | object) -> EnvConfig:
     """`env` rendering the views the policy acts on (`PolicyArchitecture.env_cameras`): a policy of
     several cameras is shown them side by side, read from its run's saved spec without building it;
-    the scripted expert, LeRobot policies and one-camera policies get `env` as it is.
+    the scripted expert, LeRobot policies and one-camera policies get `env` as it is, and so does
+    an env that renders the policy's cameras and more (the actor picks the policy's,
+    `gymnast.eval.actors.PolicyActor.seen`).
 
     Raises:
-        ValueError: `env` names other cameras than the default (front) and the policy's.
+        ValueError: `env` names cameras other than the default (front) that lack some of the policy's.
     """
     if not isinstance(policy, (str, Path)):  # a policy object
         config = getattr(policy, "config", None)
@@ -78,7 +80,7 @@ def policy_env_config(env: EnvConfig, policy: str | Path | object) -> EnvConfig:
         family = next((spec[name] for name in POLICY_FAMILIES if name in spec), {})
         names = {field.name for field in dataclasses.fields(PolicyArchitecture)}
         cameras = PolicyArchitecture(**{key: value for key, value in family.items() if key in names}).env_cameras
-    if cameras == env.cameras:
+    if set(cameras) <= set(env.cameras):
         return env
     if env.cameras != EnvConfig().cameras:
         raise ValueError(f"the environment renders cameras {','.join(env.cameras)}, but the policy {policy} acts on "

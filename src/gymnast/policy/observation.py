@@ -29,7 +29,7 @@ import torch
 from torch import nn
 
 from gymnast.policy.text import EMBEDDING_DIM, InstructionEncoder
-from gymnast.policy.vision import make_vision_encoder, to_float_image
+from gymnast.policy.vision import make_vision_encoder, split_views, to_float_image
 from gymnast.utils.device import bf16_autocast, to_device
 
 
@@ -111,11 +111,9 @@ class ObservationConditioned(nn.Module):
         if tuple(images.shape[1:]) != self.observed_shape:
             raise ValueError(f"images must be (B, {', '.join(map(str, self.observed_shape))}), got {tuple(images.shape)}")
         images = to_device(images, self.vision_position.device)  # the camera's frames live on the host
-        batch, height = images.shape[:2]
-        squares = images.view(batch, height, self.views, height, 3).transpose(1, 2).flatten(0, 1)  # (B*V, H, W, 3)
         with bf16_autocast(images.device, bf16_vision):
-            tokens = self.vision(to_float_image(squares))  # (B*V, P, D)
-        tokens = tokens.float().reshape(batch, -1, tokens.shape[-1]) + self.vision_position  # (B, V*P, D)
+            tokens = self.vision(to_float_image(split_views(images, self.views)))  # (B*V, P, D)
+        tokens = tokens.float().reshape(len(images), -1, tokens.shape[-1]) + self.vision_position  # (B, V*P, D)
         scale, shift = self.text_film(text).unsqueeze(1).chunk(2, dim=-1)
         tokens = tokens * (1 + scale) + shift
         return torch.cat([self.text_token(text).unsqueeze(1), tokens], dim=1)  # (B, 1 + V*P, D)

@@ -30,6 +30,7 @@ from gymnast.policy.action_tokenizer import ActionTokenizer
 from gymnast.policy.flow_vla import FlowVLA, FlowVLAConfig
 from gymnast.policy.observation import shared_architecture
 from gymnast.policy.vla import EmbeddedVLA, VLAConfig
+from gymnast.policy.vision import split_views
 from gymnast.utils.checkpoint import resolve_checkpoint, resume_training, save_training, write_run_config
 from gymnast.utils.device import resolve_device
 from gymnast.utils.distributed import Parallel, data_parallel
@@ -164,8 +165,7 @@ def random_shift(images: torch.Tensor, pad: int, generator: torch.Generator, vie
         return images
     if views > 1:
         batch, height, width, _ = images.shape
-        squares = images.view(batch, height, views, width // views, 3).transpose(1, 2).flatten(0, 1)
-        shifted = random_shift(squares, pad, generator)  # (B*V, H, W/V, 3)
+        shifted = random_shift(split_views(images, views), pad, generator)  # (B*V, H, W/V, 3)
         return shifted.view(batch, views, height, width // views, 3).transpose(1, 2).reshape(images.shape)
     batch, height, width, _ = images.shape
     padded = F.pad(images.permute(0, 3, 1, 2).float(), (pad,) * 4, mode="replicate")

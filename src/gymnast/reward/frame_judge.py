@@ -1,6 +1,6 @@
 """The per-frame success judge: is the task done in this frame?
 
-Legend: B videos, T frames, N judged frames, H/W image size, D feature width.
+Legend: B videos, T frames, N judged frames, H/W image size, V cameras, D feature width.
 
 Meta-World reports success at every step, so a judge can learn from every frame of every
 episode (tens of thousands of labelled frames where whole-episode labels give a few hundred
@@ -9,6 +9,10 @@ done at any step. Each frame is judged beside the video's first frame (where the
 goal started, which a frame alone may hide behind the arm) and the instruction's MiniLM
 embedding; the video's probability of success is the largest of its frames' (the start frame
 excluded: nothing has been done yet).
+
+Several cameras arrive side by side in each frame (`gymnast.utils.images.tile_views`): each
+camera's pair of squares goes through the same encoder alone, and the head reads the V features
+one after the other, so it knows which camera saw what.
 
 The decision threshold is part of the model's settings, chosen by `gymnast train-judge` on
 validation scenes that neither training nor the reported figures use.
@@ -22,7 +26,7 @@ import torch
 from torch import nn
 
 from gymnast.policy.text import EMBEDDING_DIM, InstructionEncoder
-from gymnast.policy.vision import to_float_image
+from gymnast.policy.vision import split_views, to_float_image
 from gymnast.reward.judge import JudgeConfig, ThresholdJudge, check_videos, labelled_loss
 from gymnast.utils.device import bf16_autocast, to_device
 
@@ -51,23 +55,28 @@ class FrameJudge(ThresholdJudge, nn.Module):
     def __init__(self, config: JudgeConfig = JudgeConfig()) -> None:
         super().__init__()
         self.config = config
+        self.views = len(config.cameras)
         self.vision = _pair_encoder(config.width)
         self.text = nn.Linear(EMBEDDING_DIM, config.width)
-        self.head = nn.Sequential(nn.Linear(2 * config.width, 256), nn.GELU(), nn.Linear(256, 1))
+        self.head = nn.Sequential(nn.Linear((self.views + 1) * config.width, 256), nn.GELU(), nn.Linear(256, 1))
         self.encoder = InstructionEncoder()
-        self(torch.zeros(1, config.image_size, config.image_size, 3, dtype=torch.uint8),
-             torch.zeros(1, config.image_size, config.image_size, 3, dtype=torch.uint8), torch.zeros(1, EMBEDDING_DIM))
+        blank = torch.zeros(1, config.image_size, self.views * config.image_size, 3, dtype=torch.uint8)
+        self(blank, blank, torch.zeros(1, EMBEDDING_DIM))  # sizes the lazy layer
 
     def forward(self, first: torch.Tensor, frames: torch.Tensor, text: torch.Tensor) -> torch.Tensor:
-        """(N, H, W, 3) uint8 first frames and judged frames, (N, 384) embeddings -> (N,) logits."""
+        """(N, H, V*W, 3) uint8 first frames and judged frames, (N, 384) embeddings -> (N,) logits."""
+        size, views = self.config.image_size, self.views
+        if tuple(frames.shape[1:]) != (size, views * size, 3) or first.shape != frames.shape:
+            raise ValueError(f"a judge of cameras {','.join(self.config.cameras)} needs (N, {size}, {views * size}, 3) "
+                             f"frames (the cameras side by side), got {tuple(frames.shape)} and first frames {tuple(first.shape)}")
         logits = []
         for start in range(0, len(frames), FRAMES_PER_PASS):
             part = slice(start, start + FRAMES_PER_PASS)
             device = self.text.weight.device
-            pair = torch.cat([to_float_image(to_device(first[part], device)),
-                              to_float_image(to_device(frames[part], device))], dim=1) * 2.0 - 1.0
+            squares = [to_float_image(split_views(to_device(images[part], device), self.views)) for images in (first, frames)]
+            pair = torch.cat(squares, dim=1) * 2.0 - 1.0  # (n*V, 6, H, W)
             with bf16_autocast(device):  # ~2x faster convolutions where bf16 is native
-                image = self.vision(pair).float()
+                image = self.vision(pair).float().reshape(len(pair) // self.views, -1)  # (n, V*D)
             logits.append(self.head(torch.cat([image, self.text(to_device(text[part], device))], dim=1)).squeeze(1))
         return torch.cat(logits)
 

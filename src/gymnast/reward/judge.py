@@ -45,10 +45,16 @@ class JudgeConfig:
     width: int = 128
     """Feature width D."""
     image_size: int = 96
-    """Frame height and width."""
+    """Frame height and width (of each camera's view)."""
     threshold: float = 0.5
     """P(success) from which a video counts as a success (`gymnast train-judge` chooses it on
     validation scenes)."""
+    cameras: tuple[str, ...] = ("front",)
+    """The cameras the judge sees, side by side in each frame, the primary first (their names in
+    the datasets it was trained on)."""
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "cameras", tuple(self.cameras))  # a list when read back from JSON
 
 
 class ThresholdJudge:
@@ -84,6 +90,9 @@ class LearnedJudge(ThresholdJudge, nn.Module):
 
     def __init__(self, config: JudgeConfig = JudgeConfig()) -> None:
         super().__init__()
+        if len(config.cameras) > 1:
+            raise ValueError(f"the video judge sees one camera, not {','.join(config.cameras)}; "
+                             "the per-frame judges (--kind frames or progress) see several")
         self.config = config
         self.vision = SmallCNN(config.width)
         self.position = nn.Parameter(torch.zeros(JUDGED_FRAMES, config.width))

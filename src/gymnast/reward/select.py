@@ -55,7 +55,8 @@ def make_reward(spec: RewardSpec, world_model: WorldModel | None = None) -> Rewa
 def measure_judge(reward: RewardSpec, data: Path, out: Path, wm: Path | None = None, heldout_fraction: float = 0.1,
                   device: str = "auto", camera: str | None = None, keys: FeatureKeys = FeatureKeys()) -> dict:
     """`evaluate_judge` of the 0/1 judge `reward` (judge:RUN or vlm:MODEL@BASE_URL) on the episodes of
-    the held-out scenes of `data` (its `camera`, its actions and states read by `keys`), and with `wm`
+    the held-out scenes of `data` (its `camera`, or the cameras a judge of several was trained on;
+    its actions and states read by `keys`), and with `wm`
     on its re-imaginings of them, or `evaluate_progress` of a progress judge (which gives degrees,
     not verdicts); written to `out` (JSON). A learned judge and the world model run on `device`."""
     from gymnast.reward.progress_judge import evaluate_progress
@@ -68,11 +69,13 @@ def measure_judge(reward: RewardSpec, data: Path, out: Path, wm: Path | None = N
     if isinstance(judge, torch.nn.Module):  # a learned judge; a VLM runs wherever its server does
         judge.to(where)
     measure = evaluate_judge if judge.binary else evaluate_progress
-    dataset = EpisodeDataset(data, camera, keys=keys)
+    cameras = judge.config.cameras if reward.kind == "judge" and len(judge.config.cameras) > 1 else None
+    dataset = EpisodeDataset(data, camera if cameras is None else cameras[0], cameras, keys=keys)
     if reward.kind == "judge" and dataset.image_shape[0] != judge.config.image_size:
         # Frames of another size are fitted as the judge's training fitted them (its saved `fit`).
         dataset = dataset.fitted(judge.config.image_size, saved_judge_config(reward.run).fit)
     report = measure(judge, heldout_videos(dataset, heldout_fraction, wm, where))
-    report |= {"reward": str(reward), "data": str(data), "wm": str(wm) if wm else None, "camera": dataset.camera_key}
+    report |= {"reward": str(reward), "data": str(data), "wm": str(wm) if wm else None,
+               "camera": ",".join(dataset.cameras)}
     write_json(out, report)
     return report

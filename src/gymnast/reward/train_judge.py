@@ -82,6 +82,9 @@ class JudgeTrainConfig:
     takes its share of each."""
     camera: str | None = None
     """Camera to read from the datasets (e.g. ``front``); default: the first camera whose frames exist."""
+    cameras: tuple[str, ...] = ()
+    """Several cameras the per-frame judges see side by side, the primary first (e.g.
+    ``front,gripper``); default: `camera` alone. Saved with the judge."""
     keys: FeatureKeys = FeatureKeys()
     """Which dataset features are the actions and the states (--action-key, --state-key); saved with the run."""
     fit: Fit = "resize"
@@ -154,13 +157,16 @@ def load_videos(dataset: EpisodeDataset, indices: list[int], wm: Path | None, pr
     videos, episodes = [], []
     for i in tqdm(indices, desc="loading episodes", disable=not progress):
         episode = dataset.load(i)
-        frames = torch.from_numpy(episode.frames)
+        frames = torch.from_numpy(episode.observed_frames)  # every camera read, side by side
         shows = torch.cat([torch.zeros(1, dtype=torch.bool), torch.from_numpy(episode.successes).bool()])
         videos.append(Video(frames, shows.cummax(0).values, shows, episode.info.instruction, imagined=False,
                             progress=progress_targets(episode.rewards)))
         episodes.append(torch.from_numpy(episode.actions).float())
     if wm is None:
         return videos
+    if len(dataset.cameras) > 1:
+        raise ValueError(f"{dataset.root} is read with cameras {','.join(dataset.cameras)}, and the world model "
+                         f"{wm} imagines one camera's frames: train a judge of several cameras without --wm")
     model = load_world_model(wm).to(device or "cpu")
     # Episodes of similar length share a batch; shorter ones are padded with zero actions at the
     # end and cut back, which changes none of their frames: frame t follows actions up to t only.
@@ -259,12 +265,13 @@ def train_judge(data: Path, out: Path, config: JudgeTrainConfig, wm: Path | None
     """Trains the judge in `out`, chooses its threshold on the validation scenes, writes
     `out/metrics.json` (held-out TPR/FPR) and returns it."""
     started = time.perf_counter()
-    datasets = [EpisodeDataset(path, config.camera, keys=config.keys) for path in (data, *config.extra_data)]
+    datasets = [EpisodeDataset(path, config.camera, config.cameras or None, keys=config.keys)
+                for path in (data, *config.extra_data)]
     for other in datasets[1:]:
         if other.camera_shape != datasets[0].camera_shape:
             raise ValueError(f"{other.root}: frames are {other.camera_shape}, but {data} has {datasets[0].camera_shape}")
     size = model_image_size(datasets[0].camera_shape, config.judge.image_size)
-    config = dataclasses.replace(config, judge=dataclasses.replace(config.judge, image_size=size))
+    config = dataclasses.replace(config, judge=dataclasses.replace(config.judge, image_size=size, cameras=datasets[0].cameras))
     datasets = [dataset.fitted(size, config.fit) for dataset in datasets]
     parts = [split_scenes(dataset, config) for dataset in datasets]  # per dataset: (train, validation, held-out)
     train_ids, validation_ids, heldout_ids = ([p[k] for p in parts] for k in range(3))
