@@ -64,3 +64,15 @@ def test_a_one_camera_policy_keeps_the_front_view_and_a_conflicting_camera_is_re
     assert policy_env_config(EnvConfig(), str(two)).cameras == TWO
     with pytest.raises(ValueError, match="renders cameras gripper, but the policy .* acts on front,gripper"):
         policy_env_config(EnvConfig(cameras=("gripper",)), str(two))
+
+
+def test_a_one_camera_policys_rollouts_are_recorded_with_more_cameras_than_it_sees(two_camera_demos, tmp_path):
+    from gymnast.data.lerobot import EpisodeDataset
+
+    run, rollouts = tmp_path / "front", tmp_path / "rollouts"
+    main(["sft", "--data", str(two_camera_demos), "--out", str(run), "--preset", "debug", "--camera", "front"])
+    main(["collect", "--policy", str(run), "--tasks", "reach-v3", "--episodes-per-task", "1", "--noise", "0",
+          "--cameras", "front,gripper", "--env.image-size", "32", "--env.horizon", "10", "--workers", "1",
+          "--out", str(rollouts)])
+    episode = EpisodeDataset(rollouts, cameras=TWO).load(0)
+    assert list(episode.views) == list(TWO) and episode.length == 10  # the policy acted on the front view alone
