@@ -162,3 +162,13 @@ def test_rl_on_another_robot_names_what_it_cannot_do(extra, message, robot_model
     with pytest.raises(SystemExit):
         _rl_on_robot(robot_models, tmp_path / "rl", *extra)
     assert message in capsys.readouterr().err
+
+
+def test_another_robots_two_cameras_train_a_policy_and_a_judge_that_see_both(tmp_path):
+    data = write_robot_dataset(tmp_path / "data", episodes=6, steps=10, height=64, width=80, cameras=("top", "wrist"))
+    main(["sft", "--data", str(data), "--out", str(tmp_path / "sft"), "--preset", "debug", "--cameras", "top,wrist"])
+    policy = load_policy(tmp_path / "sft")
+    assert policy.config.cameras == ("top", "wrist") and policy.observed_shape == (96, 192, 3)  # each fitted to 96
+    main(["train-judge", "--data", str(data), "--out", str(tmp_path / "judge"), "--preset", "debug",
+          "--cameras", "top,wrist"])
+    assert json.loads((tmp_path / "judge" / "config.json").read_text())["model"]["cameras"] == ["top", "wrist"]
