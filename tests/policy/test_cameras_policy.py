@@ -54,12 +54,13 @@ def test_sft_on_two_cameras_makes_a_policy_that_eval_shows_both_views(family, tw
     assert evaluated["episodes"] == 1 and evaluated["config"]["env"]["cameras"] == list(TWO)
 
 
-def test_a_one_camera_policy_keeps_the_front_view_and_a_conflicting_camera_is_refused(two_camera_demos, tmp_path):
+def test_a_policy_acts_on_its_own_cameras_and_a_conflicting_camera_is_refused(two_camera_demos, tmp_path):
     one, two = tmp_path / "one", tmp_path / "two"
     main(["sft", "--data", str(two_camera_demos), "--out", str(one), "--preset", "debug", "--camera", "gripper"])
     assert load_policy(one).config.cameras == ("gripper",)
-    # A one-camera policy acts on the front view, as before cameras were a setting.
-    assert policy_env_config(EnvConfig(), str(one)) == EnvConfig()
+    assert policy_env_config(EnvConfig(), str(one)).cameras == ("gripper",)
+    # A one-camera policy of another robot's camera acts on the front view, as before cameras were a setting.
+    assert VLAConfig(cameras=("observation.images.top",)).env_cameras == ("front",)
     main(["sft", "--data", str(two_camera_demos), "--out", str(two), "--preset", "debug", "--cameras", "front,gripper"])
     assert policy_env_config(EnvConfig(), str(two)).cameras == TWO
     with pytest.raises(ValueError, match="renders cameras gripper, but the policy .* acts on front,gripper"):

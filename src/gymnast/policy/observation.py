@@ -28,6 +28,7 @@ from typing import Sequence
 import torch
 from torch import nn
 
+from gymnast.config import CAMERAS
 from gymnast.policy.text import EMBEDDING_DIM, InstructionEncoder
 from gymnast.policy.vision import make_vision_encoder, split_views, to_float_image
 from gymnast.utils.device import bf16_autocast, to_device
@@ -62,10 +63,13 @@ class PolicyArchitecture:
 
     @property
     def env_cameras(self) -> tuple[str, ...]:
-        """The simulator's views that show this policy what it was trained on: its cameras where it
-        has several; else the front view, as before cameras were a setting (a one-camera policy may
-        come from a dataset whose camera has another name)."""
-        return self.cameras if len(self.cameras) > 1 else ("front",)
+        """The simulator's views that show this policy what it was trained on: its cameras where they
+        are the simulator's (`gymnast.config.CAMERAS`) or several; else the front view, as before
+        cameras were a setting (a one-camera policy of another robot's dataset, whose camera has
+        another name, acts on the front view)."""
+        if len(self.cameras) > 1 or all(name in CAMERAS for name in self.cameras):
+            return self.cameras
+        return ("front",)
 
 
 def shared_architecture(config: PolicyArchitecture) -> dict:
