@@ -53,6 +53,7 @@ def train_wm(
     init: Path | None = None,
     extra_data: tuple[Path, ...] = (),
     camera: str | None = None,
+    cameras: CameraNames = (),
     fit: Fit | None = None,
     keys: Annotated[KeyFlags, tyro.conf.arg(name="")] = KeyFlags(),
 ) -> None:
@@ -74,6 +75,9 @@ def train_wm(
         extra_data: more dataset directories to train on (same image size), split by the same scene hash.
         camera: the dataset camera to read, by name (front: observation.images.front) or by feature key
             (image, observation.images.top); default: its first video (else image) feature.
+        cameras: several dataset cameras to imagine side by side, the primary first (e.g. front,gripper):
+            one model learns every camera's view; saved with the model, so rl starts it from the views a
+            policy of those cameras sees. Default: --camera alone.
         fit: how frames that are not the model's square size are fitted: resize (squash the whole
             frame) or crop (the central square); saved with the run.
         keys: which dataset features are the actions and the states (default: LeRobot's action and
@@ -84,7 +88,8 @@ def train_wm(
     config, inputs = resolve(
         "train-wm", out, resume, wm_preset(preset, backend or "embedded"), inputs={"data": data}, required=("data",),
         overrides={"backend": backend, "device": device, "steps": steps, "seed": seed, "moving_weight": moving_weight,
-                   "init": init, "extra_data": extra_data or None, "camera": camera, "fit": fit, **key_overrides(keys)},
+                   "init": init, "extra_data": extra_data or None, "camera": camera, "cameras": cameras or None, "fit": fit,
+                   **key_overrides(keys)},
         saved=lambda: (saved_train_config(out), saved_inputs(out, "data")))
     checkpoint = train_world_model(inputs["data"], out, config, resume=resume)
     print(f"world model: {checkpoint}")

@@ -49,35 +49,44 @@ class WorldModel(Protocol):
     satisfies it structurally, and the contract's meaning is documented there.
     """
 
-    image_size: int  # H = W
+    image_size: int  # H = W of one camera's view
     action_dim: int  # A
+    # A model of several cameras also has `views` (V): its frames are (H, V*W, 3), side by side.
 
     def init_state(self, context: torch.Tensor, generator: torch.Generator | None = None) -> Any: ...
 
     def step(self, state: Any, actions: torch.Tensor, generator: torch.Generator | None = None) -> tuple[Any, torch.Tensor]: ...
 
 
+def frame_shape(model: WorldModel) -> tuple[int, int, int]:
+    """(H, V*W, 3): the frames a world model takes and imagines, its V cameras' views side by side."""
+    return model.image_size, getattr(model, "views", 1) * model.image_size, 3
+
+
 def _spaces(model: WorldModel, chunk_size: int) -> tuple[Dict, Box]:
     """The observation space and the action space: each dimension spans the model's
     ``action_range`` (the range its training data's actions spanned), or [-1, 1], Meta-World's."""
-    size = model.image_size
-    observation = Dict({"image": Box(0, 255, (size, size, 3), np.uint8)})
+    observation = Dict({"image": Box(0, 255, frame_shape(model), np.uint8)})
     low, high = getattr(model, "action_range", ((-1.0,) * model.action_dim, (1.0,) * model.action_dim))
     shape = (chunk_size, model.action_dim)
     return observation, Box(np.broadcast_to(np.float32(low), shape), np.broadcast_to(np.float32(high), shape), shape, np.float32)
 
 
-def _check_frames(frames: Any, size: int, batch: int | None = None) -> np.ndarray:
-    """Real start frames as a (B, C, H, W, 3) uint8 copy (B = 1 without `batch`), or ValueError."""
+def _check_frames(frames: Any, shape: tuple[int, int, int], batch: int | None = None) -> np.ndarray:
+    """Real start frames of `shape` (`frame_shape`) as a (B, C, H, W, 3) uint8 copy (B = 1 without
+    `batch`), or ValueError."""
     lead = "" if batch is None else f"{batch}, "
-    expected = f"({lead}{size}, {size}, 3) or ({lead}C, {size}, {size}, 3) uint8"
+    height, width, _ = shape
+    expected = f"({lead}{height}, {width}, 3) or ({lead}C, {height}, {width}, 3) uint8"
     frames = np.asarray(frames)
-    shape = frames.shape
+    given = frames.shape
     frames = frames if batch else frames[None]  # (B, [C,] H, W, 3)
     frames = frames[:, None] if frames.ndim == 4 else frames  # (B, C, H, W, 3)
     ok = frames.ndim == 5 and frames.shape[0] == (batch or 1) and frames.shape[1] >= 1
-    if not ok or frames.shape[2:] != (size, size, 3) or frames.dtype != np.uint8:
-        raise ValueError(f"start frames must be {expected}, got {shape} {frames.dtype}")
+    if not ok or frames.shape[2:] != tuple(shape) or frames.dtype != np.uint8:
+        views = shape[1] // shape[0]
+        cameras = f" (the world model's {views} cameras side by side)" if views > 1 else ""
+        raise ValueError(f"start frames must be {expected}{cameras}, got {given} {frames.dtype}")
     return frames.copy()
 
 
@@ -162,7 +171,7 @@ class ImaginedEnv(gym.Env):
     ) -> None:
         self._sim = _Imagination(model, chunk_size, horizon)
         for start in starts:
-            _check_frames(start.frames, model.image_size)  # fail at construction, not mid-training
+            _check_frames(start.frames, frame_shape(model))  # fail at construction, not mid-training
         self.starts = tuple(starts)
         self.render_mode = render_mode
         # render() gives one frame per step, and a step spans `chunk_size` real-time actions.
@@ -186,7 +195,7 @@ class ImaginedEnv(gym.Env):
                 "the imagined env needs a real start frame and instruction: pass "
                 'reset(options={"frames": ..., "instruction": ...}) or build it with starts=[Start(...)]'
             )
-        context = _check_frames(frames, self._sim.model.image_size)
+        context = _check_frames(frames, frame_shape(self._sim.model))
         self._instruction = instruction
         frame = self._sim.start(context, seed=int(self.np_random.integers(2**63)))[0]
         return {"image": frame}, {"instruction": self._instruction, "step": 0}
@@ -251,7 +260,7 @@ class BatchedImaginedEnv(VectorEnv):
         if "frames" not in options or "instructions" not in options:
             shapes = f'{{"frames": ({self.num_envs}, [C,] H, W, 3) uint8, "instructions": {self.num_envs} strings}}'
             raise ValueError(f"the imagined env needs real start frames and instructions: reset(options={shapes})")
-        context = _check_frames(options["frames"], self._sim.model.image_size, batch=self.num_envs)
+        context = _check_frames(options["frames"], frame_shape(self._sim.model), batch=self.num_envs)
         instructions = list(options["instructions"])
         if len(instructions) != self.num_envs or not all(isinstance(i, str) for i in instructions):
             raise ValueError(f"instructions must be {self.num_envs} strings, got {instructions!r}")

@@ -41,6 +41,7 @@ from gymnast.policy.base import Policy
 from gymnast.reward.base import Reward
 from gymnast.reward.spec import RewardSpec
 from gymnast.world_model.base import WorldModel
+from gymnast.world_model.views import replay_cameras
 
 logger = logging.getLogger(__name__)
 
@@ -111,7 +112,7 @@ def measure_imagination(policy: Policy, world_model: WorldModel, reward: Reward,
                          "gives continuous scores, which are no success verdict to compare with the real world")
     began = time.perf_counter()
     tasks = resolve_tasks(config.tasks)
-    env_config = EnvConfig(image_size=world_model.image_size, horizon=config.horizon)
+    env_config = EnvConfig(image_size=world_model.image_size, horizon=config.horizon, cameras=replay_cameras(world_model))
     starts = evaluation_starts(tasks, config.episodes, env_config)
     size = min(config.batch, len(starts))
     envs = EnvFactory(IMAGINED, policy.chunk_size, env_config, "none", config.workers, world_model)
@@ -145,11 +146,14 @@ def measure_imagination_runs(policy: str | Path, wm: str | Path, reward: RewardS
     from gymnast.policy.load import load_policy
     from gymnast.reward.select import make_reward
     from gymnast.world_model.base import load_world_model
+    from gymnast.world_model.views import check_policy_views
 
     world_model = load_world_model(wm)
     judge = make_reward(reward, world_model)
     labels = {"policy": str(policy), "wm": str(wm), "reward": str(reward)}
-    return measure_imagination(load_policy(policy), world_model, judge, config, out, progress, labels)
+    loaded = load_policy(policy)
+    check_policy_views(getattr(loaded.config, "cameras", ()), world_model, policy, wm)
+    return measure_imagination(loaded, world_model, judge, config, out, progress, labels)
 
 
 @dataclass

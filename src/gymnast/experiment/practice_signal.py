@@ -71,6 +71,7 @@ from gymnast.rl.grpo import group_advantages
 from gymnast.rl.rollout import reward_context
 from gymnast.utils.atomic import write_bytes, write_json
 from gymnast.world_model.base import WorldModel
+from gymnast.world_model.views import model_cameras, replay_cameras
 
 logger = logging.getLogger(__name__)
 
@@ -177,8 +178,9 @@ def measure_signal(policy: Policy, world_model: WorldModel, reward: Reward, conf
 
     began = time.perf_counter()
     tasks = resolve_tasks(config.tasks)
-    env_config = EnvConfig(image_size=world_model.image_size, horizon=config.horizon)
-    starts = (heldout_keyframes(Path(config.data), tasks, config, world_model.image_size) if config.data
+    env_config = EnvConfig(image_size=world_model.image_size, horizon=config.horizon, cameras=replay_cameras(world_model))
+    starts = (heldout_keyframes(Path(config.data), tasks, config, world_model.image_size, model_cameras(world_model))
+              if config.data
               else fresh_starts(tasks, config.starts_per_task, env_config, config.seed))
     rollout_starts = [start for start in starts for _ in range(config.group_size)]  # groups are contiguous
     size = min(config.batch, len(rollout_starts))
@@ -253,11 +255,12 @@ def fresh_starts(tasks: Sequence[str], per_task: int, config: EnvConfig, seed: i
                         config)
 
 
-def heldout_keyframes(data: Path, tasks: Sequence[str], config: SignalConfig, image_size: int) -> list[Start]:
+def heldout_keyframes(data: Path, tasks: Sequence[str], config: SignalConfig, image_size: int,
+                      cameras: Sequence[str] = ()) -> list[Start]:
     """`config.starts_per_task` keyframes of each task from the episodes of `data`'s held-out scenes
     (`config.heldout_fraction`, the world models' split: they never trained on them) recorded in the real world, drawn by
     `config.keyframes` from `config.seed`; the frames fitted to `image_size` as the models were
-    trained. A task without a held-out episode lends its other episodes (with a warning): a
+    trained, the views of several `cameras` side by side (default: the dataset's first). A task without a held-out episode lends its other episodes (with a warning): a
     dataset too small to hold scenes out measures the models on what they trained on.
 
     Raises:
@@ -267,7 +270,7 @@ def heldout_keyframes(data: Path, tasks: Sequence[str], config: SignalConfig, im
     from gymnast.data.lerobot import EpisodeDataset
     from gymnast.world_model.data import is_heldout
 
-    dataset = EpisodeDataset(data)
+    dataset = EpisodeDataset(data, cameras=cameras or None)
     if dataset.image_shape[:2] != (image_size, image_size):
         dataset = dataset.fitted(image_size, "resize")
     draw, starts = np.random.default_rng(config.seed), []
@@ -515,6 +518,7 @@ def measure_signal_runs(policy: str | Path, wm: str | Path, reward: RewardSpec, 
     from gymnast.policy.load import load_policy
     from gymnast.reward.select import make_reward
     from gymnast.world_model.base import load_world_model
+    from gymnast.world_model.views import check_policy_views
 
     if reward.kind not in ("judge", "vlm", "state"):  # said before anything loads
         raise ValueError(f"--reward {reward} reads more than the imagined video; rl-signal reads a judge "
@@ -522,4 +526,6 @@ def measure_signal_runs(policy: str | Path, wm: str | Path, reward: RewardSpec, 
     world_model = load_world_model(wm)
     judge = make_reward(reward, world_model)
     labels = {"policy": str(policy), "wm": str(wm), "reward": str(reward)}
-    return measure_signal(load_policy(policy), world_model, judge, config, out, progress, labels)
+    loaded = load_policy(policy)
+    check_policy_views(getattr(loaded.config, "cameras", ()), world_model, policy, wm)
+    return measure_signal(loaded, world_model, judge, config, out, progress, labels)

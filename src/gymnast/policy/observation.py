@@ -30,7 +30,8 @@ from torch import nn
 
 from gymnast.config import CAMERAS
 from gymnast.policy.text import EMBEDDING_DIM, InstructionEncoder
-from gymnast.policy.vision import make_vision_encoder, split_views, to_float_image
+from gymnast.policy.vision import make_vision_encoder, to_float_image
+from gymnast.utils.images import split_views
 from gymnast.utils.device import bf16_autocast, to_device
 
 

@@ -30,7 +30,7 @@ from gymnast.policy.action_tokenizer import ActionTokenizer
 from gymnast.policy.flow_vla import FlowVLA, FlowVLAConfig
 from gymnast.policy.observation import shared_architecture
 from gymnast.policy.vla import EmbeddedVLA, VLAConfig
-from gymnast.policy.vision import split_views
+from gymnast.utils.images import split_views
 from gymnast.utils.checkpoint import resolve_checkpoint, resume_training, save_training, write_run_config
 from gymnast.utils.device import resolve_device
 from gymnast.utils.distributed import Parallel, data_parallel

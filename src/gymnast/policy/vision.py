@@ -25,17 +25,6 @@ def to_float_image(images: torch.Tensor) -> torch.Tensor:
     return images.permute(0, 3, 1, 2).float() / 255.0
 
 
-def split_views(images: torch.Tensor, views: int) -> torch.Tensor:
-    """(N, H, V*W, C) images of V cameras side by side -> (N*V, H, W, C), each camera's square on
-    its own (`gymnast.utils.images.tile_views` puts them side by side), the N's views consecutive."""
-    if views == 1:
-        return images
-    batch, height, width = images.shape[:3]
-    if width % views:
-        raise ValueError(f"images {tuple(images.shape)} are not {views} views side by side")
-    return images.reshape(batch, height, views, width // views, -1).transpose(1, 2).flatten(0, 1)
-
-
 def _conv_block(c_in: int, c_out: int, refine: bool) -> nn.Sequential:
     layers = [nn.Conv2d(c_in, c_out, 3, stride=2, padding=1), nn.GroupNorm(8, c_out), nn.GELU()]
     if refine:

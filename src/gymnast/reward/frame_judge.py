@@ -26,7 +26,8 @@ import torch
 from torch import nn
 
 from gymnast.policy.text import EMBEDDING_DIM, InstructionEncoder
-from gymnast.policy.vision import split_views, to_float_image
+from gymnast.policy.vision import to_float_image
+from gymnast.utils.images import split_views
 from gymnast.reward.judge import JudgeConfig, ThresholdJudge, check_videos, labelled_loss
 from gymnast.utils.device import bf16_autocast, to_device
 

@@ -262,7 +262,7 @@ def tasks_with_starts(data: Path, wanted: Sequence[str], keys: FeatureKeys = Fea
 
 def dataset_starts(data: Path, tasks: Sequence[str] | None = None, image_size: int | None = None,
                    fit: Fit = "resize", camera: str | None = None, keyframes: KeyframeConfig | None = None,
-                   keys: FeatureKeys = FeatureKeys()
+                   keys: FeatureKeys = FeatureKeys(), cameras: Sequence[str] | None = None
                    ) -> list[Start]:
     """One start per (task, seed) scene of a dataset: its first frame, instruction and reference;
     or, with `keyframes` other than ``first``, keyframes of every episode of `tasks` recorded in the
@@ -282,12 +282,14 @@ def dataset_starts(data: Path, tasks: Sequence[str] | None = None, image_size: i
         camera: the dataset camera to read (default: the first whose frames exist).
         keyframes: where in the episodes to start (None or ``first``: first frames).
         keys: the dataset features read as the actions and the states (the policy's, `policy_keys`).
+        cameras: several cameras whose frames a start shows side by side (a policy's and a world
+            model's of several cameras), the primary first; default: `camera` alone.
 
     Raises:
         ValueError: no scene of `tasks` has a successful expert episode (no episode of `tasks`, for
             keyframes).
     """
-    dataset = EpisodeDataset(data, camera, keys=keys)
+    dataset = EpisodeDataset(data, camera, cameras, keys=keys)
     if image_size is not None:
         dataset = dataset.fitted(image_size, fit)
     if keyframes is not None and keyframes.sampling != "first":
@@ -312,7 +314,7 @@ def dataset_starts(data: Path, tasks: Sequence[str] | None = None, image_size: i
         episode = dataset.load(best[key])
         state = episode.env_states[0] if episode.env_states.shape[1] else episode.states[0]
         starts.append(Start(episode.info.task, episode.info.seed, episode.info.instruction,
-                            episode.frames[:1].copy(), episode.actions.astype(np.float32),
+                            episode.observed_frames[:1].copy(), episode.actions.astype(np.float32),
                             state=np.asarray(state, np.float32)))
     return starts
 

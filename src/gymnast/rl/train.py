@@ -67,6 +67,7 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
     from gymnast.reward.select import make_reward
     from gymnast.world_model.base import load_world_model
     from gymnast.world_model.ensemble import EnsembleWorldModel
+    from gymnast.world_model.views import check_policy_views
 
     env = run_spec.env
     if env.imagined and run_spec.wm is None:
@@ -78,10 +79,9 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
     device = resolve_device(config.device)
     policy = load_policy(run_spec.policy).to(device)
     cameras = getattr(policy.config, "cameras", ())
-    if env.imagined and len(cameras) > 1:
-        raise ValueError(f"the policy {run_spec.policy} sees cameras {','.join(cameras)} side by side, and the world "
-                         f"model imagines one camera's frames; practise it with --env real or sim")
     world_model = load_world_model(run_spec.wm).to(device) if run_spec.wm else None
+    if env.imagined:
+        check_policy_views(cameras, world_model, run_spec.policy, run_spec.wm)
     if levers and not isinstance(world_model, EnsembleWorldModel):
         raise ValueError(f"{levers[0]} needs a world-model ensemble to disagree (gymnast "
                          f"make-ensemble); {run_spec.wm} is a single world model")
@@ -108,7 +108,7 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
     frames = policy_frames(run_spec.policy)
     keyframes = KeyframeConfig(sampling=config.keyframes, horizon=config.horizon, per_episode=config.keyframes_per_episode)
     pool = dataset_starts(data, tasks, policy.config.image_size, frames.get("fit", "resize"),
-                          frames.get("camera"), keyframes, keys) if data else None
+                          frames.get("camera"), keyframes, keys, cameras if len(cameras) > 1 else None) if data else None
     draw_starts = StartSampler(tasks, practice or pool, env_config, config.instruction)
     envs = EnvFactory(env, policy.chunk_size, env_config, config.gap, config.workers, world_model,
                       stop_above=config.disagreement_stop or None, runner=config.runner)

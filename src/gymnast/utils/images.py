@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Sequence
 
 import numpy as np
+import torch
 from PIL import Image, ImageDraw
 
 from gymnast.utils.atomic import write_bytes
@@ -29,6 +30,29 @@ def tile_views(views: Sequence[np.ndarray]) -> np.ndarray:
     if len(shapes) > 1:
         raise ValueError(f"views to tile need one shape, got {sorted(shapes)}")
     return views[0] if len(views) == 1 else np.concatenate(list(views), axis=-2)
+
+
+def split_views(images: torch.Tensor, views: int) -> torch.Tensor:
+    """(N, ..., H, V*W, C) images of V cameras side by side -> (N*V, ..., H, W, C): each camera's
+    square on its own, an item's V views consecutive (`tile_views` puts them side by side;
+    `join_views` undoes this)."""
+    if views == 1:
+        return images
+    *lead, height, width, channels = images.shape
+    if images.ndim < 4 or width % views:
+        raise ValueError(f"images {tuple(images.shape)} are not {views} views side by side")
+    squares = images.reshape(*lead, height, views, width // views, channels)  # (N, ..., H, V, W, C)
+    return squares.movedim(-3, 1).flatten(0, 1)
+
+
+def join_views(images: torch.Tensor, views: int) -> torch.Tensor:
+    """(N*V, ..., H, W, C), an item's V views consecutive -> (N, ..., H, V*W, C) side by side:
+    the inverse of `split_views`."""
+    if views == 1:
+        return images
+    if images.ndim < 4 or images.shape[0] % views:
+        raise ValueError(f"images {tuple(images.shape)} do not hold {views} views of each item")
+    return images.unflatten(0, (-1, views)).movedim(1, -3).flatten(-3, -2)
 
 
 def contact_sheet(

@@ -34,8 +34,10 @@ class WorldModel(Protocol):
     """An action-conditioned video model over uint8 RGB frames."""
 
     context_frames: int  # C: the real frames `init_state` uses (the most recent C of those given)
-    image_size: int  # H = W
+    image_size: int  # H = W of one camera's view
     action_dim: int  # A
+    # A model of V cameras (`gymnast.world_model.views`) also has `views` (V) and `cameras` (their
+    # names), and its frames are (..., H, V*W, 3), the views side by side; one without them sees one.
 
     def init_state(self, context: torch.Tensor, generator: torch.Generator | None = None) -> Any:
         """State after the real (B, C', H, W, 3) uint8 context frames, the last one being "now".
@@ -50,12 +52,14 @@ class WorldModel(Protocol):
         ...
 
 
-def check_context(context: torch.Tensor, image_size: int) -> None:
-    """Raises ValueError unless `context` is (B, C, image_size, image_size, 3) uint8 with C >= 1."""
-    expected = f"(B, C, {image_size}, {image_size}, 3) uint8"
+def check_context(context: torch.Tensor, image_size: int, views: int = 1) -> None:
+    """Raises ValueError unless `context` is (B, C, H, V*W, 3) uint8 with C >= 1, H = W = image_size
+    and V = views (the cameras side by side, `gymnast.world_model.views`)."""
+    width = views * image_size
+    expected = f"(B, C, {image_size}, {width}, 3) uint8" + (f" ({views} views side by side)" if views > 1 else "")
     if not isinstance(context, torch.Tensor):
         raise ValueError(f"context frames must be a tensor {expected}, got {type(context).__name__}")
-    if context.ndim != 5 or tuple(context.shape[2:]) != (image_size, image_size, 3) or context.shape[1] < 1:
+    if context.ndim != 5 or tuple(context.shape[2:]) != (image_size, width, 3) or context.shape[1] < 1:
         raise ValueError(f"context frames must be {expected}, got {tuple(context.shape)}")
     if context.dtype != torch.uint8:
         raise ValueError(f"context frames must be {expected}, got dtype {context.dtype}")
@@ -224,9 +228,15 @@ def load_world_model(run: str | Path, **overrides: Any) -> WorldModel:
 
     if (Path(run) / ENSEMBLE_FILE).is_file():
         return backend("ensemble").load(Path(run), **overrides).eval()
+    cameras: list[str] = []
 
     def build(spec: dict) -> WorldModel:
+        # A backend imagines one view; the cameras it learnt side by side wrap it once loaded.
         spec = {**spec, **overrides}
+        cameras.extend(spec.pop("cameras", ()))
         return backend(spec.get("backend")).from_spec(spec)
 
-    return load_model(Path(run), build)
+    model = load_model(Path(run), build)
+    from gymnast.world_model.views import with_cameras  # views.py builds on this module
+
+    return with_cameras(model, cameras).eval()

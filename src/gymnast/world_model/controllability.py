@@ -27,6 +27,7 @@ from gymnast.envs.gap import GAPS
 from gymnast.envs.metaworld import MetaWorldEnv
 from gymnast.world_model.base import WorldModel, rollout
 from gymnast.world_model.metrics import psnr, to_unit_float
+from gymnast.world_model.views import replay_cameras
 
 
 @dataclass(frozen=True)
@@ -75,10 +76,11 @@ def check_controllability(model: WorldModel, dataset: EpisodeDataset, heldout: l
     for index in tqdm(scenes, desc="controllability", disable=not progress):
         episode = dataset.load(index)
         info = episode.info
-        env = MetaWorldEnv(info.task, EnvConfig(image_size=model.image_size, horizon=config.horizon, terminate_on_success=False),
+        env = MetaWorldEnv(info.task, EnvConfig(image_size=model.image_size, horizon=config.horizon, terminate_on_success=False,
+                                                cameras=replay_cameras(model)),
                            gap=_gap_name(info.env_variant))
         start = env.reset(seed=info.seed)[0]["image"]
-        start_psnr.append(float(psnr(to_unit_float(torch.from_numpy(start)), to_unit_float(torch.from_numpy(episode.frames[0])))))
+        start_psnr.append(float(psnr(to_unit_float(torch.from_numpy(start)), to_unit_float(torch.from_numpy(episode.observed_frames[0])))))
         sequences = np.concatenate([episode.actions[None, : config.horizon].astype(np.float32),
                                     random_sequences(config.sequences - 1, config.horizon, config.hold, model.action_dim, rng)])
         real = torch.from_numpy(np.stack([simulate(env, info.seed, s) for s in sequences]))  # (S, T, H, W, 3)

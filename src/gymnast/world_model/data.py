@@ -63,28 +63,37 @@ class EpisodeBank:
     `gymnast.data.windows.TrainingWindows` does for datasets too large for memory) would decode
     a whole episode per clip; MT10 with 30 episodes per task fits in about 1 GB.
 
+    A dataset read with several cameras gives one entry per camera of each episode, under the
+    episode's actions: a single-view model learns every camera's view from them
+    (`gymnast.world_model.views`).
+
     Args:
-        dataset: where the episodes are.
+        dataset: where the episodes are (each of its cameras read).
         indices: which episodes to load.
         progress: show a progress bar while decoding.
 
-    Attributes:
-        indices: each episode's index in its dataset.
-        roots: each episode's dataset directory (banks may hold several datasets, see `union`).
-        infos, frames, actions: each episode's facts, (T+1, H, W, 3) uint8 frames and (T, A) actions.
+    Attributes (one per entry, an episode's cameras consecutive):
+        indices: the episode's index in its dataset.
+        roots: its dataset directory (banks may hold several datasets, see `union`).
+        cameras: the camera whose frames the entry holds.
+        infos, frames, actions: the episode's facts, the camera's (T+1, H, W, 3) uint8 frames and
+            the episode's (T, A) actions.
     """
 
     def __init__(self, dataset: EpisodeDataset, indices: Sequence[int], progress: bool = False) -> None:
         if not indices:
             raise ValueError(f"{dataset.root}: no episodes to load (is the held-out fraction too large?)")
-        self.indices = list(indices)
-        self.roots = [dataset.root] * len(self.indices)
-        self.infos = [dataset.episodes[i] for i in self.indices]
-        self.frames, self.actions = [], []
-        for i in tqdm(self.indices, desc="loading episodes", disable=not progress):
+        self.indices, self.roots, self.cameras, self.infos, self.frames, self.actions = [], [], [], [], [], []
+        for i in tqdm(indices, desc="loading episodes", disable=not progress):
             episode = dataset.load(i)
-            self.frames.append(torch.from_numpy(episode.frames))  # (T+1, H, W, 3)
-            self.actions.append(torch.from_numpy(episode.actions).float())  # (T, A)
+            actions = torch.from_numpy(episode.actions).float()  # (T, A)
+            for camera, frames in (episode.views or {dataset.camera_key: episode.frames}).items():
+                self.indices.append(i)
+                self.roots.append(dataset.root)
+                self.cameras.append(camera)
+                self.infos.append(dataset.episodes[i])
+                self.frames.append(torch.from_numpy(frames))  # (T+1, H, W, 3)
+                self.actions.append(actions)
 
     @classmethod
     def union(cls, parts: Sequence[tuple[EpisodeDataset, Sequence[int]]], progress: bool = False) -> EpisodeBank:
@@ -99,7 +108,7 @@ class EpisodeBank:
             raise ValueError(f"{roots}: no episodes to load (is the held-out fraction too large?)")
         bank = banks[0]
         for other in banks[1:]:
-            for name in ("indices", "roots", "infos", "frames", "actions"):
+            for name in ("indices", "roots", "cameras", "infos", "frames", "actions"):
                 getattr(bank, name).extend(getattr(other, name))
         return bank
 

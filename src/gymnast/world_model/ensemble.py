@@ -32,6 +32,7 @@ from torch import nn
 
 from gymnast.utils.atomic import write_json
 from gymnast.world_model.base import ENSEMBLE_FILE, WorldModel, check_context, load_world_model
+from gymnast.world_model.views import model_cameras, model_views
 
 
 @dataclass(frozen=True)
@@ -66,7 +67,7 @@ class EnsembleWorldModel(nn.Module):
         members: two or more world models (nn.Modules) making frames of one size from one action space.
 
     Raises:
-        ValueError: fewer than two members, or their image sizes or action dimensions differ.
+        ValueError: fewer than two members, or their image sizes, action dimensions or cameras differ.
     """
 
     backend = "ensemble"
@@ -75,8 +76,8 @@ class EnsembleWorldModel(nn.Module):
         super().__init__()
         if len(members) < 2:
             raise ValueError(f"an ensemble needs at least two members, got {len(members)}")
-        for name in ("image_size", "action_dim"):
-            values = [getattr(m, name) for m in members]
+        for name, values in (("image_size", [m.image_size for m in members]), ("action_dim", [m.action_dim for m in members]),
+                             ("cameras", [model_cameras(m) for m in members])):
             if len(set(values)) > 1:
                 raise ValueError(f"the members' {name} differ: {values}")
         self.members = nn.ModuleList(members)
@@ -90,6 +91,14 @@ class EnsembleWorldModel(nn.Module):
         return self.members[0].image_size
 
     @property
+    def views(self) -> int:
+        return model_views(self.members[0])
+
+    @property
+    def cameras(self) -> tuple[str, ...]:
+        return model_cameras(self.members[0])
+
+    @property
     def action_dim(self) -> int:
         return self.members[0].action_dim
 
@@ -101,7 +110,7 @@ class EnsembleWorldModel(nn.Module):
 
     def init_state(self, context: torch.Tensor, generator: torch.Generator | None = None) -> EnsembleState:
         """See `WorldModel.init_state`: every member starts from the same context."""
-        check_context(context, self.image_size)
+        check_context(context, self.image_size, self.views)
         return EnsembleState(tuple(m.init_state(context, generator=generator) for m in self.members))
 
     @torch.inference_mode()

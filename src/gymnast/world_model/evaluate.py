@@ -9,6 +9,10 @@ whole-frame PSNR). The same figures are computed for the trivial predictor that 
 context frame, which the model must beat. Horizon h means the h-th imagined frame; "full" is the
 mean over every frame of the rollouts that start at t = 0, i.e. whole episodes.
 
+A world model of several cameras (`gymnast.world_model.views`) is measured on their views side by
+side, and on each camera's view alone (``per_camera``): the gripper camera's view changes far more
+than the front one's as the hand moves, so the two fail differently.
+
 For an ensemble (`gymnast.world_model.ensemble`) the frames measured are its first member's, and
 the report adds the members' per-frame disagreement (disagreement_h1 ... _full) and how well it
 predicts that member's error (see `disagreement_error`): the evidence for stopping or discounting
@@ -36,12 +40,14 @@ from gymnast.data.lerobot import EpisodeDataset, FeatureKeys
 from gymnast.utils.atomic import write_json
 from gymnast.utils.checkpoint import resolve_checkpoint
 from gymnast.utils.device import resolve_device
+from gymnast.utils.images import split_views
 from gymnast.world_model.base import load_world_model, rollout
 from gymnast.world_model.controllability import ControllabilityConfig, check_controllability
 from gymnast.world_model.data import split_episodes
 from gymnast.world_model.ensemble import EnsembleWorldModel, is_ensemble, member_paths
 from gymnast.world_model.metrics import PerceptualDistance, masked_psnr, moving_mask, pearson, psnr, ssim, summarize_horizons, to_unit_float
 from gymnast.world_model.videos import side_by_side, write_gif, write_side_by_side
+from gymnast.world_model.views import model_cameras
 
 logger = logging.getLogger(__name__)
 
@@ -80,7 +86,8 @@ def evaluate_world_model(wm: Path, data: Path, out: Path, config: WorldModelEval
     model = model.to(resolve_device(config.device))
     fraction = heldout_fraction(Path(wm))
     ensemble = isinstance(model, EnsembleWorldModel)
-    dataset = EpisodeDataset(data, config.camera, keys=config.keys)
+    cameras = model_cameras(model)
+    dataset = EpisodeDataset(data, config.camera, cameras or None, keys=config.keys)
     if model_image_size(dataset.camera_shape, model.image_size) != model.image_size:
         raise ValueError(f"{data}: frames are {dataset.camera_shape}, the world model makes {model.image_size}x{model.image_size}")
     dataset = dataset.fitted(model.image_size, frame_fit(Path(wm)))
@@ -91,12 +98,13 @@ def evaluate_world_model(wm: Path, data: Path, out: Path, config: WorldModelEval
         raise ValueError(f"{data} has no held-out episodes for this run (held-out fraction {fraction})")
     perceptual = PerceptualDistance()
     rows: dict[str, list[np.ndarray]] = defaultdict(list)  # measure -> one (T,) array per rollout
+    camera_rows = {camera: defaultdict(list) for camera in cameras}  # each view's, of a multi-view model
     tasks, full_rollout = [], []
     video_dir = out.with_name(out.stem + "_videos")
     generator = torch.Generator().manual_seed(0)  # a generative backend samples: one seed, one report
     for n, index in enumerate(tqdm(heldout, desc="eval-wm", disable=not progress)):
         episode = dataset.load(index)
-        frames, actions = torch.from_numpy(episode.frames), torch.from_numpy(episode.actions).float()
+        frames, actions = torch.from_numpy(episode.observed_frames), torch.from_numpy(episode.actions).float()
         for start in range(0, len(actions), config.start_every):
             context = frames[max(0, start + 1 - model.context_frames) : start + 1][None]
             imagination = rollout(model, context, actions[None, start:], generator)
@@ -104,10 +112,12 @@ def evaluate_world_model(wm: Path, data: Path, out: Path, config: WorldModelEval
             real = frames[start + 1 :]
             if ensemble:
                 rows["disagreement"].append(imagination.disagreement[0].numpy())
-            for name, values in _measure(imagined, real, context[0], perceptual).items():
+            for name, values in _measure_against_copy(imagined, real, context[0], perceptual).items():
                 rows[name].append(values)
-            for name, values in _measure(context[0, -1:].expand_as(real), real, context[0], perceptual).items():
-                rows[f"copy_last_{name}"].append(values)
+            squares = [split_views(x[None], len(cameras)) if cameras else None for x in (imagined, real, context[0])]
+            for v, camera in enumerate(cameras):
+                for name, values in _measure_against_copy(*(x[v] for x in squares), perceptual).items():
+                    camera_rows[camera][name].append(values)
             tasks.append(episode.info.task)
             full_rollout.append(start == 0)
             name = f"{episode.info.task}_{episode.info.behaviour}_{episode.info.seed}"
@@ -119,6 +129,9 @@ def evaluate_world_model(wm: Path, data: Path, out: Path, config: WorldModelEval
                 write_gif(video_dir / f"{name}.gif", panels, fps=dataset.fps // 9, scale=1)
     table = {name: _pad(values) for name, values in rows.items()}  # name -> (N, T_max) with NaN
     report = {**_summary(table, np.array(full_rollout)), **(disagreement_error(table) if ensemble else {}), "per_task": {}}
+    if cameras:  # the figures above are over the views side by side; these are each view's own
+        report["per_camera"] = {camera: _summary({k: _pad(v) for k, v in by_measure.items()}, np.array(full_rollout))
+                                for camera, by_measure in camera_rows.items()}
     for task in sorted(set(tasks)):
         chosen = np.array([t == task for t in tasks])
         report["per_task"][task] = _summary({k: v[chosen] for k, v in table.items()}, np.array(full_rollout)[chosen])
@@ -177,6 +190,14 @@ def _ranks(x: np.ndarray) -> np.ndarray:
     return (np.bincount(tie, weights=ranks) / counts)[tie]
 
 
+def _measure_against_copy(imagined: torch.Tensor, real: torch.Tensor, context: torch.Tensor,
+                          perceptual: PerceptualDistance) -> dict:
+    """`_measure` of the imagined frames, and (as ``copy_last_<measure>``) of repeating the last
+    (C, H, W, 3) context frame, the trivial predictor the model must beat."""
+    copy = _measure(context[-1:].expand_as(real), real, context, perceptual)
+    return _measure(imagined, real, context, perceptual) | {f"copy_last_{name}": values for name, values in copy.items()}
+
+
 def _measure(imagined: torch.Tensor, real: torch.Tensor, context: torch.Tensor, perceptual: PerceptualDistance) -> dict:
     """Per-frame measures of (T, H, W, 3) uint8 `imagined` against `real`, as (T,) numpy arrays."""
     pred, target = to_unit_float(imagined), to_unit_float(real)  # (T, 3, H, W)
@@ -212,6 +233,13 @@ def format_report(report: dict) -> str:
             model, copy = report.get(f"{name}_{h}"), report.get(f"copy_last_{name}_{h}")
             cells.append("-" if model is None or copy is None else f"{model:.{digits}f}/{copy:.{digits}f}")
         lines.append(f"{name:<14}" + "".join(f"{c:>16}" for c in cells))
+    for camera, figures in report.get("per_camera", {}).items():
+        def pair(name: str, h: str) -> str:
+            model, copy = figures.get(f"{name}_{h}"), figures.get(f"copy_last_{name}_{h}")
+            return "-" if model is None or copy is None else f"{model:.2f}/{copy:.2f}"
+
+        cells = ", ".join(f"{name} {h} {pair(name, h)}" for name, h in (("psnr", "h32"), ("moving_psnr", "h32"), ("psnr", "full")))
+        lines.append(f"camera {camera}: {cells} (model/repeat last frame)")
     if "disagreement_error_corr" in report:
         lines.append(f"ensemble disagreement: h1 {report['disagreement_h1']}, h32 {report['disagreement_h32']}; "
                      f"correlation with the first member's error {report['disagreement_error_corr']} "

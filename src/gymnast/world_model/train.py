@@ -45,6 +45,7 @@ from gymnast.utils.optim import gradient_step, warmup_cosine
 from gymnast.utils.settings import from_json, saved_settings
 from gymnast.world_model.base import WorldModel, rollout
 from gymnast.world_model.data import ClipBatch, EpisodeBank, split_episodes
+from gymnast.world_model.views import with_cameras
 from gymnast.world_model.embedded import EmbeddedWorldModel, EmbeddedWorldModelConfig
 from gymnast.world_model.flow import FlowWorldModel, FlowWorldModelConfig, flow_clip_loss
 from gymnast.world_model.metrics import moving_mask, psnr, to_unit_float
@@ -96,6 +97,10 @@ class WorldModelTrainConfig:
     scene hash, so a scene held out of one is held out of all of them."""
     camera: str | None = None
     """Camera to read from the dataset (e.g. ``front``); default: the first camera whose frames exist."""
+    cameras: tuple[str, ...] = ()
+    """Several cameras to imagine side by side, the primary first (e.g. ``front,gripper``): one
+    single-view model learns every camera's view (`gymnast.world_model.views`); default: `camera`
+    alone. Saved with the model, so RL starts it from the same views a policy of those cameras sees."""
     keys: FeatureKeys = FeatureKeys()
     """Which dataset features are the actions and the states (--action-key, --state-key); saved with the run."""
     fit: Fit = "resize"
@@ -179,7 +184,7 @@ def train_world_model(data: Path, out: Path, config: WorldModelTrainConfig, resu
         FileNotFoundError: `config.init` has no checkpoint.
         DatasetError: a dataset lacks what training needs (the message names the file and field).
     """
-    datasets = [EpisodeDataset(path, config.camera, keys=config.keys) for path in (data, *config.extra_data)]
+    datasets = [EpisodeDataset(path, config.camera, config.cameras or None, keys=config.keys) for path in (data, *config.extra_data)]
     if config.init is not None and not resume:  # on resume the weights come from the run's own checkpoint
         config = dataclasses.replace(config, init=resolve_checkpoint(config.init))
     # A resumed run keeps the action range its weights were trained with, whatever `config` says.
@@ -206,8 +211,10 @@ def _train(data: Path, out: Path, config: WorldModelTrainConfig, datasets: list[
     schedule = torch.optim.lr_scheduler.LambdaLR(optimizer, warmup_cosine(config.warmup_steps, config.steps))
     sampler = torch.Generator().manual_seed(config.seed)
     validation = heldout.sample(_VALIDATION_CLIPS, context, config.future, torch.Generator().manual_seed(1)) if heldout else None
-    resolved = {"train": _settings(config), "model": model.spec(), "data": str(data), "action_stats": stats.to_dict(),
-                "train_episodes": len(bank), "heldout_episodes": len(heldout) if heldout else 0, "datasets": counts}
+    resolved = {"train": _settings(config), "model": with_cameras(model, dataset.cameras).spec(), "data": str(data),
+                "action_stats": stats.to_dict(), "datasets": counts,
+                "train_episodes": sum(c["train_episodes"] for c in counts),
+                "heldout_episodes": sum(c["heldout_episodes"] for c in counts)}
     start = resume_training(out, model, optimizer, schedule, sampler) if resume else 0
     if resume:
         logger.info("resumed %s at step %d", out, start)
@@ -310,7 +317,8 @@ def load_banks(datasets: Sequence[EpisodeDataset], heldout_fraction: float,
 
 
 # Settings that change how the weights run, not what they are: a fine-tuning run may pick its own.
-_WEIGHT_FREE = ("bf16", "reanchor_every", "sample_steps", "context_noise", "guidance")
+# The cameras too: one view's weights start a model of several (`gymnast.world_model.views`).
+_WEIGHT_FREE = ("bf16", "reanchor_every", "sample_steps", "context_noise", "guidance", "cameras")
 
 
 def build_model(config: WorldModelTrainConfig) -> EmbeddedWorldModel | FlowWorldModel:
