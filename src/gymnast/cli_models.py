@@ -290,7 +290,7 @@ def train_judge(
         camera: the dataset camera to read, by name (front: observation.images.front) or by feature key
             (image, observation.images.top); default: its first video (else image) feature.
         cameras: several dataset cameras the per-frame judges see side by side, the primary first
-            (e.g. front,gripper; not with --wm, whose world model imagines one). Default: --camera alone.
+            (e.g. front,gripper; with --wm, a world model of the same cameras). Default: --camera alone.
         fit: how frames that are not the model's square size are fitted: resize (squash the whole
             frame) or crop (the central square); saved with the run.
         device: auto (CUDA when torch sees a GPU, else the CPU), cpu, cuda or cuda:N; --resume may change it.

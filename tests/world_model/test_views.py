@@ -82,3 +82,11 @@ def test_eval_wm_measures_each_cameras_view(two_camera_wm, two_camera_demos, tmp
     for figures in report["per_camera"].values():
         assert figures["psnr_h1"] > 0 and "copy_last_moving_psnr_h8" in figures
     assert report["controllability"]["scenes"] == 1  # replayed in the simulator with both cameras rendered
+
+
+def test_a_judge_of_two_cameras_learns_from_their_re_imagined_views(two_camera_wm, two_camera_demos, tmp_path):
+    run = tmp_path / "judge"
+    main(["train-judge", "--data", str(two_camera_demos), "--out", str(run), "--preset", "debug", "--cameras",
+          "front,gripper", "--wm", str(two_camera_wm)])
+    saved = json.loads((run / "config.json").read_text())
+    assert saved["model"]["cameras"] == list(TWO) and saved["wm"] == str(two_camera_wm)

@@ -42,6 +42,7 @@ from gymnast.utils.metrics import MetricsLog
 from gymnast.utils.optim import gradient_step, warmup_cosine
 from gymnast.utils.settings import from_json, saved_settings
 from gymnast.world_model.base import load_world_model, rollout
+from gymnast.world_model.views import model_cameras
 from gymnast.world_model.data import split_episodes
 
 logger = logging.getLogger(__name__)
@@ -164,10 +165,12 @@ def load_videos(dataset: EpisodeDataset, indices: list[int], wm: Path | None, pr
         episodes.append(torch.from_numpy(episode.actions).float())
     if wm is None:
         return videos
-    if len(dataset.cameras) > 1:
-        raise ValueError(f"{dataset.root} is read with cameras {','.join(dataset.cameras)}, and the world model "
-                         f"{wm} imagines one camera's frames: train a judge of several cameras without --wm")
     model = load_world_model(wm).to(device or "cpu")
+    imagines = model_cameras(model)
+    if (len(dataset.cameras) > 1 or imagines) and tuple(dataset.cameras) != imagines:
+        raise ValueError(f"{dataset.root} is read with cameras {','.join(dataset.cameras)}, but the world model {wm} "
+                         f"imagines {','.join(imagines) or 'one camera'}: re-imagine with a world model of the "
+                         "judge's cameras (`gymnast train-wm --cameras`), or train the judge without --wm")
     # Episodes of similar length share a batch; shorter ones are padded with zero actions at the
     # end and cut back, which changes none of their frames: frame t follows actions up to t only.
     order = sorted(range(len(episodes)), key=lambda n: len(episodes[n]))
