@@ -28,10 +28,11 @@ from gymnast.utils.atomic import write_json
 RESULTS = Path(__file__).parent / "results" / "real_env.json"
 
 
-def run_steps(job: tuple[str, int, int]) -> tuple[int, float]:
-    """Steps an env with random actions; returns (steps, seconds), env construction excluded."""
-    task, steps, image_size = job
-    env = MetaWorldEnv(task, EnvConfig(image_size=image_size))
+def run_steps(job: tuple[str, int, int, tuple[str, ...]]) -> tuple[int, float]:
+    """Steps an env with random actions, rendering `cameras`; returns (steps, seconds), env
+    construction excluded."""
+    task, steps, image_size, cameras = job
+    env = MetaWorldEnv(task, EnvConfig(image_size=image_size, cameras=cameras))
     actions = np.random.default_rng(0).uniform(-1, 1, size=(steps, 4)).astype(np.float32)
     env.reset(seed=0)
     start = time.perf_counter()
@@ -44,9 +45,10 @@ def run_steps(job: tuple[str, int, int]) -> tuple[int, float]:
     return steps, elapsed
 
 
-def steps_per_second(task: str, steps: int, image_size: int, processes: int) -> float:
-    """Total steps of all processes divided by the slowest process's stepping time."""
-    results = list(parallel_map(run_steps, [(task, steps, image_size)] * processes, processes))
+def steps_per_second(task: str, steps: int, image_size: int, processes: int, cameras: tuple[str, ...] = ("front",)) -> float:
+    """Total steps of all processes divided by the slowest process's stepping time (each step
+    rendering every one of `cameras`)."""
+    results = list(parallel_map(run_steps, [(task, steps, image_size, cameras)] * processes, processes))
     return sum(n for n, _ in results) / max(t for _, t in results)
 
 

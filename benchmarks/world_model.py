@@ -1,7 +1,8 @@
 """Imagined frames per second against the real env's rendered steps per second, on this machine.
 
 The world model imagines B rollouts at once (one `step` call per chunk of K actions, one frame per
-action); the real env renders one step at a time. Both are measured in the same run, so the
+action); the real env renders one step at a time. A frame is one observation: for a world model of
+several cameras, every camera's view of it (the real env then renders those cameras too). Both are measured in the same run, so the
 ratio is not fooled by a busy machine: batch-64 imagination and the real env alternate for a few
 rounds and the medians are compared. The real env is also measured in as many processes as the
 world model has threads (the same cores), a stricter comparison reported beside it.
@@ -34,18 +35,23 @@ from gymnast.utils.atomic import write_json
 from gymnast.world_model.base import load_world_model
 from gymnast.world_model.embedded import EmbeddedWorldModel, EmbeddedWorldModelConfig
 from gymnast.world_model.state_model import load_state_model
+from gymnast.world_model.views import model_views, replay_cameras
 
 
 RESULTS = Path(__file__).parent / "results" / "world_model.json"
 
 
+def random_context(model, batch: int) -> torch.Tensor:
+    """(B, C, H, V*W, 3) uint8 noise frames of the model's views side by side."""
+    size = model.image_size
+    return torch.randint(0, 256, (batch, model.context_frames, size, model_views(model) * size, 3), dtype=torch.uint8)
+
+
 def imagined_fps(model, batch: int, chunk: int, steps: int) -> tuple[float, float]:
     """(frames per second, the process's peak resident memory so far in MiB) for `steps` chunks of a
     batch of rollouts."""
-    size = model.image_size
-    context = torch.randint(0, 256, (batch, model.context_frames, size, size, 3), dtype=torch.uint8)
     actions = torch.rand(steps, batch, chunk, model.action_dim) * 2 - 1
-    state = model.init_state(context)
+    state = model.init_state(random_context(model, batch))
     model.step(state, actions[0])  # warm-up: first calls allocate and pick kernels
     started = time.perf_counter()
     for k in range(steps):
@@ -57,8 +63,7 @@ def imagined_fps(model, batch: int, chunk: int, steps: int) -> tuple[float, floa
 def grounded_fps(model, state_model, batch: int, chunk: int, steps: int) -> float:
     """Frames per second of imagining `steps` chunks of a batch with the video model and, for the
     same actions, the state model's states and rewards (as `--reward state:RUN` scores a rollout)."""
-    size = model.image_size
-    context = torch.randint(0, 256, (batch, model.context_frames, size, size, 3), dtype=torch.uint8)
+    context = random_context(model, batch)
     actions = torch.rand(steps, batch, chunk, model.action_dim) * 2 - 1
     start, text = torch.randn(batch, state_model.config.state_dim), torch.randn(batch, state_model.config.text_dim)
     state = model.init_state(context)
@@ -85,6 +90,7 @@ def main() -> None:
 
     model = load_world_model(args.wm) if args.wm else EmbeddedWorldModel(EmbeddedWorldModelConfig()).eval()
     threads = torch.get_num_threads()
+    cameras = replay_cameras(model)  # the real env renders what the model imagines
     result: dict = {}
     fps, peak = imagined_fps(model, 1, args.chunk, args.steps * 8)
     result |= {"imagined_fps_b1": round(fps, 1), "peak_rss_mib_b1": round(peak, 1)}
@@ -100,13 +106,13 @@ def main() -> None:
             grounded.append(grounded_fps(model, state_model, 64, args.chunk, args.steps))
         fps, peak = imagined_fps(model, 64, args.chunk, args.steps)
         imagined.append(fps)
-        real.append(steps_per_second("drawer-open-v3", args.real_steps, model.image_size, 1))
+        real.append(steps_per_second("drawer-open-v3", args.real_steps, model.image_size, 1, cameras))
     result["imagined_fps_b64"] = round(statistics.median(imagined), 1)
     result["peak_rss_mib_b64"] = round(peak, 1)
     real_one = statistics.median(real)
     fps, peak = imagined_fps(model, 256, args.chunk, args.steps)  # last: the peak memory only grows
     result |= {"imagined_fps_b256": round(fps, 1), "peak_rss_mib_b256": round(peak, 1)}
-    real_all = steps_per_second("drawer-open-v3", args.real_steps, model.image_size, threads)
+    real_all = steps_per_second("drawer-open-v3", args.real_steps, model.image_size, threads, cameras)
     result |= {
         "real_env_fps": round(real_one, 1),
         f"real_env_fps_{threads}proc": round(real_all, 1),
@@ -115,6 +121,7 @@ def main() -> None:
         f"ratio_b64_vs_{threads}proc": round(result["imagined_fps_b64"] / real_all, 2),
         "torch_threads": threads,
         "image_size": model.image_size,
+        "cameras": list(cameras),
         "chunk": args.chunk,
         "model": str(args.wm) if args.wm else "untrained default architecture",
         "parameters": sum(p.numel() for p in model.parameters()),

@@ -65,6 +65,10 @@ class CollectConfig:
     failure_fraction: float = 0.25
     """Extra failure episodes per task (random actions, another task's expert), as a fraction of
     episodes_per_task, rounded up; 0 records none. Not used when recording a policy."""
+    near_misses: int = 0
+    """Near-miss episodes per task: the task's expert acting as if the objects and the goal were a
+    few centimetres off, so its hand misses them and nothing moves (`gymnast.envs.experts`),
+    on the same seeds as the expert episodes. Not used when recording a policy."""
     first_seed: int = 0
     """Seed of each task's first episode; episode i uses first_seed + i (data seeds only)."""
     gap: str = "none"
@@ -81,11 +85,12 @@ class CollectConfig:
     """Cameras, image size and horizon."""
 
     def __post_init__(self) -> None:
-        if self.episodes_per_task < 0:
-            raise ValueError(f"episodes_per_task must be >= 0, got {self.episodes_per_task}")
+        if self.episodes_per_task < 0 or self.near_misses < 0:
+            raise ValueError(f"episodes_per_task and near_misses must be >= 0, got {self.episodes_per_task} "
+                             f"and {self.near_misses}")
         if not self.noise or any(n < 0 for n in self.noise):
             raise ValueError(f"noise must be one or more non-negative levels, got {self.noise}")
-        last = self.first_seed + max(self.episodes_per_task, 1) - 1
+        last = self.first_seed + max(self.episodes_per_task, self.near_misses, 1) - 1
         if self.first_seed not in DATA_SEEDS or last not in DATA_SEEDS:
             raise ValueError(
                 f"seeds {self.first_seed}..{last} leave the data seed range "
@@ -145,6 +150,8 @@ def plan_episodes(config: CollectConfig, behaviour: str | None = None) -> list[E
         for i in range(0 if behaviour else config.failures_per_task):
             failure = ("random", "wrong_task_expert")[i % 2]
             jobs.append(EpisodeJob(task, failure, 0.0, config.first_seed + i, config.gap, config.env))
+        for i in range(0 if behaviour else config.near_misses):
+            jobs.append(EpisodeJob(task, "near_miss_expert", 0.0, config.first_seed + i, config.gap, config.env))
     return jobs
 
 

@@ -29,7 +29,8 @@ BEHAVIOURS = (*SCRIPTED_BEHAVIOURS, POLICY)
 
 expert: the task's scripted Meta-World policy; noisy_expert: the same with Gaussian action noise;
 random: uniform random actions; wrong_task_expert: the scripted policy of another task (a
-plausible-looking failure); policy: a learned policy's own rollouts from the camera image,
+plausible-looking failure); near_miss_expert: the task's scripted policy acting as if the objects
+and the goal were a few centimetres off (its hand misses them; `gymnast.envs.experts`); policy: a learned policy's own rollouts from the camera image,
 recorded as ``policy`` or ``policy-<tag>`` (see `policy_behaviour`).
 """
 _POLICY_TAG = re.compile(r"[0-9a-z]+")

@@ -2,8 +2,12 @@
 
 Meta-World ships a hand-written policy per task that reads the full simulator state. Datasets
 need more than its successes: world models and judges must also see what failure looks like, so
-there are noisy experts, random actions, and the expert of another task (motion that looks
-purposeful but does the wrong thing).
+there are noisy experts, random actions, the expert of another task (motion that looks
+purposeful but does the wrong thing), and near misses: the task's own expert acting as if the
+objects and the goal were a few centimetres away from where they are, so its hand closes on the
+air beside the handle, puck, button or peg and nothing moves. A world model that saw only
+successes learns that the object moves when the hand comes near; near misses make it earn "the
+object moves" by contact.
 """
 
 from __future__ import annotations
@@ -17,7 +21,7 @@ from metaworld.policies import ENV_POLICY_MAP
 
 from gymnast.envs.tasks import MT50, check_task
 
-SCRIPTED_BEHAVIOURS = ("expert", "noisy_expert", "random", "wrong_task_expert")
+SCRIPTED_BEHAVIOURS = ("expert", "noisy_expert", "random", "wrong_task_expert", "near_miss_expert")
 """The behaviours that act from the simulator state (`make_behaviour`); the episode schema names
 them (`gymnast.data.schema.BEHAVIOURS`)."""
 
@@ -53,6 +57,40 @@ class ScriptedExpert:
         return np.clip(action, -1.0, 1.0)
 
 
+NEAR_MISS_CM = 5.0
+"""How far a near miss's expert believes the scene to be from where it is, horizontally."""
+
+# Where Meta-World's 39-number state holds positions (x, y, z): the first and second object, the
+# same two one step before, and the goal. The hand (0:3, 18:21) is left where it is.
+_SCENE_POSITIONS = (slice(4, 7), slice(11, 14), slice(22, 25), slice(29, 32), slice(36, 39))
+
+
+class NearMissExpert:
+    """The task's scripted policy acting on a state whose objects and goal are moved by `offset`
+    (metres; the hand stays): it reaches, grasps and pushes a few centimetres beside them.
+
+    Args:
+        task: whose policy to run.
+        offset: (3,) displacement of every object position and of the goal in the state the policy reads.
+    """
+
+    def __init__(self, task: str, offset: np.ndarray) -> None:
+        self._expert = ScriptedExpert(task)
+        self._offset = np.asarray(offset, dtype=np.float64)
+
+    def __call__(self, env_state: np.ndarray) -> np.ndarray:
+        believed = np.array(env_state, dtype=np.float64)
+        for where in _SCENE_POSITIONS:
+            believed[where] += self._offset
+        return self._expert(believed)
+
+
+def near_miss_offset(rng: np.random.Generator) -> np.ndarray:
+    """A horizontal displacement of `NEAR_MISS_CM` in a random direction, in metres."""
+    angle = rng.uniform(0.0, 2 * np.pi)
+    return NEAR_MISS_CM / 100 * np.array([np.cos(angle), np.sin(angle), 0.0])
+
+
 class RandomActions:
     """Uniform random actions (the noise argument is unused: they are as noisy as it gets)."""
 
@@ -78,4 +116,6 @@ def make_behaviour(behaviour: str, task: str, noise: float, seed: int) -> Behavi
         return RandomActions(rng)
     if behaviour == "wrong_task_expert":
         return ScriptedExpert(wrong_task_for(task, seed), noise, rng)
+    if behaviour == "near_miss_expert":
+        return NearMissExpert(task, near_miss_offset(rng))
     raise ValueError(f"unknown behaviour {behaviour!r}; choose one of {SCRIPTED_BEHAVIOURS}")
