@@ -90,3 +90,14 @@ def test_a_judge_of_two_cameras_learns_from_their_re_imagined_views(two_camera_w
           "front,gripper", "--wm", str(two_camera_wm)])
     saved = json.loads((run / "config.json").read_text())
     assert saved["model"]["cameras"] == list(TWO) and saved["wm"] == str(two_camera_wm)
+
+
+def test_the_flow_backend_imagines_two_cameras_too(two_camera_demos, tmp_path):
+    config = dataclasses.replace(wm_preset("debug", "flow"), cameras=TWO, heldout_fraction=0.0)
+    train_world_model(two_camera_demos, tmp_path / "flow", config, progress=False)
+    model = load_world_model(tmp_path / "flow")
+    assert isinstance(model, MultiViewWorldModel) and type(model.model).__name__ == "FlowWorldModel"
+    generator = torch.Generator().manual_seed(0)
+    state = model.init_state(torch.zeros(2, 1, 32, 64, 3, dtype=torch.uint8), generator=generator)
+    _, frames = model.step(state, torch.zeros(2, 3, 4), generator=generator)
+    assert frames.shape == (2, 3, 32, 64, 3)
