@@ -125,7 +125,7 @@ def main() -> None:
         "chunk": args.chunk,
         "model": str(args.wm) if args.wm else "untrained default architecture",
         "parameters": sum(p.numel() for p in model.parameters()),
-        "bf16": getattr(getattr(model, "config", None), "bf16", None),
+        "bf16": getattr(getattr(getattr(model, "model", model), "config", None), "bf16", None),  # a multi-view model's backend's
         "machine": {"cpu_count": os.cpu_count(), "platform": platform.platform()},
     }
     if other is not None:  # (its memory is in the peaks above from batch 64 on)
