@@ -7,6 +7,7 @@ import json
 from pathlib import Path
 
 import pytest
+import torch
 from robot_datasets import write_robot_dataset
 
 from gymnast.cli import main
@@ -164,7 +165,7 @@ def test_rl_on_another_robot_names_what_it_cannot_do(extra, message, robot_model
     assert message in capsys.readouterr().err
 
 
-def test_another_robots_two_cameras_train_a_policy_and_a_judge_that_see_both(tmp_path):
+def test_another_robots_two_cameras_train_a_policy_a_judge_and_a_world_model_that_see_both(tmp_path):
     data = write_robot_dataset(tmp_path / "data", episodes=6, steps=10, height=64, width=80, cameras=("top", "wrist"))
     main(["sft", "--data", str(data), "--out", str(tmp_path / "sft"), "--preset", "debug", "--cameras", "top,wrist"])
     policy = load_policy(tmp_path / "sft")
@@ -172,3 +173,8 @@ def test_another_robots_two_cameras_train_a_policy_and_a_judge_that_see_both(tmp
     main(["train-judge", "--data", str(data), "--out", str(tmp_path / "judge"), "--preset", "debug",
           "--cameras", "top,wrist"])
     assert json.loads((tmp_path / "judge" / "config.json").read_text())["model"]["cameras"] == ["top", "wrist"]
+    main(["train-wm", "--data", str(data), "--out", str(tmp_path / "wm"), "--preset", "debug", "--cameras", "top,wrist"])
+    model = load_world_model(tmp_path / "wm")
+    assert model.cameras == ("top", "wrist") and model.image_size == 96  # each 64x80 view fitted to 96 px
+    _, frames = model.step(model.init_state(torch.zeros(1, 1, 96, 192, 3, dtype=torch.uint8)), torch.zeros(1, 2, 7))
+    assert frames.shape == (1, 2, 96, 192, 3)
