@@ -31,13 +31,15 @@ class EnvFactory:
         world_model: what the imagined env imagines with.
         stop_above: the imagined env stops a rollout before its first frame whose ensemble
             disagreement exceeds this (`BatchedImaginedEnv`); None never stops.
+        batch: rollouts per evaluation batch (`gymnast.rl.evaluate.evaluate_in_env`) until `train`
+            sets it to the training batch. One runs a single episode at a time, in this process.
     """
 
     def __init__(self, kind: EnvKind, chunk_size: int, config: EnvConfig, gap: str, workers: int, world_model=None,
-                 stop_above: float | None = None, runner: str = "local") -> None:
+                 stop_above: float | None = None, runner: str = "local", batch: int = 1) -> None:
         self.kind, self.chunk_size, self.config, self.gap, self.workers = kind, chunk_size, config, gap, workers
         self.world_model, self.stop_above, self.runner = world_model, stop_above, runner
-        self.batch = 1
+        self.batch = batch
         self._envs: dict[tuple[str, int], VectorEnv] = {}
 
     def train(self, num_envs: int) -> VectorEnv:

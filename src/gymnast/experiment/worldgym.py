@@ -164,10 +164,8 @@ class WorldGym:
         if hasattr(policy, "reseed"):  # a noisy policy: each estimate draws its own noise from the start
             policy.reseed()
         if policy.chunk_size not in self._factories:
-            factory = EnvFactory(IMAGINED, policy.chunk_size, self.env, "none", self.workers, self.world_model,
-                                 runner=self.runner)
-            factory.batch = self.batch
-            self._factories[policy.chunk_size] = factory
+            self._factories[policy.chunk_size] = EnvFactory(IMAGINED, policy.chunk_size, self.env, "none", self.workers,
+                                                            self.world_model, runner=self.runner, batch=self.batch)
         values = evaluate_in_env(self._factories[policy.chunk_size], kind, policy, self.judge, self.starts, prefix="wg")
         if "wg_success" not in values:
             raise RuntimeError(f"none of the {len(self.starts)} {kind} rollouts could be judged")

@@ -110,12 +110,15 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
     pool = dataset_starts(data, tasks, policy.config.image_size, frames.get("fit", "resize"),
                           frames.get("camera"), keyframes, keys, cameras if len(cameras) > 1 else None) if data else None
     draw_starts = StartSampler(tasks, practice or pool, env_config, config.instruction)
+    # Evaluations run in batches of the training batch, before the first step too (the evaluation
+    # before training used to run one episode at a time).
+    batch = config.starts_per_step * config.group_size
     envs = EnvFactory(env, policy.chunk_size, env_config, config.gap, config.workers, world_model,
-                      stop_above=config.disagreement_stop or None, runner=config.runner)
+                      stop_above=config.disagreement_stop or None, runner=config.runner, batch=batch)
     # Segments from keyframes are shorter than the task's episodes, which evaluation runs whole.
     eval_envs = envs if config.evaluation_horizon == config.horizon else EnvFactory(
         env, policy.chunk_size, dataclasses.replace(env_config, horizon=config.evaluation_horizon), config.gap,
-        config.workers, world_model, stop_above=config.disagreement_stop or None, runner=config.runner)
+        config.workers, world_model, stop_above=config.disagreement_stop or None, runner=config.runner, batch=batch)
     resolved = {"rl": dataclasses.asdict(config), "run": run_spec.to_json(), "model": policy.spec(),
                 "data": str(data) if data else None, "frames": frames}
 
