@@ -111,8 +111,9 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
                           frames.get("camera"), keyframes, keys, cameras if len(cameras) > 1 else None) if data else None
     draw_starts = StartSampler(tasks, practice or pool, env_config, config.instruction)
     # Evaluations run in batches of the training batch, before the first step too (the evaluation
-    # before training used to run one episode at a time).
-    batch = config.starts_per_step * config.group_size
+    # before training used to run one episode at a time), at most 32 episodes per simulator process:
+    # each process keeps up to twice its episodes' scenes built, tens of MB each (`SimVectorEnv`).
+    batch = min(config.starts_per_step * config.group_size, 32 * config.workers)
     envs = EnvFactory(env, policy.chunk_size, env_config, config.gap, config.workers, world_model,
                       stop_above=config.disagreement_stop or None, runner=config.runner, batch=batch)
     # Segments from keyframes are shorter than the task's episodes, which evaluation runs whole.
