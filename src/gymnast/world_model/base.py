@@ -204,6 +204,10 @@ BACKENDS = {"embedded": "gymnast.world_model.embedded:EmbeddedWorldModel",
             "ensemble": "gymnast.world_model.ensemble:EnsembleWorldModel"}
 """Backend name -> "module:Class", imported only when a checkpoint (or an ensemble directory) asks for it."""
 
+MULTI_VIEW = "gymnast.world_model.views:MultiViewWorldModel"
+"""What wraps a backend saved with several cameras (its spec's ``cameras``); named, like the
+backends, because it builds on this module."""
+
 ENSEMBLE_FILE = "ensemble.json"
 """A directory holding this file is an ensemble of world-model runs (see `gymnast.world_model.ensemble`)."""
 
@@ -223,8 +227,7 @@ def load_world_model(run: str | Path, **overrides: Any) -> WorldModel:
     def backend(name: Any) -> Any:
         if name not in BACKENDS:
             raise ValueError(f"{run}: model.backend is {name!r}; known backends: {sorted(BACKENDS)}")
-        module, attribute = BACKENDS[name].split(":")
-        return getattr(import_module(module), attribute)
+        return _named_class(BACKENDS[name])
 
     if (Path(run) / ENSEMBLE_FILE).is_file():
         return backend("ensemble").load(Path(run), **overrides).eval()
@@ -237,6 +240,10 @@ def load_world_model(run: str | Path, **overrides: Any) -> WorldModel:
         return backend(spec.get("backend")).from_spec(spec)
 
     model = load_model(Path(run), build)
-    from gymnast.world_model.views import with_cameras  # views.py builds on this module
+    return _named_class(MULTI_VIEW)(model, cameras).eval() if len(cameras) > 1 else model
 
-    return with_cameras(model, cameras).eval()
+
+def _named_class(path: str) -> Any:
+    """The class a "module:Class" string names, its module imported now."""
+    module, attribute = path.split(":")
+    return getattr(import_module(module), attribute)
