@@ -5,6 +5,10 @@ models use it):
 - ``imagined_fps_b1024`` / ``_b4096``: frames per second through `BatchedImaginedEnv` (the env RL
   runs in, frames copied back to the host every step, not just the model) with the committed
   world model, batches of 1024 and 4096 rollouts of random action chunks;
+  ``model_fps_b*``: the world model's own `step` at the same batches, nothing copied to the host
+  (what the env could reach);
+  ``imagined_obs_per_s_two_cameras_b*``: the same with two cameras' views of every rollout
+  (observations of both views per second);
 - ``wm_train_step_s``: one optimizer step of `gymnast train-wm` (clips of 32 future frames,
   backpropagated through the rollout) at batch 64, for the default model and for the larger
   model of the embedded backend's gpu preset when it has one;
@@ -45,10 +49,13 @@ from gymnast.world_model.base import load_world_model
 from gymnast.world_model.data import ClipBatch
 from gymnast.world_model.embedded import EmbeddedWorldModel, EmbeddedWorldModelConfig
 from gymnast.world_model.train import WM_PRESETS, clip_loss
+from gymnast.world_model.views import model_views, with_cameras
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = Path(__file__).parent / "results" / "gpu.json"
 WORLD_MODEL, JUDGE = ROOT / "results/world_model/wm", ROOT / "results/judge/video_judge"
+TWO_CAMERAS = ("front", "gripper")
+SKIPPABLE = ("wm", "policy", "rl")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -91,11 +98,12 @@ def timed(fn, device: torch.device, repeats: int) -> float:
 
 
 def imagined_env_fps(model, batch: int, steps: int, chunk: int = 5) -> float:
-    """Frames per second of `steps` env steps of `batch` rollouts (after one warm-up step)."""
+    """Observations per second of `steps` env steps of `batch` rollouts (after one warm-up step)."""
     rng = np.random.default_rng(0)
     size = model.image_size
     env = BatchedImaginedEnv(model, batch, chunk_size=chunk, horizon=(steps + 1) * chunk)
-    frames = rng.integers(0, 256, (batch, model.context_frames, size, size, 3), dtype=np.uint8)
+    # Several cameras' views side by side (gymnast.world_model.views): one observation is all of them.
+    frames = rng.integers(0, 256, (batch, model.context_frames, size, size * model_views(model), 3), dtype=np.uint8)
     env.reset(seed=0, options={"frames": frames, "instructions": ["reach the goal"] * batch})
     low, high = env.single_action_space.low, env.single_action_space.high
     actions = rng.uniform(low, high, (steps + 1, batch, *low.shape)).astype(np.float32)
@@ -104,6 +112,18 @@ def imagined_env_fps(model, batch: int, steps: int, chunk: int = 5) -> float:
     for k in range(1, steps + 1):
         env.step(actions[k])  # returns host frames, so the device has finished
     return batch * chunk * steps / (time.perf_counter() - started)
+
+
+def model_fps(model, batch: int, device: torch.device, repeats: int, chunk: int = 5) -> float:
+    """Frames per second of the world model's own `step` (no env, nothing copied to the host)."""
+    torch.manual_seed(0)
+    size = model.image_size
+    context = torch.randint(0, 256, (batch, model.context_frames, size, size * model_views(model), 3),
+                            dtype=torch.uint8, device=device)
+    actions = torch.rand(batch, chunk, model.action_dim, device=device) * 2 - 1
+    with torch.inference_mode():
+        state = model.init_state(context)
+        return batch * chunk / timed(lambda: model.step(state, actions), device, repeats)
 
 
 def wm_train_step_s(config: EmbeddedWorldModelConfig, sizes: Sizes, device: torch.device) -> float:
@@ -152,8 +172,13 @@ def main() -> None:
     parser.add_argument("--data", type=Path, default=ROOT / "data/mt10", help="dataset of RL start states (96 px)")
     parser.add_argument("--tasks", default="reach-v3,push-v3,drawer-open-v3,window-open-v3")
     parser.add_argument("--small", action="store_true", help="toy sizes: checks the script runs, measures nothing")
+    parser.add_argument("--skip", default="", help=f"measurements to leave out, comma-separated, of {SKIPPABLE} "
+                        "(policy and rl need the sentence encoder's package, for the policy's instructions)")
     parser.add_argument("--out", type=Path, default=RESULTS)
     args = parser.parse_args()
+    skip = {name for name in args.skip.split(",") if name}
+    if skip - set(SKIPPABLE):
+        sys.exit(f"--skip {args.skip}: unknown {sorted(skip - set(SKIPPABLE))}; the measurements are {SKIPPABLE}")
     device = resolve_device(args.device)
     if device.type != "cuda" and not args.small:
         sys.exit(f"benchmarks/gpu.py measures a GPU, and --device {args.device} is not one; "
@@ -165,14 +190,24 @@ def main() -> None:
     world_model = load_world_model(WORLD_MODEL).to(device).eval()
     result: dict = {f"imagined_fps_b{b}": round(imagined_env_fps(world_model, b, sizes.imagine_steps))
                     for b in sizes.imagine_batches}
-    default_wm = dataclasses.replace(EmbeddedWorldModelConfig(), image_size=world_model.image_size)
-    result["wm_train_step_s"] = {"default": round(wm_train_step_s(default_wm, sizes, device), 4)}
-    if "gpu" in WM_PRESETS:
-        large = dataclasses.replace(WM_PRESETS["gpu"].model, image_size=world_model.image_size)
-        result["wm_train_step_s"]["gpu_preset"] = round(wm_train_step_s(large, sizes, device), 4)
-    result["policy_train_obs_per_s"] = round(policy_train_obs_per_s(sizes, device))
-    rl = rl_step(args.data, sizes, device, args.tasks)
-    result |= {"rl_step_s": round(rl["step_s"], 3), "rl_step": rl}
+    result |= {f"model_fps_b{b}": round(model_fps(world_model, b, device, sizes.repeats)) for b in sizes.imagine_batches}
+    # The same model imagining two cameras' views of each rollout (train-wm --cameras front,gripper).
+    two_cameras = with_cameras(world_model, TWO_CAMERAS)
+    result |= {f"imagined_obs_per_s_two_cameras_b{b}": round(imagined_env_fps(two_cameras, b, sizes.imagine_steps))
+               for b in sizes.imagine_batches}
+    if "wm" not in skip:
+        default_wm = dataclasses.replace(EmbeddedWorldModelConfig(), image_size=world_model.image_size)
+        result["wm_train_step_s"] = {"default": round(wm_train_step_s(default_wm, sizes, device), 4)}
+        if "gpu" in WM_PRESETS:
+            large = dataclasses.replace(WM_PRESETS["gpu"].model, image_size=world_model.image_size)
+            result["wm_train_step_s"]["gpu_preset"] = round(wm_train_step_s(large, sizes, device), 4)
+    if "policy" not in skip:
+        result["policy_train_obs_per_s"] = round(policy_train_obs_per_s(sizes, device))
+    if "rl" not in skip:
+        rl = rl_step(args.data, sizes, device, args.tasks)
+        result |= {"rl_step_s": round(rl["step_s"], 3), "rl_step": rl}
+    if skip:
+        result["not_measured"] = sorted(skip)
     result |= {
         "sizes": dataclasses.asdict(sizes),
         "goals": {"imagined_fps_b4096": 250_000, "rl_step_s": 2.0},

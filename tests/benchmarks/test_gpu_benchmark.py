@@ -1,4 +1,5 @@
-"""benchmarks/gpu.py keeps working where no GPU is: every measurement runs at toy sizes on the CPU."""
+"""benchmarks/gpu.py and benchmarks/lerobot_gpu.py keep working where no GPU is: every measurement runs at
+toy sizes on the CPU."""
 
 from __future__ import annotations
 
@@ -20,18 +21,26 @@ def _run(*args: str) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, str(SCRIPT), *args], cwd=ROOT, capture_output=True, text=True, timeout=600)
 
 
-@pytest.mark.slow
-@pytest.mark.skipif(not (ROOT / "results/world_model/wm").exists(), reason="needs the committed world model and judge")
-def test_every_measurement_runs_at_toy_sizes_on_the_cpu(tmp_path):
-    data = tmp_path / "data"  # start states at the committed models' 96 px
+@pytest.fixture(scope="module")
+def starts(tmp_path_factory) -> Path:
+    """Start states at the committed models' 96 px."""
+    data = tmp_path_factory.mktemp("starts")
     collect(CollectConfig(tasks="reach-v3", episodes_per_task=2, noise=(0.0,), workers=1,
                           env=EnvConfig(image_size=96, horizon=100)), data, progress=False)
+    return data
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not (ROOT / "results/world_model/wm").exists(), reason="needs the committed world model and judge")
+def test_every_measurement_runs_at_toy_sizes_on_the_cpu(tmp_path, starts):
+    data = starts
     out = tmp_path / "gpu.json"
     done = _run("--device", "cpu", "--small", "--data", str(data), "--tasks", "reach-v3", "--out", str(out))
     assert done.returncode == 0, done.stderr[-3000:]
     result = json.loads(out.read_text())
     assert result["device"] == "cpu" and result["sizes"]["policy_batch"] == 4
     assert result["imagined_fps_b4"] > 0 and result["imagined_fps_b8"] > 0
+    assert result["imagined_obs_per_s_two_cameras_b4"] > 0 and result["model_fps_b4"] > 0
     assert result["wm_train_step_s"]["default"] > 0 and result["policy_train_obs_per_s"] > 0
     assert result["rl_step"]["rollouts_per_step"] == 4 and result["rl_step_s"] > 0
 
@@ -40,3 +49,22 @@ def test_without_a_gpu_it_measures_nothing_and_says_why(tmp_path):
     done = _run("--device", "cpu", "--out", str(tmp_path / "gpu.json"))
     assert done.returncode != 0 and "measures a GPU" in done.stderr
     assert not (tmp_path / "gpu.json").exists()
+
+
+def test_an_unknown_measurement_to_skip_is_named(tmp_path):
+    done = _run("--device", "cpu", "--small", "--skip", "policy,judge", "--out", str(tmp_path / "gpu.json"))
+    assert done.returncode != 0 and "unknown ['judge']" in done.stderr
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not (ROOT / "results/world_model/wm").exists(), reason="needs the committed world model")
+def test_the_smolvla_grpo_step_runs_at_toy_sizes_on_the_cpu(tmp_path, starts):
+    """benchmarks/lerobot_gpu.py: a tiny SmolVLA through `gymnast rl --policy lerobot:...` in imagination."""
+    out = tmp_path / "lerobot_gpu.json"
+    done = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "lerobot_gpu.py"), "--device", "cpu", "--small",
+                           "--data", str(starts), "--tasks", "reach-v3", "--out", str(out)],
+                          cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-3000:]
+    result = json.loads(out.read_text())
+    assert result["step"]["rollouts_per_step"] == 4 and result["step"]["policy_calls"] > 0
+    assert result["grpo_step_s"] > 0 and 0 < result["parameters"] < 10**6

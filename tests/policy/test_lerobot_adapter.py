@@ -55,3 +55,21 @@ def test_a_feature_gymnast_cannot_give_is_refused_by_name(lerobot_act):
 def test_a_folder_without_a_lerobot_config_is_named(tmp_path):
     with pytest.raises(FileNotFoundError, match=f"lerobot:{tmp_path}: no config.json"):
         load_policy(f"lerobot:{tmp_path}")
+
+
+def test_the_full_size_smolvla_backbone_has_smolvlm2_500m_s_published_sizes(tmp_path):
+    """benchmarks/lerobot_gpu.py times SmolVLA at its real size; its VLM's config must say so
+    (the 450 M-parameter model itself is built there, on a GPU machine)."""
+    from gymnast.policy.lerobot_init import SMOLVLM2_500M, write_vlm
+
+    folder = write_vlm(tmp_path / "vlm", SMOLVLM2_500M)
+    from transformers import AutoConfig, AutoProcessor  # after write_vlm has let transformers import torchvision
+
+    config = AutoConfig.from_pretrained(folder)
+    text, vision = config.text_config, config.vision_config
+    assert (text.hidden_size, text.num_hidden_layers, text.num_attention_heads, text.num_key_value_heads,
+            text.intermediate_size, text.vocab_size) == (960, 32, 15, 5, 2560, 49280)
+    assert (vision.hidden_size, vision.num_hidden_layers, vision.image_size, vision.patch_size) == (768, 12, 512, 16)
+    assert config.scale_factor == 4 and SMOLVLM2_500M.image_tokens == 64
+    processor = AutoProcessor.from_pretrained(folder)
+    assert processor.image_seq_len == 64 and processor.tokenizer("reach the goal")["input_ids"]

@@ -12,11 +12,13 @@ and its ResNet-18 backbone starts from random weights, since none can be downloa
 from __future__ import annotations
 
 import argparse
+import dataclasses
 from pathlib import Path
 
 import torch
 
 from gymnast.policy.lerobot_import import require_lerobot
+from gymnast.utils.torchvision_ops import allow_torchvision_import
 
 
 def new_act(out: Path, image_size: int = 96, action_dim: int = 4, chunk: int = 5, predicted: int | None = None,
@@ -50,16 +52,19 @@ def new_act(out: Path, image_size: int = 96, action_dim: int = 4, chunk: int = 5
 
 
 def new_smolvla(out: Path, image_size: int = 96, action_dim: int = 4, chunk: int = 5, predicted: int = 8,
-                steps: int = 3, action_std: float = 1.0, seed: int = 0) -> Path:
-    """Writes a tiny randomly initialised SmolVLA policy to `out`, with the tiny vision-language
-    model it is built on in ``out/vlm`` (SmolVLA reads its VLM's config, tokenizer and image
-    processor from ``vlm_model_name``; a real one comes from a model hub, which is not reachable
-    here). For exercising the flow path offline, not for acting well.
+                steps: int = 3, action_std: float = 1.0, seed: int = 0, full_size: bool = False) -> Path:
+    """Writes a randomly initialised SmolVLA policy to `out`, with the vision-language model it is
+    built on in ``out/vlm`` (SmolVLA reads its VLM's config, tokenizer and image processor from
+    ``vlm_model_name``; a real one comes from a model hub, which is not reachable here). For
+    exercising the flow path offline, not for acting well.
 
     Args:
         chunk: actions executed per call (``n_action_steps``), gymnast's K.
         predicted: actions predicted per call (``chunk_size``).
         steps: flow integration steps.
+        full_size: LeRobot's published SmolVLA architecture (`SMOLVLM2_500M`, SmolVLA's own
+            defaults for the layers kept, the image side, the token and padding lengths) instead
+            of a tiny one: for timing the real thing (benchmarks/lerobot_gpu.py).
     """
     require_lerobot()
     from lerobot.configs.types import FeatureType, NormalizationMode, PolicyFeature
@@ -67,25 +72,61 @@ def new_smolvla(out: Path, image_size: int = 96, action_dim: int = 4, chunk: int
     from lerobot.policies.smolvla.modeling_smolvla import SmolVLAPolicy
 
     out = Path(out)
-    vlm = tiny_vlm(out / "vlm")
+    sizes = SMOLVLM2_500M if full_size else TINY_VLM
+    vlm = write_vlm(out / "vlm", sizes)
+    # Full size keeps SmolVLA's defaults (16 VLM layers, 48 tokens, 32 padded dimensions).
+    shape = {} if full_size else {"max_state_dim": 8, "max_action_dim": 8, "tokenizer_max_length": 16,
+                                  "num_vlm_layers": 2}
     config = SmolVLAConfig(
         input_features={"observation.image": PolicyFeature(FeatureType.VISUAL, (3, image_size, image_size))},
         output_features={"action": PolicyFeature(FeatureType.ACTION, (action_dim,))},
-        chunk_size=predicted, n_action_steps=chunk, max_state_dim=8, max_action_dim=8, num_steps=steps,
-        resize_imgs_with_padding=(_VLM_IMAGE, _VLM_IMAGE), tokenizer_max_length=16, vlm_model_name=str(vlm.resolve()),
-        load_vlm_weights=False, num_vlm_layers=2, device="cpu",
+        chunk_size=predicted, n_action_steps=chunk, num_steps=steps,
+        resize_imgs_with_padding=(sizes.image_side, sizes.image_side), vlm_model_name=str(vlm.resolve()),
+        load_vlm_weights=False, device="cpu", **shape,
         normalization_mapping={"VISUAL": NormalizationMode.IDENTITY, "STATE": NormalizationMode.MEAN_STD,
                                "ACTION": NormalizationMode.MEAN_STD})
     return _save_new(SmolVLAPolicy, config, out, action_dim, action_std, seed)
 
 
-_VLM_IMAGE = 32  # the tiny VLM's image side: 16 patches of 8 px, 4 image tokens after its pixel shuffle
+@dataclasses.dataclass(frozen=True)
+class VLMSizes:
+    """The sizes of a SmolVLM: a SigLIP vision tower, a pixel shuffle, a Llama text model."""
+
+    image_side: int
+    patch: int
+    vision_width: int
+    vision_layers: int
+    vision_heads: int
+    vision_ffn: int
+    text_width: int
+    text_layers: int
+    text_heads: int
+    text_kv_heads: int
+    text_ffn: int
+    vocabulary: int  # rows of the token embedding (the word-level tokenizer below uses a few)
+    shuffle: int  # pixel-shuffle factor: (image_side / patch / shuffle) ** 2 image tokens
+
+    @property
+    def image_tokens(self) -> int:
+        return (self.image_side // self.patch // self.shuffle) ** 2
+
+
+# 16 patches of 8 px, 4 image tokens after the shuffle.
+TINY_VLM = VLMSizes(image_side=32, patch=8, vision_width=32, vision_layers=1, vision_heads=2, vision_ffn=64,
+                    text_width=64, text_layers=2, text_heads=4, text_kv_heads=2, text_ffn=128, vocabulary=0,
+                    shuffle=2)
+# HuggingFaceTB/SmolVLM2-500M-Video-Instruct, SmolVLA's backbone: SigLIP base patch16/512 and
+# SmolLM2-360M (SmolVLA keeps its first 16 of 32 layers).
+SMOLVLM2_500M = VLMSizes(image_side=512, patch=16, vision_width=768, vision_layers=12, vision_heads=12,
+                         vision_ffn=3072, text_width=960, text_layers=32, text_heads=15, text_kv_heads=5,
+                         text_ffn=2560, vocabulary=49280, shuffle=4)
 _WORDS = ("reach the goal push puck open close drawer window press button pick and place a to of "
           "red green blue put on in").split()
 
 
-def tiny_vlm(out: Path) -> Path:
-    """Writes a tiny SmolVLM config, word-level tokenizer and image processor to `out`."""
+def write_vlm(out: Path, sizes: VLMSizes = TINY_VLM) -> Path:
+    """Writes a SmolVLM config of `sizes`, a word-level tokenizer and an image processor to `out`."""
+    allow_torchvision_import()  # transformers' processors import torchvision where it is installed
     from tokenizers import Tokenizer, models, pre_tokenizers
     from transformers import (PreTrainedTokenizerFast, SmolVLMConfig, SmolVLMImageProcessor, SmolVLMProcessor,
                               SmolVLMVideoProcessor)
@@ -97,17 +138,21 @@ def tiny_vlm(out: Path) -> Path:
     tokenizer.pre_tokenizer = pre_tokenizers.WhitespaceSplit()
     fast = PreTrainedTokenizerFast(tokenizer_object=tokenizer, unk_token="<unk>", pad_token="<pad>",
                                    extra_special_tokens=special)
-    side = {"longest_edge": _VLM_IMAGE}
+    side = {"longest_edge": sizes.image_side}
     images = SmolVLMImageProcessor(do_resize=False, do_image_splitting=False, max_image_size=side, size=side)
     SmolVLMProcessor(image_processor=images, tokenizer=fast, video_processor=SmolVLMVideoProcessor(),
-                     image_seq_len=4).save_pretrained(out)
+                     image_seq_len=sizes.image_tokens).save_pretrained(out)
+    vocabulary = max(sizes.vocabulary, len(vocab))
+    head_dim = sizes.text_width // sizes.text_heads
     SmolVLMConfig(
-        vision_config={"hidden_size": 32, "intermediate_size": 64, "num_hidden_layers": 1, "num_attention_heads": 2,
-                       "image_size": _VLM_IMAGE, "patch_size": 8},
-        text_config={"model_type": "llama", "hidden_size": 64, "intermediate_size": 128, "num_hidden_layers": 2,
-                     "num_attention_heads": 4, "num_key_value_heads": 2, "head_dim": 16, "vocab_size": len(vocab),
-                     "max_position_embeddings": 256},
-        scale_factor=2, image_token_id=vocab["<image>"], vocab_size=len(vocab)).save_pretrained(out)
+        vision_config={"hidden_size": sizes.vision_width, "intermediate_size": sizes.vision_ffn,
+                       "num_hidden_layers": sizes.vision_layers, "num_attention_heads": sizes.vision_heads,
+                       "image_size": sizes.image_side, "patch_size": sizes.patch},
+        text_config={"model_type": "llama", "hidden_size": sizes.text_width, "intermediate_size": sizes.text_ffn,
+                     "num_hidden_layers": sizes.text_layers, "num_attention_heads": sizes.text_heads,
+                     "num_key_value_heads": sizes.text_kv_heads, "head_dim": head_dim, "vocab_size": vocabulary,
+                     "max_position_embeddings": 8192 if sizes.vocabulary else 256},
+        scale_factor=sizes.shuffle, image_token_id=vocab["<image>"], vocab_size=vocabulary).save_pretrained(out)
     return out
 
 
