@@ -181,6 +181,30 @@ def test_rl_killed_and_resumed_matches_an_uninterrupted_run(rl_dataset, tmp_path
     assert resumed["curve"] == expected["curve"] and resumed["end_success"] == expected["end_success"]
 
 
+def test_a_crash_in_the_last_evaluation_keeps_the_steps_and_resume_runs_it_again(rl_dataset, tmp_path, monkeypatch):
+    import gymnast.rl.train as train
+
+    out, evaluate, calls = tmp_path / "run", train.evaluate_in_env, []
+
+    def lost_after_the_first(*args, **kwargs):  # step 0's evaluation runs; the one after the steps fails
+        calls.append(args)
+        if len(calls) > 1:
+            raise RuntimeError("simulator worker lost")
+        return evaluate(*args, **kwargs)
+
+    monkeypatch.setattr(train, "evaluate_in_env", lost_after_the_first)
+    with pytest.raises((RuntimeError, SystemExit)):
+        main(_rl_args("imagined", f"judge:{JUDGE}", out, rl_dataset, "--no-real-eval"))
+    assert int((out / "checkpoints" / "last").read_text()) == 2  # both trained steps were kept
+    assert not (out / "summary.json").exists()
+    monkeypatch.setattr(train, "evaluate_in_env", evaluate)
+    main(["rl", "--out", str(out), "--resume"])
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["steps"] == 2 and [entry["step"] for entry in summary["curve"]] == [0, 2]
+    evaluations = [m["step"] for m in read_metrics(out) if "eval/own_episodes" in m]
+    assert evaluations == [0, 2]
+
+
 def test_update_does_not_depend_on_the_micro_batch_size(rl_dataset):
     from gymnast.envs.sim_vector import SimVectorEnv
     from gymnast.config import EnvConfig

@@ -176,11 +176,26 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
         state["curve"].append({"step": step, **values})
         log(step, values)
 
+    def checkpoint(done: int) -> None:
+        save_checkpoint(out, done, policy, resolved, optimizer,
+                        {"sampler": sampler.get_state(), "actions": actions.get_state()},
+                        {"schedule": schedule.state_dict(), "state": state})
+        if isinstance(policy, LeRobotPolicy):  # back to LeRobot: the newest weights as its own folder
+            policy.export(out / LEROBOT_EXPORT)
+
+    def evaluation_due(done: int) -> bool:
+        return (config.eval_every and done % config.eval_every == 0) or done == config.steps
+
     try:
-        if start_step == 0:
+        evaluated = {entry["step"] for entry in state["curve"]}
+        if start_step == 0 or (evaluation_due(start_step) and start_step not in evaluated):
+            # A new run's first evaluation, or one that a crash stopped after its step was saved.
+            metrics.drop(start_step, "eval/")
             began = time.perf_counter()
-            evaluate(0)
+            evaluate(start_step)
             state["wall_s"] += time.perf_counter() - began
+            if start_step:
+                checkpoint(start_step)
         bar = tqdm(range(start_step, config.steps), initial=start_step, total=config.steps, desc=f"rl {env}",
                    disable=not progress)
         for step in bar:
@@ -207,15 +222,14 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
                 write_group_video(out / "videos" / f"step_{done:06d}.mp4", batch, scores, config.group_size)
             log(done, values)
             bar.set_postfix(reward=f"{values.get('reward/mean', float('nan')):.2f}", step_s=f"{values['time/step_s']:.1f}")
-            if (config.eval_every and done % config.eval_every == 0) or done == config.steps:
-                evaluate(done)
             state["wall_s"] += time.perf_counter() - started
-            if done % config.checkpoint_every == 0 or done == config.steps:
-                save_checkpoint(out, done, policy, resolved, optimizer,
-                                {"sampler": sampler.get_state(), "actions": actions.get_state()},
-                                {"schedule": schedule.state_dict(), "state": state})
-                if isinstance(policy, LeRobotPolicy):  # back to LeRobot: the newest weights as its own folder
-                    policy.export(out / LEROBOT_EXPORT)
+            if done % config.checkpoint_every == 0 or evaluation_due(done):
+                checkpoint(done)  # before the evaluation, which can run long: a crash there keeps the step
+            if evaluation_due(done):
+                began = time.perf_counter()
+                evaluate(done)
+                state["wall_s"] += time.perf_counter() - began
+                checkpoint(done)  # again, with the evaluation in its state
     finally:  # worker processes and event files are released even when a step fails
         envs.close()
         eval_envs.close()

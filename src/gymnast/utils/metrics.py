@@ -31,6 +31,19 @@ class MetricsLog:
         with self.path.open("a") as file:
             file.write(json.dumps({"step": step, **values}) + "\n")
 
+    def drop(self, step: int, prefix: str) -> None:
+        """Removes the lines of `step` whose every value is named `prefix`... (an evaluation that a
+        crash cut short after logging it, about to be run again)."""
+        if not self.path.exists():
+            return
+        lines = [line for line in self.path.read_text().splitlines() if line]
+
+        def dropped(line: str) -> bool:
+            values = json.loads(line)
+            return values.pop("step") == step and all(key.startswith(prefix) for key in values)
+
+        write_bytes(self.path, "".join(f"{line}\n" for line in lines if not dropped(line)).encode())
+
 
 
 def read_metrics(run: Path) -> list[dict]:
