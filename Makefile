@@ -34,7 +34,8 @@ setup: $(STAMP)
 test: $(STAMP)
 	@# The import floors and "no cycles" (pyproject.toml, [tool.importlinter]) come before the tests.
 	$(BIN)/lint-imports --no-cache --no-logo
-	$(BIN)/python -m pytest
+	@# The slowest tests are listed at the end: the suite must stay inside CI's 20 minutes.
+	$(BIN)/python -m pytest --durations=25
 
 # The headline experiment on a few tasks: every stage from data to report, then the table.
 demo: $(STAMP)
