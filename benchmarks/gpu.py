@@ -166,6 +166,18 @@ def rl_step(data: Path, sizes: Sizes, device: torch.device, tasks: str) -> dict:
                         group_size=sizes.rl_group, horizon=sizes.rl_horizon, device=str(device))
 
 
+def gpu_device(name: str, small: bool, out: Path, results: Path, script: str) -> torch.device:
+    """The device a GPU benchmark runs on; exits unless it is a GPU or the run is `small` (toy
+    sizes, which must not overwrite the committed `results`)."""
+    device = resolve_device(name)
+    if device.type != "cuda" and not small:
+        sys.exit(f"{script} measures a GPU, and --device {name} is not one; "
+                 "on the CPU run the other benchmarks (or add --small to check this script)")
+    if small and out == results:
+        sys.exit("--small measures nothing worth keeping: give --out somewhere other than " + str(results))
+    return device
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--device", default="cuda", help="cuda or cuda:N (cpu only with --small)")
@@ -179,12 +191,7 @@ def main() -> None:
     skip = {name for name in args.skip.split(",") if name}
     if skip - set(SKIPPABLE):
         sys.exit(f"--skip {args.skip}: unknown {sorted(skip - set(SKIPPABLE))}; the measurements are {SKIPPABLE}")
-    device = resolve_device(args.device)
-    if device.type != "cuda" and not args.small:
-        sys.exit(f"benchmarks/gpu.py measures a GPU, and --device {args.device} is not one; "
-                 "on the CPU run the other benchmarks (or add --small to check this script)")
-    if args.small and args.out == RESULTS:
-        sys.exit("--small measures nothing worth keeping: give --out somewhere other than " + str(RESULTS))
+    device = gpu_device(args.device, args.small, args.out, RESULTS, "benchmarks/gpu.py")
     sizes = SMALL if args.small else Sizes()
 
     world_model = load_world_model(WORLD_MODEL).to(device).eval()

@@ -32,7 +32,7 @@ import torch
 
 import gymnast  # noqa: F401  (sets MUJOCO_GL)
 from gymnast.utils.atomic import write_json
-from gymnast.utils.device import resolve_device
+from gpu import gpu_device
 from rl_step import time_setting
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -58,12 +58,7 @@ def main() -> None:
     parser.add_argument("--small", action="store_true", help="a tiny SmolVLA at toy sizes: measures nothing")
     parser.add_argument("--out", type=Path, default=RESULTS)
     args = parser.parse_args()
-    device = resolve_device(args.device)
-    if device.type != "cuda" and not args.small:
-        sys.exit(f"benchmarks/lerobot_gpu.py measures a GPU, and --device {args.device} is not one; "
-                 "add --small to check this script on the CPU")
-    if args.small and args.out == RESULTS:
-        sys.exit("--small measures nothing worth keeping: give --out somewhere other than " + str(RESULTS))
+    device = gpu_device(args.device, args.small, args.out, RESULTS, "benchmarks/lerobot_gpu.py")
     from gymnast.policy.lerobot_init import new_smolvla
 
     sizes = SMALL if args.small else FULL
