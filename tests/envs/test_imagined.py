@@ -220,3 +220,16 @@ def test_batched_env_rejects_missing_or_misshapen_starts_and_actions(model, star
     with pytest.raises(ValueError) as error:
         env.step(np.zeros((5, 4), np.float32))
     assert "(3, 5, 4)" in str(error.value) and "(5, 4)" in str(error.value)
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA GPU")
+def test_frames_from_a_gpu_come_back_exact_and_each_step_in_its_own_array():
+    from gymnast.envs.imagined import HostCopier
+
+    copy = HostCopier()
+    first = torch.randint(0, 256, (4, 5, 8, 8, 3), dtype=torch.uint8, device="cuda")
+    second = torch.randint(0, 256, (4, 5, 8, 8, 3), dtype=torch.uint8, device="cuda")
+    kept = [copy(first), copy(second), copy(second[:, :2])]  # the last: a chunk cut at the horizon
+    assert np.array_equal(kept[0], first.cpu().numpy()) and np.array_equal(kept[1], second.cpu().numpy())
+    assert np.array_equal(kept[2], second[:, :2].cpu().numpy())
+    assert not np.shares_memory(kept[0], kept[1])  # the reused buffer never backs a returned array
