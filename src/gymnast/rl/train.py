@@ -25,6 +25,7 @@ import copy
 import dataclasses
 import logging
 import time
+import warnings
 from collections.abc import Callable
 from pathlib import Path
 
@@ -317,7 +318,11 @@ def rl_step(env: VectorEnv, policy, reward: Reward, draw_starts: Callable[[int, 
         advantages, advantage_metrics = grpo.group_advantages(rewards.view(-1, size), config.normalize_std)
         values |= advantage_metrics | update_policy(policy, optimizer, batch, advantages.reshape(-1), config, reference,
                                                     anchor, actions)
-    schedule.step()
+    with warnings.catch_warnings():
+        # The schedule counts RL steps, those whose rollouts left nothing to learn from included;
+        # torch warns when it steps before any optimizer step, as the first such step does.
+        warnings.filterwarnings("ignore", message="Detected call of `lr_scheduler.step\\(\\)` before")
+        schedule.step()
     values["time/update_s"] = time.perf_counter() - updated
     return batch, scores, values
 
