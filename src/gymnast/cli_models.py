@@ -50,6 +50,7 @@ def train_wm(
     steps: int | None = None,
     seed: int | None = None,
     moving_weight: float | None = None,
+    action_dropout: float | None = None,
     init: Path | None = None,
     extra_data: tuple[Path, ...] = (),
     camera: str | None = None,
@@ -71,6 +72,8 @@ def train_wm(
         steps: override the preset's optimizer steps.
         seed: override the seed.
         moving_weight: extra loss weight of moving pixels, normalised (0 = plain mean squared error).
+        action_dropout: share of training steps whose action is hidden, so that the model can be
+            imagined with action guidance (`guidance` in its config.json; docs/world_model.md).
         init: fine-tune: start from the weights of this world-model run or checkpoint (same model spec).
         extra_data: more dataset directories to train on (same image size), split by the same scene hash.
         camera: the dataset camera to read, by name (front: observation.images.front) or by feature key
@@ -88,7 +91,7 @@ def train_wm(
     config, inputs = resolve(
         "train-wm", out, resume, wm_preset(preset, backend or "embedded"), inputs={"data": data}, required=("data",),
         overrides={"backend": backend, "device": device, "steps": steps, "seed": seed, "moving_weight": moving_weight,
-                   "init": init, "extra_data": extra_data or None, "camera": camera, "cameras": cameras or None, "fit": fit,
+                   f"{'flow' if backend == 'flow' else 'model'}.action_dropout": action_dropout, "init": init, "extra_data": extra_data or None, "camera": camera, "cameras": cameras or None, "fit": fit,
                    **key_overrides(keys)},
         saved=lambda: (saved_train_config(out), saved_inputs(out, "data")))
     checkpoint = train_world_model(inputs["data"], out, config, resume=resume)

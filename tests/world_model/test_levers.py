@@ -10,6 +10,7 @@ from safetensors.torch import load_file
 
 from gymnast.cli import main
 from gymnast.data.lerobot import EpisodeDataset
+from gymnast.world_model.base import load_world_model
 from gymnast.world_model.train import WM_PRESETS, build_model, frame_loss, load_banks, saved_train_config, train_world_model
 
 # The tiny dataset's scenes are reach and drawer-close, seeds 0 and 1; at 0.25, drawer-close/0 is held out.
@@ -110,10 +111,14 @@ def test_cli_fine_tunes_on_several_datasets_with_moving_weight(tiny_dataset, tmp
     train_world_model(tiny_dataset, tmp_path / "source", DEBUG, progress=False)
     out = tmp_path / "tuned"
     main(["train-wm", "--data", str(tiny_dataset), "--out", str(out), "--preset", "debug", "--moving-weight", "4",
-          "--init", str(tmp_path / "source"), "--extra-data", str(copy)])
+          "--init", str(tmp_path / "source"), "--extra-data", str(copy), "--action-dropout", "0.2"])
     assert "world model:" in capsys.readouterr().out
     saved = json.loads((out / "config.json").read_text())
     assert saved["train"]["moving_weight"] == 4.0 and saved["train"]["extra_data"] == [str(copy)]
+    # The source had no action dropout: its weights start the run, the "no action" embedding starts fresh.
+    assert saved["model"]["action_dropout"] == 0.2 and saved["model"]["guidance"] == 1.0
+    tuned = load_world_model(out, guidance=2.0)
+    assert tuned.config.guidance == 2.0 and tuned.no_action is not None
     assert saved["train"]["init"] == str(tmp_path / "source" / "checkpoints" / "000004")  # the checkpoint it resolved to
     assert [d["data"] for d in saved["datasets"]] == [str(tiny_dataset), str(copy)]
     config = saved_train_config(out)

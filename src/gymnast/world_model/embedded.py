@@ -8,6 +8,7 @@ channels, h/w = H/8, W/8 latent grid.
     z' --decoder (transposed convs + skips)--> flow, rgb, alpha
     frame = alpha * rgb + (1 - alpha) * warp(last context frame, flow)
     every `reanchor_every` steps: encode the last C imagined frames as the new context
+    with `action_dropout` in training, guidance w: z' = z'(no action) + w (z'(action) - z'(no action))
 
 Why this shape (docs/world_model.md has the measurements):
 - Meta-World is deterministic given the scene, and the context frames show the scene, so a
@@ -24,6 +25,10 @@ Why this shape (docs/world_model.md has the measurements):
   imagined clip), so the model learns to correct its own drift instead of compounding it. Past
   that trained length a rollout re-encodes its own last frames as a fresh context
   (`reanchor_every`), which keeps whole-episode rollouts coherent.
+- A model trained on experts can draw what experts do whatever the actions say (a door that opens
+  under actions that miss its handle). Hiding the action in a share of training steps teaches the
+  latent step what happens without one; guidance w > 1 then scales up what the action changes
+  (classifier-free guidance, as in the flow backend, on the latent step).
 """
 
 from __future__ import annotations
@@ -68,6 +73,13 @@ class EmbeddedWorldModelConfig:
     """Past this many imagined steps from one context, re-encode the state from the last imagined
     frames, as if they were real (0 = never). The latent recurrence is trained on clips of this
     length; run much longer, it drifts out of what it learned, while re-encoding keeps it in."""
+    action_dropout: float = 0.0
+    """Share of training steps (per rollout and action) whose action is replaced by a learned "no
+    action" embedding, which only a model trained with some has; what `guidance` needs."""
+    guidance: float = 1.0
+    """Action guidance when imagining: each latent step is the "no action" step plus w times what
+    the action changes (1 = the action's step alone; > 1 sharpens the action's effect, and computes
+    the latent step twice). Changes how the weights are used, not what they are: set at load time."""
 
     def __post_init__(self) -> None:
         if self.image_size % 8:
@@ -77,6 +89,11 @@ class EmbeddedWorldModelConfig:
         if any(w % 8 for w in (*self.widths, self.latent_channels)):
             raise ValueError(f"widths and latent_channels must be multiples of 8 (group norm), got {self.widths}, {self.latent_channels}")
         check_action_range(self.action_low, self.action_high, self.action_dim)
+        if not 0 <= self.action_dropout < 1:
+            raise ValueError(f"action_dropout must be in [0, 1), got {self.action_dropout}")
+        if self.guidance != 1 and self.action_dropout == 0:
+            raise ValueError(f"guidance {self.guidance} needs a model trained with action_dropout > 0 "
+                             "(it has no 'no action' step to guide from); use guidance 1")
 
 
 @dataclass(frozen=True)
@@ -151,6 +168,8 @@ class EmbeddedWorldModel(ConfiguredWorldModel):
             nn.Linear(config.action_dim, config.action_width), nn.SiLU(), nn.Linear(config.action_width, config.action_width)
         )
         self.blocks = nn.ModuleList(ActionBlock(z, config.action_width) for _ in range(config.blocks))
+        # Only models trained with action dropout have it: older runs' weights load unchanged.
+        self.no_action = nn.Parameter(torch.zeros(config.action_width)) if config.action_dropout > 0 else None
         self.up_coarse = nn.ConvTranspose2d(z, coarse, 4, 2, 1)
         self.up_fine = nn.ConvTranspose2d(coarse, fine, 4, 2, 1)
         # Per output pixel: rgb, alpha and the flow (dx, dy) in [-1, 1] image units; 2x2 sub-pixels each.
@@ -199,9 +218,7 @@ class EmbeddedWorldModel(ConfiguredWorldModel):
         for k in range(actions.shape[1]):
             if state.since_anchor == self.config.reanchor_every:
                 state = self.encode(state.recent)  # imagined frames become the new context
-            z, condition = state.z, self.embed_action(actions[:, k])
-            for block in self.blocks:
-                z = block(z, condition)
+            z = self._latent_step(state.z, self.embed_action(actions[:, k]))
             frame = self._decode(z, state)  # (B, 3, H, W)
             recent = state.recent
             if self.config.reanchor_every and state.since_anchor >= self.config.reanchor_every - len(recent[0]):
@@ -210,6 +227,24 @@ class EmbeddedWorldModel(ConfiguredWorldModel):
             state = dataclasses.replace(state, z=z, recent=recent, since_anchor=state.since_anchor + 1)
             frames.append(frame)
         return state, torch.stack(frames, dim=1)
+
+    def _latent_step(self, z: torch.Tensor, condition: torch.Tensor) -> torch.Tensor:
+        """(B, Z, h, w) latent and (B, action_width) action embedding -> the latent one action later."""
+        if self.no_action is None:
+            return self._blocks(z, condition)
+        no_action = self.no_action.to(condition.dtype).expand_as(condition)
+        if self.training:  # hide the action in `action_dropout` of the steps
+            hidden = torch.rand(len(condition), 1, device=condition.device) < self.config.action_dropout
+            return self._blocks(z, torch.where(hidden, no_action, condition))
+        if self.config.guidance == 1:
+            return self._blocks(z, condition)
+        guided, free = self._blocks(z.repeat(2, 1, 1, 1), torch.cat([condition, no_action])).chunk(2)
+        return free + self.config.guidance * (guided - free)
+
+    def _blocks(self, z: torch.Tensor, condition: torch.Tensor) -> torch.Tensor:
+        for block in self.blocks:
+            z = block(z, condition)
+        return z
 
     def _decode(self, z: torch.Tensor, state: LatentState) -> torch.Tensor:
         x = F.silu(self.up_coarse(z) + state.skip_coarse)  # (B, W2, H/4, W/4)

@@ -319,6 +319,9 @@ def load_banks(datasets: Sequence[EpisodeDataset], heldout_fraction: float,
 # Settings that change how the weights run, not what they are: a fine-tuning run may pick its own.
 # The cameras too: one view's weights start a model of several (`gymnast.world_model.views`).
 _WEIGHT_FREE = ("bf16", "reanchor_every", "sample_steps", "context_noise", "guidance", "cameras")
+# Training settings a fine-tune may change; the weights they add (the embedded backend's "no action"
+# embedding, with action dropout) start fresh.
+_TRAINING_ONLY = ("action_dropout",)
 
 
 def build_model(config: WorldModelTrainConfig) -> EmbeddedWorldModel | FlowWorldModel:
@@ -341,11 +344,15 @@ def build_model(config: WorldModelTrainConfig) -> EmbeddedWorldModel | FlowWorld
     action_range = {name: tuple(source.get(name, ())) for name in ("action_low", "action_high")}
     model = backend(dataclasses.replace(architecture(config), **action_range))
     wanted = json.loads(json.dumps(model.spec()))  # tuples as JSON lists, like the saved spec
-    differ = sorted(k for k in source.keys() | wanted.keys() if k not in _WEIGHT_FREE and source.get(k) != wanted.get(k))
+    differ = sorted(k for k in source.keys() | wanted.keys()
+                    if k not in _WEIGHT_FREE + _TRAINING_ONLY and source.get(k) != wanted.get(k))
     if differ:
         fields = ", ".join(f"{k} ({source.get(k)!r} there, {wanted.get(k)!r} here)" for k in differ)
         raise ValueError(f"--init {config.init}: its model differs from this run's in {fields}")
-    model.load_state_dict(load_file(checkpoint / "model.safetensors"))
+    missing, unexpected = model.load_state_dict(load_file(checkpoint / "model.safetensors"), strict=False)
+    if unexpected or set(missing) - {"no_action"}:
+        raise ValueError(f"--init {config.init}: its weights do not fit this model "
+                         f"(missing here: {sorted(unexpected)}; missing there: {sorted(missing)})")
     logger.info("starting from the weights of %s", checkpoint)
     return model
 
