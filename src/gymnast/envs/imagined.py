@@ -101,10 +101,12 @@ def _check_actions(actions: Any, space: Box, names: str) -> np.ndarray:
 
 
 class HostCopier:
-    """Brings frames to the host as fresh arrays. From a GPU through one page-locked buffer kept for
-    the next step, then a parallel copy into ordinary memory: on an H100 a step's frames at batch
-    4096 (566 MB) came over in 0.11 s so, 0.50 s through freshly page-locked memory each step (its
-    allocation is the cost) and 0.43 s through pageable memory (benchmarks/results/gpu.json)."""
+    """Brings frames to the host as fresh arrays (the env keeps every step's frames as the video).
+
+    From a GPU through one page-locked buffer kept for the next step, then a parallel copy into
+    ordinary memory: on an H100 a step's frames at batch 4096 (566 MB) came over in 0.11 s so, in
+    0.50 s through freshly page-locked memory each step (allocating it is the cost) and in 0.43 s
+    through pageable memory (benchmarks/results/gpu_host_copy.json)."""
 
     def __init__(self) -> None:
         self._staging: torch.Tensor | None = None
