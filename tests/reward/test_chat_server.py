@@ -17,6 +17,7 @@ import torch
 from PIL import Image
 
 from gymnast.cli import main
+from gymnast.policy.text import InstructionEncoder
 from gymnast.reward.chat_server import ChatLimits, ChatServer
 from gymnast.reward.judge import JudgeConfig, LearnedJudge
 from gymnast.reward.serve import judge_answer
@@ -50,6 +51,7 @@ GOOD = {"model": "gymnast-judge", "messages": messages(jpeg(), jpeg())}
 def server():
     torch.manual_seed(0)
     judge = LearnedJudge(JudgeConfig(width=32, image_size=SIZE)).eval()  # untrained: only its answers' form matters
+    InstructionEncoder()(["load the sentence encoder"])  # before serving: its first load takes seconds
     with ChatServer(judge_answer(judge), limits=LIMITS) as running:
         yield running
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import functools
 import os
+import threading
 from importlib.metadata import PackageNotFoundError, version
 from typing import Sequence
 
@@ -22,8 +23,19 @@ from gymnast.utils.torchvision_ops import allow_torchvision_import
 EMBEDDING_DIM = 384
 
 
-@functools.lru_cache(maxsize=1)
+_LOADING = threading.Lock()
+
+
 def _sentence_model():
+    # One load at a time: transformers builds the model with nn.Module's registration methods
+    # replaced process-wide, so two loads overlapping in threads (a chat server's first requests)
+    # can leave them replaced, and every model built afterwards lands on the meta device.
+    with _LOADING:
+        return _load_sentence_model()
+
+
+@functools.lru_cache(maxsize=1)
+def _load_sentence_model():
     # The weights are in the package; never let the loader reach for a model hub.
     os.environ.setdefault("HF_HUB_OFFLINE", "1")
     os.environ.setdefault("TRANSFORMERS_OFFLINE", "1")
