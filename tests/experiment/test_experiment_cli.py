@@ -85,6 +85,35 @@ def test_dyna_counts_its_rollouts_and_is_watched_every_round(experiment: Path):
     assert (experiment / "plots" / "dyna.png").read_bytes()[:4] == b"\x89PNG"
 
 
+def test_one_small_real_budget_is_spent_three_ways_and_every_interaction_is_counted(experiment: Path):
+    summary = json.loads((experiment / "summary.json").read_text())
+    budget, setup = summary["equal_budget"], summary["equal_budget_setup"]
+    assert set(budget) == {"real_grpo", "imagined", "iter_sft"}
+    for name, row in budget.items():
+        assert 0 <= row["ci_low"] <= row["success"] <= row["ci_high"] <= 1 and row["episodes"] == 2, name
+    # debug: 2 rollouts of reach, recorded once for the refit and for Iter-SFT, counted from the dataset
+    recorded = EpisodeDataset(experiment / "equal_budget" / "rollouts")
+    assert len(recorded) == setup["recorded"]["episodes"] == 2
+    spent = sum(recorded.lengths)
+    assert budget["imagined"]["real_interactions"] == budget["iter_sft"]["real_interactions"] == spent > 0
+    # GRPO in the real world spends as many rollouts of its own (one group of 2), counted by its run
+    grpo = experiment / "equal_budget" / "real_grpo"
+    settings = json.loads((grpo / "config.json").read_text())["rl"]
+    assert settings["steps"] * settings["starts_per_step"] * settings["group_size"] == len(recorded)
+    assert settings["max_rounds"] == 1 and setup["real_grpo_steps"] == settings["steps"]
+    assert budget["real_grpo"]["real_interactions"] == json.loads((grpo / "summary.json").read_text())["real_interactions"] > 0
+    # practice in imagination on the world model and the judge refitted on the recorded rollouts
+    imagined = experiment / "equal_budget" / "imagined"
+    run = json.loads((imagined / "rl" / "config.json").read_text())["run"]
+    assert run["wm"] == str(imagined / "world_model") and run["reward"] == f"judge:{imagined / 'judge'}"
+    for model in ("world_model", "judge"):
+        refit = json.loads((imagined / model / "config.json").read_text())
+        assert str(recorded.root) in json.dumps(refit), model
+    assert summary["goals"]["imagined_beats_real_grpo_at_equal_budget"] in (True, False)
+    report = (experiment / "report.md").read_text()
+    assert "## Equal real budgets" in report and "Practice in imagination above GRPO on the same real budget" in report
+
+
 def test_robustness_language_and_worldgym_are_measured(experiment: Path):
     summary = json.loads((experiment / "summary.json").read_text())
     for name in ("sft", "rl_wm_judge", "rl_wm_verified"):

@@ -60,3 +60,12 @@ def test_the_printed_table_says_a_lead_is_not_significant_at_this_size():
     text = format_table(summary)
     assert "Goal of beating it: not significant at this size." in text and "**" not in text
     assert "Goal of beating SFT (the recipe learns): not met." in text  # 40% against 40%
+
+
+def test_imagination_beats_real_grpo_at_an_equal_budget_only_with_its_interval_apart():
+    rows = {name: _row(80, 200) for name in ARM_NAMES}
+    close = {"real_grpo": _row(80, 200, 9000), "imagined": _row(90, 200, 9000), "iter_sft": _row(85, 200, 9000)}
+    assert experiment_goals(rows, None, 0.5, {}, close)["imagined_beats_real_grpo_at_equal_budget"] is False
+    apart = close | {"imagined": _row(130, 200, 9000)}
+    assert experiment_goals(rows, None, 0.5, {}, apart)["imagined_beats_real_grpo_at_equal_budget"] is True
+    assert experiment_goals(rows, None, 0.5, {})["imagined_beats_real_grpo_at_equal_budget"] is None  # not run

@@ -28,7 +28,9 @@ import zlib
 from dataclasses import dataclass
 from pathlib import Path
 
+from gymnast.config import EnvConfig
 from gymnast.data.collect import CollectConfig, EpisodeJob, collect
+from gymnast.data.lerobot import EpisodeDataset
 from gymnast.data.schema import policy_behaviour
 from gymnast.eval.actors import ImaginedPlanActor, PolicyActor, load_run_policy, load_run_world_model
 from gymnast.utils.checkpoint import resolve_checkpoint
@@ -137,3 +139,21 @@ def record_policy(
     logger.info("recording %s as behaviour %s (temperature %g, noise %s%s)", run_dir, actors.behaviour, temperature,
                 ", ".join(f"{n:g}" for n in config.noise), f", planned in {world_model}" if world_model else "")
     return collect(config, out, progress=progress, make_actor=actors)
+
+
+def record_real_rollouts(run: str | Path, tasks: str, per_task: int, first_seed: int, temperature: float, horizon: int,
+                         workers: int, runner: str, out: Path, progress: bool = True) -> dict:
+    """Records `per_task` real rollouts per task of `run`'s policy (sampled at `temperature`, data
+    seeds from `first_seed`, no action noise) into `out`, and counts what they cost.
+
+    Returns:
+        ``episodes``, ``successes`` and ``real_interactions``: the actions taken, read back from
+        the recorded dataset itself, so a resumed recording is counted whole.
+    """
+    size = load_run_policy(str(Path(run).resolve())).config.image_size
+    config = CollectConfig(tasks=tasks, episodes_per_task=per_task, noise=(0.0,), first_seed=first_seed,
+                           workers=workers, runner=runner, env=EnvConfig(image_size=size, horizon=horizon))
+    record_policy(run, config, out, temperature=temperature, progress=progress)
+    dataset = EpisodeDataset(out)
+    return {"episodes": len(dataset), "successes": sum(info.success for info in dataset.episodes),
+            "real_interactions": int(sum(dataset.lengths))}

@@ -59,6 +59,29 @@ class DynaArmConfig:
                 raise ValueError(f"DynaArmConfig.{name} must be at least 1, got {getattr(self, name)}")
 
 
+@dataclass(frozen=True)
+class EqualBudgetConfig:
+    """Equal real budgets (`gymnast.experiment.equal_budget`): the same few real rollouts per task
+    spent on GRPO in the real world, on refitting the world model and the judge before practice in
+    imagination, or on Iter-SFT of their real successes."""
+
+    rollouts_per_task: int = 32
+    """Real rollouts per task each arm may spend on training (0: the comparison is not run)."""
+    first_seed: int = 200_000
+    """Data seed of every task's first recorded rollout: scenes no other stage records."""
+    wm_steps: int = 300
+    """Fine-tuning steps of the world model on the recorded rollouts."""
+    judge_steps: int = 200
+    """Fine-tuning steps of the judge on them."""
+
+    def __post_init__(self) -> None:
+        for name in ("rollouts_per_task", "first_seed", "wm_steps", "judge_steps"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"EqualBudgetConfig.{name} must be at least 0, got {getattr(self, name)}")
+        if self.rollouts_per_task and min(self.wm_steps, self.judge_steps) < 1:
+            raise ValueError("EqualBudgetConfig.wm_steps and judge_steps must be at least 1 when rollouts_per_task is set")
+
+
 WEAK_TASKS = "reach-v3,push-v3,pick-place-v3,peg-insert-side-v3"
 """MT10's tasks where the SFT policy is weakest (10-24% real success, results/sft/)."""
 
@@ -87,6 +110,8 @@ class ExperimentConfig:
     """The Iter-SFT arm."""
     dyna: DynaArmConfig = field(default_factory=DynaArmConfig)
     """The Dyna arm (its RL settings are the shared `rl`)."""
+    equal_budget: EqualBudgetConfig = field(default_factory=EqualBudgetConfig)
+    """The equal-real-budget comparison (its RL settings are the shared `rl`)."""
     weak_tasks: str = WEAK_TASKS
     """Tasks whose pooled success summary.json reports per arm (``weak_tasks``), the ones RL should
     help most; those of them not in `tasks` are left out."""
@@ -136,6 +161,11 @@ class ExperimentConfig:
                              f"random actions are worldgym_random), got {self.worldgym_noise}")
         if self.weak_tasks:
             resolve_tasks(self.weak_tasks)  # an unknown name is said now
+        budget = self.equal_budget.rollouts_per_task * len(resolve_tasks(self.tasks))
+        if self.equal_budget.rollouts_per_task and budget < self.rl.group_size:
+            raise ValueError(f"ExperimentConfig.equal_budget.rollouts_per_task ({self.equal_budget.rollouts_per_task}) "
+                             f"x {len(resolve_tasks(self.tasks))} tasks is {budget} real rollouts, fewer than one GRPO "
+                             f"group of rl.group_size ({self.rl.group_size})")
         if self.rl.steps % self.dyna.rounds:
             raise ValueError(f"ExperimentConfig.dyna.rounds ({self.dyna.rounds}) must divide rl.steps "
                              f"({self.rl.steps}): Dyna spends the RL arms' step budget in equal rounds")
@@ -173,6 +203,7 @@ def _debug() -> ExperimentConfig:
         rl=rl,
         iter_sft=IterSFTConfig(group_size=2, steps=2),
         dyna=DynaArmConfig(rounds=2, rollouts_per_task=1, wm_steps=2, judge_steps=2),
+        equal_budget=EqualBudgetConfig(rollouts_per_task=2, wm_steps=2, judge_steps=2),
         eval_episodes=2,
         robustness_episodes=1,
         worldgym_episodes=1,
@@ -196,6 +227,7 @@ def _demo() -> ExperimentConfig:
                     watch_every=2, watch_rollouts=8, video_every=2, checkpoint_every=2),
         iter_sft=IterSFTConfig(group_size=2, steps=100),
         dyna=DynaArmConfig(rounds=2, rollouts_per_task=2, wm_steps=20, judge_steps=20),
+        equal_budget=EqualBudgetConfig(rollouts_per_task=4, wm_steps=20, judge_steps=20),
         eval_episodes=10,
         robustness_episodes=4,
         worldgym_episodes=4,
@@ -216,6 +248,8 @@ def _gpu() -> ExperimentConfig:
         judge=JUDGE_PRESETS["gpu"],
         rl=dataclasses.replace(RL_PRESETS["gpu"], eval_episodes=10),
         dyna=DynaArmConfig(rounds=4, rollouts_per_task=16, wm_steps=1000, judge_steps=500),
+        # WMPO's budget: 128 real rollouts per task.
+        equal_budget=EqualBudgetConfig(rollouts_per_task=128, wm_steps=1000, judge_steps=500),
         workers=16,
     )
 

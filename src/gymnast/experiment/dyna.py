@@ -195,10 +195,10 @@ def run_round(k: int, config: DynaConfig, inputs: DynaInputs, policy: Path, wm: 
         row["rollouts"] = stages.run("rollouts", lambda: record_rollouts(k, rl_run, judge, config, rollouts, progress),
                                      rollouts)
         recorded.append(rollouts)
-        stages.run("world_model", lambda: fine_tune_world_model(inputs.wm, wm, recorded, config, new_wm, progress),
-                   new_wm)
-        row["judge"] = stages.run("judge", lambda: fine_tune_judge(inputs.judge, judge, new_wm, recorded, config,
-                                                                   new_judge, progress), new_judge)
+        stages.run("world_model", lambda: fine_tune_world_model(inputs.wm, wm, recorded, config.wm_steps, new_wm,
+                                                                progress), new_wm)
+        row["judge"] = stages.run("judge", lambda: fine_tune_judge(inputs.judge, judge, new_wm, recorded,
+                                                                   config.judge_steps, new_judge, progress), new_judge)
         wm, judge = new_wm, new_judge
     evaluated = stages.run("eval", lambda: _evaluate(rl_run, config, here / "eval.json"))
     return rl_run, wm, judge, {**evaluated, **row}
@@ -207,30 +207,25 @@ def run_round(k: int, config: DynaConfig, inputs: DynaInputs, policy: Path, wm: 
 def record_rollouts(k: int, policy: Path, judge: Path, config: DynaConfig, out: Path, progress: bool) -> dict:
     """Records round `k`'s real rollouts; returns their count, success, real interactions (actions
     taken, from the dataset itself) and how the judge that guided the round's RL scores them."""
-    from gymnast.data.collect import CollectConfig
     from gymnast.data.lerobot import EpisodeDataset
-    from gymnast.eval.actors import load_run_policy
-    from gymnast.eval.record import record_policy
+    from gymnast.eval.record import record_real_rollouts
     from gymnast.reward.train_judge import evaluate_judge, load_judge, load_videos
 
-    env = EnvConfig(image_size=load_run_policy(str(policy.resolve())).config.image_size, horizon=config.rl.horizon)
-    collect = CollectConfig(tasks=config.rl.tasks, episodes_per_task=config.rollouts_per_task, noise=(0.0,),
-                            first_seed=config.first_rollout_seed + (k - 1) * config.rollouts_per_task,
-                            workers=config.workers, runner=config.runner, env=env)
-    record_policy(policy, collect, out, temperature=config.rollout_temperature, progress=progress)
+    counts = record_real_rollouts(policy, config.rl.tasks, config.rollouts_per_task,
+                                  config.first_rollout_seed + (k - 1) * config.rollouts_per_task,
+                                  config.rollout_temperature, config.rl.horizon, config.workers, config.runner, out,
+                                  progress)
     dataset = EpisodeDataset(out)
     # Before fine-tuning: how often the judge passed a failure (the errors this round teaches it).
     judge_report = evaluate_judge(load_judge(judge), load_videos(dataset, list(range(len(dataset))), None, False))
-    return {"episodes": len(dataset), "successes": sum(info.success for info in dataset.episodes),
-            "real_interactions": sum(dataset.lengths), "judge_before": judge_report}
+    return {**counts, "judge_before": judge_report}
 
 
-def fine_tune_world_model(original: Path, current: Path, recorded: list[Path], config: DynaConfig, out: Path,
+def fine_tune_world_model(original: Path, current: Path, recorded: list[Path], steps: int, out: Path,
                           progress: bool) -> dict:
-    """The world model `current`, fine-tuned on `original`'s data plus every recorded rollout."""
+    """The world model `current`, fine-tuned for `steps` on `original`'s data plus every recorded rollout."""
     from gymnast.world_model.train import saved_train_config, train_world_model
 
-    steps = config.wm_steps
     settings = _fine_tuning(saved_train_config(original), steps, current, recorded, validate_every=steps,
                             video_every=steps)
     checkpoint = train_world_model(Path(saved_settings(original)["data"]), out, settings, resume=_started(out),
@@ -238,14 +233,14 @@ def fine_tune_world_model(original: Path, current: Path, recorded: list[Path], c
     return {"checkpoint": str(checkpoint)}
 
 
-def fine_tune_judge(original: Path, current: Path, wm: Path, recorded: list[Path], config: DynaConfig, out: Path,
+def fine_tune_judge(original: Path, current: Path, wm: Path, recorded: list[Path], steps: int, out: Path,
                     progress: bool) -> dict:
-    """The judge `current`, fine-tuned on `original`'s data plus every recorded rollout (re-imagined
+    """The judge `current`, fine-tuned for `steps` on `original`'s data plus every recorded rollout (re-imagined
     by the round's world model when the original judge learned from imagined video too)."""
     from gymnast.reward.train_judge import saved_judge_config, train_judge
 
     saved = saved_settings(original)
-    settings = _fine_tuning(saved_judge_config(original), config.judge_steps, current, recorded)
+    settings = _fine_tuning(saved_judge_config(original), steps, current, recorded)
     return train_judge(Path(saved["data"]), out, settings, wm=wm if saved.get("wm") else None, resume=_started(out),
                        progress=progress)
 

@@ -19,7 +19,7 @@ GOAL_DYNA_SHARE = 0.1
 
 
 def experiment_goals(arms: dict[str, dict], weak: dict | None, worldgym_r: float | None,
-                     watch_false_success: dict[str, float | None]) -> dict:
+                     watch_false_success: dict[str, float | None], equal_budget: dict | None = None) -> dict:
     """summary.json's ``goals``, each True only where the figures show it.
 
     Args:
@@ -27,6 +27,7 @@ def experiment_goals(arms: dict[str, dict], weak: dict | None, worldgym_r: float
         weak: ``weak_tasks`` (None: the experiment has none).
         worldgym_r: WorldGym's Pearson r (None: undefined).
         watch_false_success: each world-model arm's judged successes that failed for real.
+        equal_budget: ``equal_budget`` (None: not run).
     """
     return {
         "rl_real_beats_sft": above(arms["rl_real"], arms["sft"]),
@@ -39,6 +40,8 @@ def experiment_goals(arms: dict[str, dict], weak: dict | None, worldgym_r: float
         "dyna_reaches_real_rl_with_10pct": _dyna_goal(arms),
         "watch_false_success_at_most_10pct": {name: value is not None and value <= GOAL_WATCH_FALSE_SUCCESS
                                               for name, value in watch_false_success.items()},
+        "imagined_beats_real_grpo_at_equal_budget": (above(equal_budget["imagined"], equal_budget["real_grpo"])
+                                                     if equal_budget else None),
     }
 
 

@@ -10,7 +10,8 @@ Stages, in order, each done once (`gymnast.experiment.stages`; a rerun skips fin
    ``imagination``: the SFT policy's judged imagined rollouts against the same actions replayed
    in the real world (`gymnast.experiment.imagination`); ``signal``: whether GRPO's update in
    imagination is the one the real outcomes would give (`gymnast.experiment.practice_signal`).
-4. ``arm_<name>``: Iter-SFT, the four RL arms and Dyna (`gymnast.experiment.arms`).
+4. ``arm_<name>``: Iter-SFT, the four RL arms and Dyna (`gymnast.experiment.arms`);
+   ``equal_budget_<name>``: one small real budget spent three ways (`gymnast.experiment.equal_budget`).
 5. ``eval_<name>``: every arm in the real world, ``eval_episodes`` per task from the evaluation
    seeds, Wilson intervals; then the SFT and world-model-RL policies under minor and major
    perturbations and with held-out instruction paraphrases.
@@ -55,12 +56,19 @@ def run_experiment(config: ExperimentConfig, out: Path, reuse: dict[str, Path] |
     policies = {"sft": sft}
     for spec in ARMS[1:]:
         policies[spec.name] = _train_arm(stages, spec.name, config, out, sft, wm, judge, state, data, progress)
+    equal_budget = {}
+    if config.equal_budget.rollouts_per_task:
+        from gymnast.experiment.equal_budget import train_equal_budget
+
+        equal_budget = train_equal_budget(stages, config, out / "equal_budget", sft, wm, judge, data, progress)
     # The real world as the dataset saw it (a reused dataset may have its own image size).
     env = EnvConfig(image_size=EpisodeDataset(data).image_shape[0], horizon=config.rl.horizon)
     # The arms are trained: their evaluations share one set of simulator processes.
     with kept_workers(config.workers, config.runner):
         for name, policy in policies.items():
             _evaluate(stages, f"eval_{name}", policy, config, out, config.eval_episodes, env, progress)
+        for name, policy in equal_budget.items():
+            _evaluate(stages, f"eval_equal_budget_{name}", policy, config, out, config.eval_episodes, env, progress)
         for name in ROBUSTNESS_ARMS:
             for perturb in PERTURBATIONS:
                 _evaluate(stages, f"eval_{name}_{perturb}", policies[name], config, out, config.robustness_episodes,

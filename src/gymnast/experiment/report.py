@@ -131,6 +131,31 @@ def _weak_tasks(arms: dict[str, dict], config: ExperimentConfig) -> dict | None:
     return {"tasks": tasks, "arms": pooled}
 
 
+def _equal_budget(stages: Stages) -> dict | None:
+    """The three uses of one real budget (`gymnast.experiment.equal_budget`): each one's real
+    success with its interval and the real interactions it spent on training (None: not run)."""
+    from gymnast.experiment.equal_budget import EQUAL_BUDGET_ARMS
+
+    if not all(stages.done(f"eval_equal_budget_{name}") for name in EQUAL_BUDGET_ARMS):
+        return None
+    rows = {}
+    for name in EQUAL_BUDGET_ARMS:
+        result, trained = stages.record(f"eval_equal_budget_{name}"), stages.record(f"equal_budget_{name}")
+        rows[name] = {**_brief(result), "real_interactions": trained["real_interactions"],
+                      "per_task": {task: v["success"] for task, v in result["per_task"].items()}}
+    return rows
+
+
+def _equal_budget_setup(stages: Stages, config: ExperimentConfig) -> dict | None:
+    """How the equal budget was spent: the recorded rollouts and each arm's steps."""
+    if not stages.done("equal_budget_real_grpo"):
+        return None
+    recorded = stages.record("equal_budget_rollouts")
+    return {"rollouts_per_task": config.equal_budget.rollouts_per_task,
+            "recorded": {key: recorded[key] for key in ("episodes", "successes", "real_interactions")},
+            "real_grpo_steps": stages.record("equal_budget_real_grpo")["steps"], "imagined_rl_steps": config.rl.steps}
+
+
 def build_summary(stages: Stages, config: ExperimentConfig) -> dict:
     """summary.json's content, from the finished stages."""
     from gymnast.data.lerobot import EpisodeDataset
@@ -176,6 +201,8 @@ def build_summary(stages: Stages, config: ExperimentConfig) -> dict:
         "dyna_real_interactions": arms["dyna"]["real_interactions"] if "dyna" in arms else None,
         "real_rl_real_interactions": arms["rl_real"]["real_interactions"],
         "dyna": _dyna_against_real_rl(stages, config),
+        "equal_budget": (equal_budget := _equal_budget(stages)),
+        "equal_budget_setup": _equal_budget_setup(stages, config),
         "judge": {k: v for k, v in (judge_metrics or {}).items() if k.startswith(("real_", "imagined_"))},
         "world_model": _without_bookkeeping(stages.record("world_model_eval")) if stages.done("world_model_eval") else None,
         "imagination_agreement": imagination["agreement"] if imagination else None,
@@ -189,7 +216,7 @@ def build_summary(stages: Stages, config: ExperimentConfig) -> dict:
         "stage_wall_s": {path.stem: json.loads(path.read_text()).get("wall_s")
                          for path in sorted((stages.out / "stages").glob("*.json"))},
     }
-    summary["goals"] = experiment_goals(arms, weak, worldgym["pearson"], summary["watch_false_success"])
+    summary["goals"] = experiment_goals(arms, weak, worldgym["pearson"], summary["watch_false_success"], equal_budget)
     return summary
 
 

@@ -51,7 +51,7 @@ def verdict_lines(summary: dict) -> list[str]:
             f". Goal of beating SFT (the recipe learns): **{goal_in_words(learned, real['success'] > sft['success'])}**.")),
         (f"- WorldGym: Pearson r = {_num(summary['worldgym_pearson'])}, Spearman = {_num(summary['worldgym_spearman'])} over "
          f"{len(summary['worldgym'])} policies. Goal r >= 0.9: **{met[goals['worldgym_r_at_least_0.9']]}**."),
-        *_weak_tasks_verdict(summary), *_dyna_verdict(summary), *_watch_verdict(summary),
+        *_weak_tasks_verdict(summary), *_dyna_verdict(summary), *_equal_budget_verdict(summary), *_watch_verdict(summary),
     ]
 
 
@@ -87,6 +87,45 @@ def _dyna_verdict(summary: dict) -> list[str]:
              f"({pct(share)} of RL in the real world's {real['real_interactions']:,}, which reached {pct(real['success'])}; "
              f"{_significance(dyna, real)}). Goal of matching it with at most 10% of its interactions, having learned "
              f"(above SFT, intervals apart): **{goal_in_words(summary['goals']['dyna_reaches_real_rl_with_10pct'], ahead)}**.")]
+
+
+EQUAL_BUDGET_TITLES = {"real_grpo": "GRPO in the real world", "imagined": "world model and judge refitted, then practice in imagination",
+                       "iter_sft": "Iter-SFT on their real successes"}
+
+
+def _equal_budget_verdict(summary: dict) -> list[str]:
+    budget = summary.get("equal_budget")  # None in experiments without the comparison
+    if not budget:
+        return []
+    imagined, grpo = budget["imagined"], budget["real_grpo"]
+    rows = "; ".join(f"{EQUAL_BUDGET_TITLES[name]} {pct(budget[name]['success'])} "
+                     f"({budget[name]['real_interactions']:,} real interactions)" for name in EQUAL_BUDGET_TITLES)
+    met = summary["goals"]["imagined_beats_real_grpo_at_equal_budget"]
+    per_task = summary["equal_budget_setup"]["rollouts_per_task"]
+    return [(f"- Equal real budgets, {per_task} real rollouts per task spent three ways: {rows}. "
+             f"Practice in imagination above GRPO on the same real budget, intervals apart: "
+             f"**{goal_in_words(met, imagined['success'] > grpo['success'])}**.")]
+
+
+def _equal_budget_section(summary: dict) -> list[str]:
+    """The equal-budget arms beside SFT: success, interval and the real interactions each spent."""
+    budget, setup = summary.get("equal_budget"), summary.get("equal_budget_setup")
+    if not budget:
+        return []
+    sft = summary["arms"]["sft"]
+    recorded = setup["recorded"]
+    lines = ["## Equal real budgets", "",
+             (f"{setup['rollouts_per_task']} real rollouts per task: the SFT policy's, recorded once ({recorded['episodes']} "
+              f"episodes, {recorded['successes']} successes, {recorded['real_interactions']:,} real interactions) for the "
+              f"world model's refit and for Iter-SFT; GRPO in the real world spends as many of its own in "
+              f"{setup['real_grpo_steps']} step(s); practice in imagination takes {setup['imagined_rl_steps']} steps."), "",
+             "| arm | success | 95% CI | real interactions for training |", "|---|---|---|---|",
+             f"| SFT | {pct(sft['success'])} | [{pct(sft['ci_low'])}, {pct(sft['ci_high'])}] | 0 |"]
+    for name, title in EQUAL_BUDGET_TITLES.items():
+        row = budget[name]
+        lines.append(f"| {title} | {pct(row['success'])} | [{pct(row['ci_low'])}, {pct(row['ci_high'])}] | "
+                     f"{row['real_interactions']:,} |")
+    return [*lines, ""]
 
 
 def _watch_verdict(summary: dict) -> list[str]:
@@ -286,6 +325,7 @@ def report_markdown(summary: dict, plots: dict[str, str]) -> str:
         f"![learning curves]({plots['curves']})", "",
         "## Per task", "", *_per_task_table(summary), "",
         *_dyna_section(summary, plots),
+        *_equal_budget_section(summary),
         "## Robustness and language", "", *_robustness_tables(summary), "",
         "## WorldGym: does the world model rank policies like the real world?", "", *_worldgym_table(summary), "",
         f"![WorldGym]({plots['worldgym']})", "",
@@ -299,5 +339,6 @@ def report_markdown(summary: dict, plots: dict[str, str]) -> str:
         "- `imagination/`: the SFT policy's imagined rollouts against their real replays (imagination.json, imagination.md, videos).",
         "- `signal/`: GRPO groups in imagination against the real outcomes of the same actions (signal.json, signal.md).",
         "- `arms/<arm>/`: each arm's run (metrics.jsonl, TensorBoard, rollout videos with their rewards, summary.json).",
+        "- `equal_budget/`: the recorded rollouts and the runs of the equal-budget comparison.",
     ]
     return "\n".join(lines) + "\n"
