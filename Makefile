@@ -36,8 +36,9 @@ test: $(STAMP)
 	@# The import floors and "no cycles" (pyproject.toml, [tool.importlinter]) come before the tests.
 	$(BIN)/lint-imports --no-cache --no-logo
 	@# Two processes, a test file each at a time (session fixtures are built once per process): many
-	@# tests wait on subprocesses, simulators and timeouts, so two cores finish the suite about a
-	@# fifth sooner than one process. The slowest are listed at the end: CI allows 20 minutes.
+	@# tests wait on subprocesses, simulators and timeouts. Each process computes with its share of
+	@# the cores (tests/conftest.py): with torch's default of a thread per core in both, the suite
+	@# took 17.5 minutes on 2 cores; with one each, 11.6. The slowest are listed at the end.
 	$(BIN)/python -m pytest -n $(TEST_PROCESSES) --dist loadfile --durations=25
 
 # The headline experiment on a few tasks: every stage from data to report, then the table.

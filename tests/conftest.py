@@ -19,6 +19,18 @@ from gymnast.config import EnvConfig
 from gymnast.data.collect import CollectConfig, collect
 from gymnast.utils.disk_cache import CACHE_ENV
 
+# Several test processes on a machine of few cores (`make test` runs two on two): each computing
+# with torch's default of one thread per core puts more busy threads than cores on the machine,
+# and OpenMP's waiting threads then slow every convolution several-fold (measured: 7x for a small
+# CNN's step on two cores with another process busy). Each process, and what it starts, gets its
+# share of the cores.
+_PROCESSES = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
+if _PROCESSES > 1:
+    _THREADS = max(1, (os.cpu_count() or 1) // _PROCESSES)
+    for _name in ("OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(_name, str(_THREADS))
+    torch.set_num_threads(_THREADS)
+
 # Sentence embeddings are cached on disk for every process (gymnast.utils.disk_cache): the tests'
 # worker processes share a folder of their own, never the user's cache.
 os.environ[CACHE_ENV] = tempfile.mkdtemp(prefix="gymnast-test-cache-")
