@@ -67,7 +67,7 @@ def train_equal_budget(stages: Stages, config: ExperimentConfig, out: Path, sft:
     """
     budget = budget_for(config.equal_budget, config)
     rollouts = out / "rollouts"
-    stages.run("equal_budget_rollouts", lambda: _record(sft, config, budget, rollouts, progress), rollouts)
+    stages.run("equal_budget_rollouts", lambda: _record(sft, config, rollouts, progress), rollouts)
     recorded = stages.record("equal_budget_rollouts")["real_interactions"]
     arms = {"real_grpo": out / "real_grpo", "imagined": out / "imagined" / "rl", "iter_sft": out / "iter_sft"}
     stages.run("equal_budget_real_grpo", lambda: _real_grpo(config, budget, sft, data, arms["real_grpo"], progress),
@@ -81,7 +81,7 @@ def train_equal_budget(stages: Stages, config: ExperimentConfig, out: Path, sft:
     return arms
 
 
-def _record(sft: Path, config: ExperimentConfig, budget: Budget, out: Path, progress: bool) -> dict:
+def _record(sft: Path, config: ExperimentConfig, out: Path, progress: bool) -> dict:
     """The SFT policy's budget of real rollouts, sampled as RL samples them, on fresh data seeds."""
     from gymnast.eval.record import record_real_rollouts
 
@@ -135,8 +135,9 @@ def _imagined(config: ExperimentConfig, sft: Path, wm: Path, judge: Path, data: 
 def _iter_sft(config: ExperimentConfig, sft: Path, data: Path, rollouts: Path, out: Path, progress: bool) -> dict:
     """The SFT policy fine-tuned on the recorded rollouts' real successes, 1:1 with the demonstrations."""
     from gymnast.data.lerobot import EpisodeDataset
+    from gymnast.experiment.iter_sft import fine_tune_on_successes
     from gymnast.policy.load import load_policy
-    from gymnast.policy.sft import load_demos, train_sft
+    from gymnast.policy.sft import load_demos
 
     dataset = EpisodeDataset(rollouts)
     successes = [i for i, info in enumerate(dataset.episodes) if info.success]
@@ -144,9 +145,5 @@ def _iter_sft(config: ExperimentConfig, sft: Path, data: Path, rollouts: Path, o
     if samples is None:
         logger.warning("equal budget: none of the %d recorded rollouts succeeded; Iter-SFT fine-tunes on the "
                        "demonstrations alone", len(dataset))
-    steps = config.iter_sft.steps
-    settings = dataclasses.replace(config.sft, steps=steps, lr=config.iter_sft.lr,
-                                   warmup_steps=min(config.sft.warmup_steps, steps // 10), checkpoint_every=steps)
-    train_sft(data, out, settings, resume=(out / "checkpoints" / "last").exists(), progress=progress, init=sft,
-              extra=samples)
+    fine_tune_on_successes(sft, data, samples, out, config, progress)
     return {"successes": len(successes), "samples": 0 if samples is None else len(samples.images)}

@@ -89,12 +89,20 @@ def imagine_successes(policy_run: Path, wm_run: Path, judge_run: Path, data: Pat
 def train_iter_sft(policy_run: Path, wm_run: Path, judge_run: Path, data: Path, out: Path,
                    config: ExperimentConfig, progress: bool = True) -> dict:
     """Runs Iter-SFT into `out`; returns what it imagined and kept."""
+    samples, counts = imagine_successes(policy_run, wm_run, judge_run, data, config, progress)
+    fine_tune_on_successes(policy_run, data, samples, out, config, progress)
+    return counts
+
+
+def fine_tune_on_successes(policy_run: Path, data: Path, samples: DemoSet | None, out: Path, config: ExperimentConfig,
+                           progress: bool = True) -> None:
+    """Iter-SFT's fine-tuning into `out`: `policy_run` on `samples` (successes, imagined or real)
+    drawn 1:1 with `data`'s demonstrations (on the demonstrations alone where None), for
+    ``iter_sft.steps`` at ``iter_sft.lr``."""
     from gymnast.policy.sft import train_sft
 
-    samples, counts = imagine_successes(policy_run, wm_run, judge_run, data, config, progress)
     sft = dataclasses.replace(config.sft, steps=config.iter_sft.steps, lr=config.iter_sft.lr,
                               warmup_steps=min(config.sft.warmup_steps, config.iter_sft.steps // 10),
                               checkpoint_every=config.iter_sft.steps)
     train_sft(data, out, sft, resume=(out / "checkpoints" / "last").exists(), progress=progress, init=policy_run,
               extra=samples)
-    return counts
