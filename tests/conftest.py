@@ -21,9 +21,9 @@ from gymnast.utils.disk_cache import CACHE_ENV
 
 # Several test processes on a machine of few cores (`make test` runs two on two): each computing
 # with torch's default of one thread per core puts more busy threads than cores on the machine,
-# and OpenMP's waiting threads then slow every convolution several-fold (measured: 7x for a small
-# CNN's step on two cores with another process busy). Each process, and what it starts, gets its
-# share of the cores.
+# and OpenMP's waiting threads then slow torch's work several-fold (`pytest -n 2 tests/world_model
+# tests/policy` on two cores: 197 s with a thread per core in each process, 80 s with one). Each
+# process, and what it starts, gets its share of the cores.
 _PROCESSES = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
 if _PROCESSES > 1:
     _THREADS = max(1, (os.cpu_count() or 1) // _PROCESSES)
