@@ -258,6 +258,7 @@ def dyna(
     policy: Path | None = None,
     wm: Path | None = None,
     judge: Path | None = None,
+    state: Path | None = None,
     data: Path | None = None,
     preset: Preset = "full",
     resume: bool = False,
@@ -265,20 +266,30 @@ def dyna(
     rollouts_per_task: int | None = None,
     steps: int | None = None,
     tasks: str | None = None,
+    keyframes: str | None = None,
+    horizon: int | None = None,
+    eval_horizon: int | None = None,
+    practice_from_rollouts: bool | None = None,
+    state_steps: int | None = None,
+    wm_steps: int | None = None,
     workers: int | None = None,
     runner: str | None = None,
     real_rl: bool | None = None,
 ) -> None:
     """World-Gymnast's loop: RL in imagination, a few counted real rollouts of the new policy, the
-    world model and the judge fine-tuned on them, a real evaluation; repeated. Writes OUT/round_k/,
-    OUT/summary.json, OUT/dyna.md (table) and OUT/dyna.png (real success against real interactions),
-    beside RL in the real world with the same settings. Rerunning skips what finished.
+    world model and the reward model (judge or state model) fine-tuned on them, a real evaluation;
+    repeated. Writes OUT/round_k/, OUT/summary.json, OUT/dyna.md (table) and OUT/dyna.png (real
+    success against real interactions), beside RL in the real world with the same settings.
+    Rerunning skips what finished.
 
     Args:
         out: run directory.
         policy: the SFT (or RL) run to start from (required unless --resume).
         wm: the world-model run imagined RL starts in; fine-tuned every round.
-        judge: the judge run that rewards imagined RL; fine-tuned every round.
+        judge: the judge run that rewards imagined RL; fine-tuned every round (this or --state).
+        state: instead of a judge, a state-model run or ensemble (`gymnast train-state`,
+            `gymnast make-ensemble`) whose reward head rewards imagined RL; every member fine-tuned
+            every round.
         data: dataset whose scenes imagined RL starts from (default: the one the policy was trained on).
         preset: debug (seconds; tests), demo (minutes) or full.
         resume: continue the run in OUT with the settings and inputs saved there.
@@ -286,6 +297,14 @@ def dyna(
         rollouts_per_task: real episodes recorded per task and round (default: the preset's).
         steps: RL steps in imagination per round (default: the preset's).
         tasks: tasks trained and evaluated on (default: the preset's).
+        keyframes: where in the start episodes practice begins (see `gymnast rl --help`; default: the preset's).
+        horizon: actions per imagined rollout, e.g. 20 for short segments (default: the preset's).
+        eval_horizon: actions per real episode, recorded or evaluated (0: --horizon; with segments,
+            the task's 150).
+        practice_from_rollouts: rounds after the first practise from the previous round's real
+            rollouts instead of --data (default: the preset's, off).
+        state_steps: fine-tuning steps of the state model per round (default: the preset's).
+        wm_steps: fine-tuning steps of the world model per round; 0 keeps the given one (default: the preset's).
         workers: simulator processes (default: the preset's).
         runner: where they run: local, ray or ray:ADDRESS (default: the preset's, local).
         real_rl: also run RL in the real world for comparison (default: the preset's, on).
@@ -298,10 +317,11 @@ def dyna(
         return config, dataclasses.asdict(inputs)
 
     config, inputs = resolve(
-        "dyna", out, resume, DYNA_PRESETS[preset], inputs={"policy": policy, "wm": wm, "judge": judge, "data": data},
+        "dyna", out, resume, DYNA_PRESETS[preset], inputs={"policy": policy, "wm": wm, "judge": judge, "state": state, "data": data},
         overrides={"rounds": rounds, "rollouts_per_task": rollouts_per_task, "rl.steps": steps, "rl.tasks": tasks,
-                   "workers": workers, "runner": runner,
-                   "real_rl": real_rl}, saved=saved, required=("policy", "wm", "judge"))
+                   "rl.keyframes": keyframes, "rl.horizon": horizon, "rl.eval_horizon": eval_horizon, "practice_from_rollouts": practice_from_rollouts,
+                   "state_steps": state_steps, "wm_steps": wm_steps, "workers": workers, "runner": runner,
+                   "real_rl": real_rl}, saved=saved, required=("policy", "wm"))
     summary = run_dyna(config, DynaInputs(**inputs), out)
     print(dyna_table(summary))
     print(f"summary: {out / 'summary.json'}, plot: {out / summary['plot']}")

@@ -130,3 +130,57 @@ def test_a_judge_fine_tunes_from_the_given_judge_and_only_one_of_its_own_kind(mo
         torch.testing.assert_close(value, source.state_dict()[key], msg=key)
     with pytest.raises(ValueError, match="--init .*frame"):
         build_judge(dataclasses.replace(config, kind="video"))
+
+
+@pytest.fixture(scope="module")
+def state_ensemble(models) -> Path:
+    """Two tiny state models (seeds 0 and 1) on the models' episodes, as one ensemble."""
+    from gymnast.world_model.state_model import write_state_ensemble
+    from gymnast.world_model.train_state import StateTrainConfig, train_state_model
+
+    root = models["data"].parent
+    members = []
+    for seed in (0, 1):
+        settings = StateTrainConfig(steps=2, batch_size=8, unroll=4, hidden=16, checkpoint_every=2, seed=seed)
+        train_state_model(models["data"], root / f"state_s{seed}", settings, progress=False)
+        members.append(root / f"state_s{seed}")
+    write_state_ensemble(root / "state_ens", members)
+    return root / "state_ens"
+
+
+def test_a_state_model_ensemble_rewards_practice_from_the_newest_rollouts_and_every_member_is_refit(
+        one_rl_step_per_round, models, state_ensemble, tmp_path):
+    out = tmp_path / "run"
+    main(["dyna", "--preset", "debug", "--out", str(out), "--policy", str(POLICY), "--wm", str(models["wm"]),
+          "--state", str(state_ensemble), "--data", str(models["data"]), "--rounds", "2", "--real-rl", "False",
+          "--keyframes", "uniform", "--horizon", "5", "--eval-horizon", "10", "--practice-from-rollouts", "True",
+          "--state-steps", "2", "--wm-steps", "0"])
+    first = json.loads((out / "round_1" / "rl" / "config.json").read_text())["run"]
+    assert first["reward"] == f"state:{state_ensemble}" and first["data"] == str(models["data"])
+    # Round 2 practises on the refitted ensemble, from the real rollouts round 1 recorded.
+    second = json.loads((out / "round_2" / "rl" / "config.json").read_text())["run"]
+    assert second["reward"] == f"state:{out / 'round_1' / 'state'}"
+    assert second["data"] == str(out / "round_1" / "rollouts")
+    # --wm-steps 0: every round imagines in the given world model.
+    assert second["wm"] == str(models["wm"]) and not (out / "round_1" / "world_model").exists()
+    for i, member in enumerate(("state_s0", "state_s1")):
+        train = json.loads((out / "round_1" / "state" / f"member_{i}" / "config.json").read_text())["train"]
+        assert Path(train["init"]).parent.parent.resolve() == (models["data"].parent / member).resolve()
+        assert train["extra_data"] == [str(out / "round_1" / "rollouts")] and train["steps"] == 2
+    from gymnast.world_model.state_model import load_state_models
+    assert len(load_state_models(out / "round_1" / "state")) == 2
+    # Segments of 5 actions are practised; the real rollouts and evaluations are whole 10-action episodes.
+    assert json.loads((out / "round_1" / "rl" / "config.json").read_text())["rl"]["horizon"] == 5
+    recorded = EpisodeDataset(out / "round_1" / "rollouts")
+    assert max(len(recorded.load(i).actions) for i in range(len(recorded))) == 10
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["rounds"][1]["judge_fpr_on_rollouts"] is None and summary["real_rl"] is None
+
+
+def test_dyna_practises_on_exactly_one_reward_model(models, state_ensemble, tmp_path):
+    with pytest.raises(ValueError, match="not both"):
+        DynaInputs(POLICY, models["wm"], models["judge"], state=state_ensemble).check()
+    with pytest.raises(ValueError, match="not neither"):
+        DynaInputs(POLICY, models["wm"]).check()
+    with pytest.raises(FileNotFoundError, match="--state .*no run there"):
+        DynaInputs(POLICY, models["wm"], state=tmp_path).check()

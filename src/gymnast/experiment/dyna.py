@@ -1,17 +1,23 @@
 """`gymnast dyna`: World-Gymnast's iterative loop of practice in imagination and a little reality.
 
-Each round k (1..rounds), from the policy, world model and judge that round k-1 left:
+Each round k (1..rounds), from the policy, world model and reward model that round k-1 left:
 
-1. RL in imagination: `rl.steps` GRPO steps in the world model, rewarded by the judge
-   (`gymnast.rl.train.train_rl`), from the original dataset's scenes.
+1. RL in imagination: `rl.steps` GRPO steps in the world model (`gymnast.rl.train.train_rl`),
+   rewarded by the judge or by the grounded state model's reward head (``state``, `gymnast
+   train-state`, one run or an ensemble), from the original dataset's scenes, or, with
+   `practice_from_rollouts`, from the previous round's recorded rollouts: the policy's own newest
+   real states, where WoVR restarts imagination.
 2. Real rollouts: `rollouts_per_task` episodes per task of the new policy in the real world
    (`gymnast.eval.record.record_policy`), from data seeds only. These are the only real
    interactions Dyna spends on training, and they are counted from the recorded dataset. The
    last round takes none (and skips step 3): nothing after it would learn from them.
-3. Fine-tuning: the world model and the judge each continue from their last weights on their own
-   original data plus every round's recorded rollouts (``init`` and ``extra_data`` of
-   `train_world_model` and `train_judge`). The rollouts carry Meta-World's per-step success flags,
-   so the judge's false positives (failures it passed) become labelled negatives.
+3. Fine-tuning: the world model and the reward model each continue from their last weights on their
+   own original data plus every round's recorded rollouts (``init`` and ``extra_data`` of
+   `train_world_model`, `train_judge` and `train_state_model`; every member of an ensemble). The
+   rollouts carry Meta-World's per-step success flags and rewards, so the judge's false positives
+   (failures it passed) become labelled negatives, and the state model learns the states the
+   practised policy reaches, where its reward head was wrong in the direction practice exploited
+   (the lever that lifted its ranking most, docs/world_model.md).
 4. Evaluation: `gymnast eval` in the real world on the evaluation seeds; these episodes measure
    and are counted apart from the training interactions.
 
@@ -62,9 +68,14 @@ class DynaConfig:
     its own demonstrations' scenes (docs/rl.md), so rollouts there hold few of the failures the
     judge must learn to refuse."""
     wm_steps: int = 300
-    """Fine-tuning steps of the world model per round."""
+    """Fine-tuning steps of the world model per round (0: every round imagines in the given one)."""
     judge_steps: int = 200
     """Fine-tuning steps of the judge per round."""
+    state_steps: int = 500
+    """Fine-tuning steps of the state model (of each member of an ensemble) per round."""
+    practice_from_rollouts: bool = False
+    """Rounds after the first practise from the previous round's recorded rollouts (their first
+    frames, or frames within them with `rl.keyframes`) instead of the original dataset's scenes."""
     eval_episodes: int = 20
     """Real evaluation episodes per task after each round, from the evaluation seeds."""
     workers: int = 2
@@ -75,9 +86,11 @@ class DynaConfig:
     """GRPO settings of every round's imagined RL and of the real-world arm."""
 
     def __post_init__(self) -> None:
-        for name in ("rounds", "rollouts_per_task", "wm_steps", "judge_steps", "eval_episodes", "workers"):
+        for name in ("rounds", "rollouts_per_task", "judge_steps", "state_steps", "eval_episodes", "workers"):
             if getattr(self, name) < 1:
                 raise ValueError(f"DynaConfig.{name} must be at least 1, got {getattr(self, name)}")
+        if self.wm_steps < 0:
+            raise ValueError(f"DynaConfig.wm_steps must be at least 0, got {self.wm_steps}")
         if self.rollout_temperature < 0:
             raise ValueError(f"DynaConfig.rollout_temperature must be >= 0, got {self.rollout_temperature}")
         if self.real_reward not in ("sim", "sim-dense"):
@@ -112,24 +125,45 @@ DYNA_PRESETS: dict[str, DynaConfig] = {
 
 @dataclass(frozen=True)
 class DynaInputs:
-    """What the loop starts from: runs of the policy, world model and judge, and the dataset whose
-    scenes imagined RL starts from (None: the one the policy was trained on)."""
+    """What the loop starts from: runs of the policy, world model and reward model (a judge, or a
+    state model: one run or an ensemble of them), and the dataset whose scenes imagined RL starts
+    from (None: the one the policy was trained on)."""
 
     policy: Path
     wm: Path
-    judge: Path
+    judge: Path | None = None
     data: Path | None = None
+    state: Path | None = None
+
+    @property
+    def reward_kind(self) -> str:
+        """``judge`` or ``state``: which of the two reward models the loop practises on and refits."""
+        return "judge" if self.judge is not None else "state"
+
+    @property
+    def reward_model(self) -> Path:
+        return self.judge if self.judge is not None else self.state
 
     def check(self) -> None:
         """Raises FileNotFoundError or ValueError, naming the input, before anything runs."""
-        for name in ("policy", "wm", "judge"):
-            run = getattr(self, name)
+        from gymnast.world_model.ensemble import is_ensemble, member_paths
+
+        if (self.judge is None) == (self.state is None):
+            raise ValueError("dyna practises on one reward model: give --judge RUN or --state RUN, not "
+                             f"{'both' if self.judge is not None else 'neither'}")
+        runs = [("policy", self.policy), ("wm", self.wm)]
+        if self.state is not None and is_ensemble(self.state):
+            runs += [("state", member) for member in member_paths(self.state)]
+        else:
+            runs.append((self.reward_kind, self.reward_model))
+        for name, run in runs:
             if not (Path(run) / "config.json").is_file():
                 raise FileNotFoundError(f"--{name} {run}: no run there (no config.json); dyna fine-tunes a single "
-                                        f"{'world-model' if name == 'wm' else name} run")
-        for name in ("wm", "judge"):
-            if not saved_settings(getattr(self, name)).get("data"):
-                raise ValueError(f"--{name} {getattr(self, name)} does not say which dataset it was trained on")
+                                        f"{'world-model' if name == 'wm' else name} run"
+                                        f"{' or an ensemble of state-model runs' if name == 'state' else ''}")
+        for name, run in runs[1:]:
+            if not saved_settings(run).get("data"):
+                raise ValueError(f"--{name} {run} does not say which dataset it was trained on")
         if self.data is not None and not Path(self.data).is_dir():
             raise FileNotFoundError(f"--data {self.data}: no such directory")
 
@@ -161,9 +195,9 @@ def run_dyna(config: DynaConfig, inputs: DynaInputs, out: Path, progress: bool =
     began = time.perf_counter()
     stages = Stages(out)
     rounds = [stages.run("round_0_eval", lambda: _evaluate(inputs.policy, config, out / "round_0" / "eval.json"))]
-    policy, wm, judge, recorded = inputs.policy, inputs.wm, inputs.judge, []
+    policy, wm, reward, recorded = inputs.policy, inputs.wm, inputs.reward_model, []
     for k in range(1, config.rounds + 1):
-        policy, wm, judge, row = run_round(k, config, inputs, policy, wm, judge, recorded, out, progress)
+        policy, wm, reward, row = run_round(k, config, inputs, policy, wm, reward, recorded, out, progress)
         rounds.append(row)
         logger.info("dyna round %d: real success %.1f%% [%.1f, %.1f]; its rollouts took %d real actions", k,
                     100 * row["success"], 100 * row["ci_low"], 100 * row["ci_high"],
@@ -175,10 +209,11 @@ def run_dyna(config: DynaConfig, inputs: DynaInputs, out: Path, progress: bool =
     return write_report(summary, out)
 
 
-def run_round(k: int, config: DynaConfig, inputs: DynaInputs, policy: Path, wm: Path, judge: Path,
+def run_round(k: int, config: DynaConfig, inputs: DynaInputs, policy: Path, wm: Path, reward: Path,
               recorded: list[Path], out: Path, progress: bool) -> tuple[Path, Path, Path, dict]:
-    """One round in OUT/round_k/: the new policy, world model and judge, and the round's figures.
-    `recorded` (every round's rollout dataset so far) gains this round's."""
+    """One round in OUT/round_k/: the new policy, world model and reward model (judge or state
+    model, `inputs.reward_kind`), and the round's figures. `recorded` (every round's rollout
+    dataset so far) gains this round's."""
     from gymnast.envs.kinds import IMAGINED
     from gymnast.reward.spec import RewardSpec
     from gymnast.rl.config import RLRun
@@ -186,35 +221,48 @@ def run_round(k: int, config: DynaConfig, inputs: DynaInputs, policy: Path, wm: 
 
     here = out / f"round_{k}"
     stages = Stages(here)
-    rl_run, rollouts, new_wm, new_judge = here / "rl", here / "rollouts", here / "world_model", here / "judge"
-    spec = RLRun(str(policy), IMAGINED, RewardSpec.judge(str(judge)), wm=str(wm), data=_str(inputs.data))
+    kind = inputs.reward_kind
+    rl_run, rollouts, new_wm, new_reward = here / "rl", here / "rollouts", here / "world_model", here / kind
+    starts = recorded[-1] if config.practice_from_rollouts and recorded else inputs.data
+    spec = RLRun(str(policy), IMAGINED, RewardSpec(kind, run=Path(reward)), wm=str(wm), data=_str(starts))
     trained = stages.run("rl", lambda: _rl_record(train_rl(spec, rl_run, config.rl, resume=_started(rl_run),
                                                            progress=progress)), rl_run)
     row = {"round": k, "rl_steps": k * config.rl.steps, "rl": trained}
     if k < config.rounds:  # the last round's rollouts could no longer change the policy: none are taken
+        judge = reward if kind == "judge" else None
         row["rollouts"] = stages.run("rollouts", lambda: record_rollouts(k, rl_run, judge, config, rollouts, progress),
                                      rollouts)
         recorded.append(rollouts)
-        stages.run("world_model", lambda: fine_tune_world_model(inputs.wm, wm, recorded, config.wm_steps, new_wm,
-                                                                progress), new_wm)
-        row["judge"] = stages.run("judge", lambda: fine_tune_judge(inputs.judge, judge, new_wm, recorded,
-                                                                   config.judge_steps, new_judge, progress), new_judge)
-        wm, judge = new_wm, new_judge
+        if config.wm_steps:
+            stages.run("world_model", lambda: fine_tune_world_model(inputs.wm, wm, recorded, config.wm_steps, new_wm,
+                                                                    progress), new_wm)
+        else:
+            new_wm = wm
+        if kind == "judge":
+            refit = lambda: fine_tune_judge(inputs.judge, reward, new_wm, recorded, config.judge_steps, new_reward,
+                                            progress)
+        else:
+            refit = lambda: fine_tune_state_model(inputs.state, reward, recorded, config.state_steps, new_reward,
+                                                  progress)
+        row[kind] = stages.run(kind, refit, new_reward)
+        wm, reward = new_wm, new_reward
     evaluated = stages.run("eval", lambda: _evaluate(rl_run, config, here / "eval.json"))
-    return rl_run, wm, judge, {**evaluated, **row}
+    return rl_run, wm, reward, {**evaluated, **row}
 
 
-def record_rollouts(k: int, policy: Path, judge: Path, config: DynaConfig, out: Path, progress: bool) -> dict:
+def record_rollouts(k: int, policy: Path, judge: Path | None, config: DynaConfig, out: Path, progress: bool) -> dict:
     """Records round `k`'s real rollouts; returns their count, success, real interactions (actions
-    taken, from the dataset itself) and how the judge that guided the round's RL scores them."""
+    taken, from the dataset itself) and how the judge that guided the round's RL, if one did, scores them."""
     from gymnast.data.lerobot import EpisodeDataset
     from gymnast.eval.record import record_real_rollouts
     from gymnast.reward.train_judge import evaluate_judge, load_judge, load_videos
 
     counts = record_real_rollouts(policy, config.rl.tasks, config.rollouts_per_task,
                                   config.first_rollout_seed + (k - 1) * config.rollouts_per_task,
-                                  config.rollout_temperature, config.rl.horizon, config.workers, config.runner, out,
+                                  config.rollout_temperature, config.rl.evaluation_horizon, config.workers, config.runner, out,
                                   progress)
+    if judge is None:
+        return counts
     dataset = EpisodeDataset(out)
     # Before fine-tuning: how often the judge passed a failure (the errors this round teaches it).
     judge_report = evaluate_judge(load_judge(judge), load_videos(dataset, list(range(len(dataset))), None, False))
@@ -243,6 +291,34 @@ def fine_tune_judge(original: Path, current: Path, wm: Path, recorded: list[Path
     settings = _fine_tuning(saved_judge_config(original), steps, current, recorded)
     return train_judge(Path(saved["data"]), out, settings, wm=wm if saved.get("wm") else None, resume=_started(out),
                        progress=progress)
+
+
+def fine_tune_state_model(original: Path, current: Path, recorded: list[Path], steps: int, out: Path,
+                          progress: bool) -> dict:
+    """The state model `current` (a run, or an ensemble: each member in OUT/member_i, and OUT an
+    ensemble of them), fine-tuned for `steps` on `original`'s data plus every recorded rollout;
+    returns each member's held-out errors (its eval.json) by member."""
+    from gymnast.utils.settings import from_json
+    from gymnast.world_model.ensemble import is_ensemble, member_paths
+    from gymnast.world_model.state_model import write_state_ensemble
+    from gymnast.world_model.train_state import StateTrainConfig, train_state_model
+
+    pairs = list(zip(member_paths(original), member_paths(current), strict=True)) if is_ensemble(original) \
+        else [(original, current)]
+    reports, members = {}, []
+    for i, (first, last) in enumerate(pairs):
+        member = out / f"member_{i}" if len(pairs) > 1 else out
+        saved = saved_settings(first)
+        base = from_json(StateTrainConfig, saved["train"])
+        settings = dataclasses.replace(base, steps=steps, checkpoint_every=min(base.checkpoint_every, steps),
+                                       init=last, extra_data=(*base.extra_data, *recorded))
+        train_state_model(Path(saved["data"]), member, settings, resume=_started(member), progress=progress)
+        evaluation = member / "eval.json"
+        reports[member.name] = json.loads(evaluation.read_text()) if evaluation.is_file() else None
+        members.append(member)
+    if len(members) > 1:
+        write_state_ensemble(out, members)
+    return reports
 
 
 def _fine_tuning(base, steps: int, current: Path, recorded: list[Path], **more):
@@ -308,7 +384,7 @@ def _evaluate(policy: Path, config: DynaConfig, report: Path) -> dict:
 
     size = load_run_policy(str(Path(policy).resolve())).config.image_size
     settings = EvalConfig(tasks=config.rl.tasks, episodes=config.eval_episodes, workers=config.workers,
-                          runner=config.runner, env=EnvConfig(image_size=size, horizon=config.rl.horizon))
+                          runner=config.runner, env=EnvConfig(image_size=size, horizon=config.rl.evaluation_horizon))
     result = evaluate(str(policy), settings, report, progress=False)
     return {**{key: result[key] for key in ("success", "ci_low", "ci_high", "episodes", "successes", "per_task")},
             "eval_real_interactions": result["real_interactions"]}

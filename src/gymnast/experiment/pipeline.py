@@ -62,7 +62,7 @@ def run_experiment(config: ExperimentConfig, out: Path, reuse: dict[str, Path] |
 
         equal_budget = train_equal_budget(stages, config, out / "equal_budget", sft, wm, judge, data, progress)
     # The real world as the dataset saw it (a reused dataset may have its own image size).
-    env = EnvConfig(image_size=EpisodeDataset(data).image_shape[0], horizon=config.rl.horizon)
+    env = EnvConfig(image_size=EpisodeDataset(data).image_shape[0], horizon=config.rl.evaluation_horizon)
     # The arms are trained: their evaluations share one set of simulator processes.
     with kept_workers(config.workers, config.runner):
         for name, policy in policies.items():
