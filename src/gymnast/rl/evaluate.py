@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import torch
 from gymnasium.vector import VectorEnv
+from tqdm import tqdm
 
 from gymnast.envs.engine import run_batch
 from gymnast.envs.factory import EnvFactory
@@ -39,8 +40,9 @@ def verdicts(rollouts: Rollouts, scores: torch.Tensor, reward: Reward) -> torch.
 
 
 def evaluate_in_env(envs: EnvFactory, kind: EnvKind, policy, reward: Reward, starts: Sequence[Start],
-                    prefix: str) -> dict[str, float]:
-    """Greedy rollouts from `starts` in env `kind`; success with its 95% Wilson interval.
+                    prefix: str, progress: bool = False) -> dict[str, float]:
+    """Greedy rollouts from `starts` in env `kind`; success with its 95% Wilson interval (a
+    progress bar of the episodes with `progress`: hundreds of whole episodes take minutes).
 
     Returns ``{prefix}_episodes`` (judged), ``_interactions`` (actions taken, which are real
     interactions when `kind` declares ``real_interactions``) and, when any episode could be judged, ``_success``,
@@ -48,6 +50,7 @@ def evaluate_in_env(envs: EnvFactory, kind: EnvKind, policy, reward: Reward, sta
     """
     env = envs.get(kind, envs.batch)
     outcomes, interactions = [], 0
+    bar = tqdm(total=len(starts), desc=f"evaluate {kind}", unit="ep", disable=not progress, leave=False)
     for first in range(0, len(starts), env.num_envs):
         batch = list(starts[first: first + env.num_envs])
         real = len(batch)
@@ -56,6 +59,8 @@ def evaluate_in_env(envs: EnvFactory, kind: EnvKind, policy, reward: Reward, sta
         scores = score_groups(reward, rollouts, 1) if rollouts.success is None else torch.zeros(len(batch))
         outcomes.append(verdicts(rollouts, scores, reward)[:real])
         interactions += int(rollouts.lengths[:real].sum())
+        bar.update(real)
+    bar.close()
     success = torch.cat(outcomes)
     judged = success[torch.isfinite(success)]
     wins, total = int(judged.sum()), len(judged)

@@ -164,9 +164,10 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
                 board.add_scalar(key, value, step)
 
     def evaluate(step: int) -> None:
-        values = evaluate_in_env(eval_envs, env, policy, reward, eval_starts, prefix="eval/own")
+        values = evaluate_in_env(eval_envs, env, policy, reward, eval_starts, prefix="eval/own", progress=progress)
         if config.real_eval and not env.real_interactions:  # else its own evaluation is the real one
-            real = evaluate_in_env(eval_envs, REAL, policy, reward, eval_starts, prefix="eval/real")
+            real = evaluate_in_env(eval_envs, REAL, policy, reward, eval_starts, prefix="eval/real",
+                                   progress=progress)
             state["eval_real_interactions"] += int(real.pop("eval/real_interactions"))
             values |= real
         own = int(values.pop("eval/own_interactions", 0))
