@@ -317,9 +317,11 @@ def dyna(
         return config, dataclasses.asdict(inputs)
 
     config, inputs = resolve(
-        "dyna", out, resume, DYNA_PRESETS[preset], inputs={"policy": policy, "wm": wm, "judge": judge, "state": state, "data": data},
+        "dyna", out, resume, DYNA_PRESETS[preset],
+        inputs={"policy": policy, "wm": wm, "judge": judge, "state": state, "data": data},
         overrides={"rounds": rounds, "rollouts_per_task": rollouts_per_task, "rl.steps": steps, "rl.tasks": tasks,
-                   "rl.keyframes": keyframes, "rl.horizon": horizon, "rl.eval_horizon": eval_horizon, "practice_from_rollouts": practice_from_rollouts,
+                   "rl.keyframes": keyframes, "rl.horizon": horizon, "rl.eval_horizon": eval_horizon,
+                   "practice_from_rollouts": practice_from_rollouts,
                    "state_steps": state_steps, "wm_steps": wm_steps, "workers": workers, "runner": runner,
                    "real_rl": real_rl}, saved=saved, required=("policy", "wm"))
     summary = run_dyna(config, DynaInputs(**inputs), out)

@@ -259,8 +259,8 @@ def record_rollouts(k: int, policy: Path, judge: Path | None, config: DynaConfig
 
     counts = record_real_rollouts(policy, config.rl.tasks, config.rollouts_per_task,
                                   config.first_rollout_seed + (k - 1) * config.rollouts_per_task,
-                                  config.rollout_temperature, config.rl.evaluation_horizon, config.workers, config.runner, out,
-                                  progress)
+                                  config.rollout_temperature, config.rl.evaluation_horizon, config.workers,
+                                  config.runner, out, progress)
     if judge is None:
         return counts
     dataset = EpisodeDataset(out)

@@ -86,7 +86,8 @@ def _record(sft: Path, config: ExperimentConfig, out: Path, progress: bool) -> d
     from gymnast.eval.record import record_real_rollouts
 
     return record_real_rollouts(sft, config.tasks, config.equal_budget.rollouts_per_task, config.equal_budget.first_seed,
-                                config.rl.temperature, config.rl.evaluation_horizon, config.workers, config.runner, out, progress)
+                                config.rl.temperature, config.rl.evaluation_horizon, config.workers, config.runner, out,
+                                progress)
 
 
 def _real_grpo(config: ExperimentConfig, budget: Budget, sft: Path, data: Path, out: Path, progress: bool) -> dict:
