@@ -142,6 +142,7 @@ class DynaInputs:
 
     @property
     def reward_model(self) -> Path:
+        """The run (or ensemble directory) of that reward model."""
         return self.judge if self.judge is not None else self.state
 
     def check(self) -> None:
@@ -233,19 +234,19 @@ def run_round(k: int, config: DynaConfig, inputs: DynaInputs, policy: Path, wm: 
         row["rollouts"] = stages.run("rollouts", lambda: record_rollouts(k, rl_run, judge, config, rollouts, progress),
                                      rollouts)
         recorded.append(rollouts)
-        if config.wm_steps:
+        if config.wm_steps:  # else every round imagines in the given world model
             stages.run("world_model", lambda: fine_tune_world_model(inputs.wm, wm, recorded, config.wm_steps, new_wm,
                                                                     progress), new_wm)
-        else:
-            new_wm = wm
+            wm = new_wm
         if kind == "judge":
-            refit = lambda: fine_tune_judge(inputs.judge, reward, new_wm, recorded, config.judge_steps, new_reward,
-                                            progress)
+            row["judge"] = stages.run("judge", lambda: fine_tune_judge(inputs.judge, reward, wm, recorded,
+                                                                       config.judge_steps, new_reward, progress),
+                                      new_reward)
         else:
-            refit = lambda: fine_tune_state_model(inputs.state, reward, recorded, config.state_steps, new_reward,
-                                                  progress)
-        row[kind] = stages.run(kind, refit, new_reward)
-        wm, reward = new_wm, new_reward
+            row["state"] = stages.run("state", lambda: fine_tune_state_model(inputs.state, reward, recorded,
+                                                                             config.state_steps, new_reward, progress),
+                                      new_reward)
+        reward = new_reward
     evaluated = stages.run("eval", lambda: _evaluate(rl_run, config, here / "eval.json"))
     return rl_run, wm, reward, {**evaluated, **row}
 
