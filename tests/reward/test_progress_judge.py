@@ -26,6 +26,7 @@ def test_a_video_scores_the_mean_progress_of_its_frames_after_the_first():
     videos = torch.randint(0, 255, (3, 6, 16, 16, 3), dtype=torch.uint8)
     per_frame = judge.frame_probabilities(videos, ["push the puck"] * 3)
     assert torch.allclose(judge.score(videos, ["push the puck"] * 3), per_frame[:, 1:].mean(dim=1))
+    assert torch.allclose(judge.step_rewards(videos, ["push the puck"] * 3), per_frame[:, 1:])
     assert not judge.binary and judge.score(videos[:, :1], ["push the puck"] * 3).tolist() == [0.0] * 3
 
 

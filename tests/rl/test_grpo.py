@@ -8,6 +8,7 @@ import pytest
 import torch
 from torch import nn
 
+from gymnast.rl import grpo
 from gymnast.rl.grpo import group_advantages, k3_kl, keep_groups, keep_varied_groups, policy_loss
 
 # ---------------------------------------------------------------- slow plain-Python references
@@ -367,3 +368,47 @@ def test_policy_loss_rejects_an_empty_mask_without_a_token_count():
 def test_k3_rejects_mismatched_shapes():
     with pytest.raises(ValueError, match=r"\(2, 3\).*\(3, 2\)"):
         k3_kl(torch.zeros(2, 3), torch.zeros(3, 2))
+
+
+def test_reward_to_go_credits_each_call_with_the_rewards_from_its_actions_on():
+    # two calls of 2 actions; the second rollout ended after 3 actions without success (NaN after)
+    steps = torch.tensor([[0.1, 0.2, 0.3, 0.4], [0.5, 0.0, 0.6, float("nan")]])
+    returns = grpo.reward_to_go(steps, chunk=2, calls=2)
+    assert torch.allclose(returns, torch.tensor([[1.0 / 4, 0.7 / 4], [1.1 / 3, 0.6 / 3]]))
+    assert torch.allclose(returns[:, 0], torch.nanmean(steps, dim=1))  # call 0's is the rollout's score
+
+
+def test_reward_to_go_pads_calls_past_the_horizon_and_keeps_unscored_rollouts_nan():
+    steps = torch.tensor([[1.0, 1.0, 1.0], [float("nan")] * 3])
+    returns = grpo.reward_to_go(steps, chunk=2, calls=3)
+    assert torch.allclose(returns[0], torch.tensor([1.0, 1 / 3, 0.0]))
+    assert returns[1].isnan().all()
+    with pytest.raises(ValueError, match="calls"):
+        grpo.reward_to_go(steps, chunk=1, calls=2)
+
+
+def test_call_advantages_compare_each_call_with_the_rollouts_still_acting_there():
+    # one group of 3, two calls; rollout 0 ended after its first call (a success)
+    returns = torch.tensor([[0.9, 0.5], [0.2, 0.1], [0.4, 0.3]])
+    acting = torch.tensor([[True, False], [True, True], [True, True]])
+    advantages = grpo.call_advantages(returns, acting, group_size=3, normalize_std=False)
+    assert torch.allclose(advantages[:, 0], returns[:, 0] - returns[:, 0].mean())
+    # at call 1 the finished rollout's 0.5 is not the others' baseline
+    assert torch.allclose(advantages[:, 1], torch.tensor([0.0, -0.1, 0.1]))
+
+
+def test_call_advantages_of_constant_calls_equal_the_rollout_advantages():
+    rewards = torch.tensor([[0.0, 1.0, 2.0, 5.0], [3.0, 3.0, 1.0, 0.0]])  # (B=2, G=4)
+    returns = rewards.reshape(-1, 1).expand(-1, 3)  # every call of a rollout with its rollout's return
+    per_call = grpo.call_advantages(returns, torch.ones(8, 3, dtype=torch.bool), group_size=4)
+    per_rollout, _ = grpo.group_advantages(rewards)
+    assert torch.allclose(per_call, per_rollout.reshape(-1, 1).expand(-1, 3))
+    with pytest.raises(ValueError, match="multiple of 3"):
+        grpo.call_advantages(returns, torch.ones(8, 3, dtype=torch.bool), group_size=3)
+
+
+def test_call_advantages_keep_the_groups_scale_at_calls_where_rollouts_barely_differ():
+    returns = torch.tensor([[1.0, 0.001], [0.0, 0.0]])  # whole returns differ by 1, the last call by 0.001
+    advantages = grpo.call_advantages(returns, torch.ones(2, 2, dtype=torch.bool), group_size=2)
+    assert torch.allclose(advantages[:, 0], torch.tensor([1.0, -1.0]), atol=1e-5)
+    assert torch.allclose(advantages[:, 1], torch.tensor([0.001, -0.001]), atol=1e-5)

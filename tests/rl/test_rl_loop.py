@@ -239,3 +239,31 @@ def test_a_positive_advantage_makes_the_sampled_chunk_more_likely(rl_dataset):
     update_policy(policy, torch.optim.SGD(policy.parameters(), lr=0.05), batch, torch.tensor([1.0, -1.0]), config)
     after = policy.log_prob(batch.observations[:, 0], batch.instructions, batch.tokens[:, 0], 1.6).sum(-1)
     assert after[0] > before[0] and after[1] < before[1]
+
+
+def test_per_call_credit_trains_on_the_dense_reward_and_refuses_a_whole_video_reward(rl_dataset, tmp_path, capsys):
+    out = tmp_path / "run"
+    main(_rl_args("real", "sim-dense", out, rl_dataset, "--credit", "reward-to-go"))
+    assert json.loads((out / "config.json").read_text())["rl"]["credit"] == "reward-to-go"
+    assert [m["step"] for m in read_metrics(out) if "train/policy_loss" in m] == [1, 2]
+    with pytest.raises(SystemExit):
+        main(_rl_args("real", "sim", tmp_path / "binary", rl_dataset, "--credit", "reward-to-go"))
+    assert "scores whole videos only" in capsys.readouterr().err
+
+
+def test_per_call_advantages_move_each_call_by_its_own_sign(rl_dataset):
+    from gymnast.envs.sim_vector import SimVectorEnv
+    from gymnast.config import EnvConfig
+
+    policy = load_policy(POLICY)
+    starts = dataset_starts(rl_dataset)[:1]
+    with SimVectorEnv(1, policy.chunk_size, EnvConfig(image_size=96, horizon=2 * policy.chunk_size)) as env:
+        batch = collect_rollouts(env, policy, starts, 1.6, torch.Generator().manual_seed(0))
+    def logp():
+        return torch.stack([policy.log_prob(batch.observations[:, s], batch.instructions, batch.tokens[:, s], 1.6).sum()
+                            for s in range(2)])
+    before = logp()
+    update_policy(policy, torch.optim.SGD(policy.parameters(), lr=0.05), batch, torch.tensor([[1.0, -1.0]]),
+                  RL_PRESETS["debug"])
+    after = logp()
+    assert after[0] > before[0] and after[1] < before[1]

@@ -117,6 +117,8 @@ def test_an_ensemble_of_state_models_averages_rewards_and_counts_only_agreed_suc
     assert (ensemble.verdict(sentences, context) <= torch.stack([r.verdict(sentences, context) for r in alone]).amin(0)).all()
     scores = ensemble.score(frames, sentences, context)
     assert scores.shape == (6,) and ((0 <= scores) & (scores <= 1)).all()
+    steps = ensemble.step_rewards(frames, sentences, context)  # what per-call credit shares out
+    assert steps.shape == (6, 4) and torch.allclose(steps.mean(dim=1), scores)
     assert ensemble.metrics()["reward/state_disagreement"] > 0 and alone[0].metrics() == {}
 
 

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Protocol, runtime_checkable
 
 import torch
 
@@ -78,6 +78,17 @@ class Reward(Protocol):
 
     def score(self, frames: torch.Tensor, instructions: Sequence[str], context: RewardContext) -> torch.Tensor:
         """(B,) float32 scores for (B, T, H, W, 3) uint8 rollout videos; NaN where one cannot be scored."""
+
+
+@runtime_checkable
+class StepReward(Reward, Protocol):
+    """A reward that scores every action of a rollout, not only the whole: the dense rewards
+    (`SimDense`, the state model's reward head, the progress judge). RL's reward-to-go credit
+    (`--credit reward-to-go`) gives each policy call the reward of what followed it."""
+
+    def step_rewards(self, frames: torch.Tensor, instructions: Sequence[str], context: RewardContext) -> torch.Tensor:
+        """(B, T) float32 one reward per action, NaN for steps that do not count (after an episode
+        ended without success); `score` is their mean over the steps that count."""
         ...
 
     def metrics(self) -> dict[str, float]:

@@ -37,10 +37,13 @@ class ProgressJudge(FrameJudge):
     binary = False
 
     def score(self, frames: torch.Tensor, instructions: Sequence[str], context: RewardContext | None = None) -> torch.Tensor:
-        progress = self.frame_probabilities(frames, instructions)  # (B, T); frame 0 is the start, not judged
-        if progress.shape[1] < 2:
-            return torch.zeros(len(progress))
-        return progress[:, 1:].mean(dim=1)
+        steps = self.step_rewards(frames, instructions, context)
+        return steps.mean(dim=1) if steps.shape[1] else torch.zeros(len(steps))
+
+    def step_rewards(self, frames: torch.Tensor, instructions: Sequence[str], context: RewardContext | None = None
+                     ) -> torch.Tensor:
+        """(B, T) the predicted progress of the frame each action led to; frame 0 is the start, not judged."""
+        return self.frame_probabilities(frames, instructions)[:, 1:]
 
 
 def progress_targets(rewards: np.ndarray) -> torch.Tensor:

@@ -49,10 +49,14 @@ class SimDense:
         return {}  # counts nothing
 
     def score(self, frames: torch.Tensor, instructions: Sequence[str], context: RewardContext) -> torch.Tensor:
+        return torch.nanmean(self.step_rewards(frames, instructions, context), dim=1)
+
+    def step_rewards(self, frames: torch.Tensor, instructions: Sequence[str], context: RewardContext) -> torch.Tensor:
+        """(B, T) each action's dense reward in [0, 1], the largest after a success, NaN after another end."""
         if context.env_rewards is None:
             raise ValueError("the dense sim reward needs RewardContext.env_rewards: the rollout must come from a simulator")
         rewards = context.env_rewards.float()  # (B, T)
         if context.success is not None:
             held = torch.isnan(rewards) & context.success.reshape(-1, 1).bool()
             rewards = torch.where(held, torch.full_like(rewards, META_WORLD_MAX_STEP_REWARD), rewards)
-        return torch.nanmean(rewards, dim=1) / META_WORLD_MAX_STEP_REWARD
+        return rewards / META_WORLD_MAX_STEP_REWARD

@@ -94,11 +94,19 @@ class StateReward:
         rollouts = self.imagine(instructions, context)
         return {h: (self._score(rollouts, h), self._verdict(rollouts, h)) for h in horizons}
 
+    def step_rewards(self, frames: torch.Tensor, instructions: Sequence[str], context: RewardContext) -> torch.Tensor:
+        """(B, T) the members' mean predicted reward of each action (the largest from an agreed
+        success on); `score` is their mean."""
+        return self._member_steps(self.imagine(instructions, context), context.actions.shape[1]).mean(dim=0)
+
+    def _member_steps(self, rollouts: list[StateRollout], steps: int) -> torch.Tensor:
+        """(members, B, steps) each member's predicted reward per action, in [0, 1], 1 from an agreed success on."""
+        succeeded = self._succeeded(rollouts)[:, :steps]
+        return torch.stack([torch.where(succeeded, 1.0, r.rewards[:, :steps].clamp(0, 1)) for r in rollouts])
+
     def _score(self, rollouts: list[StateRollout], steps: int) -> torch.Tensor:
         """(B,) the members' mean predicted dense return over the first `steps` steps."""
-        succeeded = self._succeeded(rollouts)[:, :steps]
-        returns = torch.stack([torch.where(succeeded, 1.0, r.rewards[:, :steps].clamp(0, 1)).mean(dim=1)
-                               for r in rollouts])
+        returns = self._member_steps(rollouts, steps).mean(dim=2)  # (members, B)
         if len(rollouts) > 1:
             self._disagreement = float(returns.std(dim=0).mean())
         return returns.mean(dim=0)

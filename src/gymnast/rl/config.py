@@ -19,6 +19,10 @@ from gymnast.reward.spec import RewardSpec
 from gymnast.utils.settings import saved_settings
 
 
+CREDITS = ("rollout", "reward-to-go")
+"""How a rollout's reward is shared among its policy calls (`RLConfig.credit`)."""
+
+
 @dataclass(frozen=True)
 class RLConfig:
     """GRPO settings. Defaults follow World-Gymnast except where docs/rl.md says why not."""
@@ -85,6 +89,11 @@ class RLConfig:
     (0: always). A starting policy is kept for it, as for --kl-coef."""
     imitation_batch: int = 64
     """Demonstration samples per imitation loss."""
+    credit: str = "rollout"
+    """How a rollout's reward is shared among its policy calls: rollout (GRPO: every call gets the
+    rollout's advantage) or reward-to-go (each call gets the rewards of the actions from it on,
+    against its group's at the same call; needs a reward that scores every action: sim-dense,
+    state:RUN or a progress judge)."""
     normalize_std: bool = True
     """Divide group advantages by the group's standard deviation."""
     keep_low: float = 0.1
@@ -163,6 +172,8 @@ class RLConfig:
                              "--fresh-scenes and --scenes start from first frames; give one of them")
         if self.instruction is not None and not self.instruction.strip():
             raise ValueError("RLConfig.instruction is empty; give a sentence or leave it out")
+        if self.credit not in CREDITS:
+            raise ValueError(f"RLConfig.credit must be one of {', '.join(CREDITS)}, got {self.credit!r}")
         if not 0 <= self.keep_low <= self.keep_high <= 1:
             raise ValueError(f"need 0 <= keep_low <= keep_high <= 1, got {self.keep_low}, {self.keep_high}")
         parse_runner(self.runner)

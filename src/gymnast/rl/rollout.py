@@ -174,12 +174,15 @@ def _sample(policy: Policy, image: torch.Tensor, instructions: list[str], temper
     return ActionSample(actions, tokens, torch.zeros(tokens.shape))
 
 
-def score_groups(reward: Reward, rollouts: Rollouts, size: int) -> torch.Tensor:
-    """(R,) scores, reward called once per block of `size` rollouts that share a start state."""
+def score_groups(reward: Reward, rollouts: Rollouts, size: int, per_step: bool = False) -> torch.Tensor:
+    """(R,) scores, reward called once per block of `size` rollouts that share a start state; with
+    `per_step`, (R, T) rewards of every action (the reward must be a `StepReward`)."""
     scores = []
     for first in range(0, len(rollouts.starts), size):
         block = rollouts.select(torch.arange(first, min(first + size, len(rollouts.starts))))
-        scores.append(reward.score(block.frames, block.instructions, reward_context(block)).float().reshape(-1))
+        score = reward.step_rewards if per_step else reward.score
+        scored = score(block.frames, block.instructions, reward_context(block)).float()
+        scores.append(scored if per_step else scored.reshape(-1))
     return torch.cat(scores)
 
 

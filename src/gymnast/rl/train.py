@@ -41,7 +41,7 @@ from gymnast.data.keyframes import KeyframeConfig
 from gymnast.envs.starts import Start, StartSampler, evaluation_starts, own_instruction, scene_starts
 from gymnast.envs.tasks import parse_scenes, resolve_tasks
 from gymnast.policy.lerobot_policy import LeRobotPolicy
-from gymnast.reward.base import Reward, check_fits
+from gymnast.reward.base import Reward, StepReward, check_fits
 from gymnast.rl import grpo
 from gymnast.rl.config import RLConfig, RLRun
 from gymnast.rl.evaluate import evaluate_in_env, verdicts, watch_hacking
@@ -91,6 +91,10 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
         reward.to(device)
     from_dataset = not config.fresh_scenes and config.scenes is None
     check_fits(reward, str(run_spec.reward), env, demonstrations=from_dataset)
+    if config.credit == "reward-to-go" and not isinstance(reward, StepReward):
+        raise ValueError(f"--credit reward-to-go gives each policy call the rewards that followed it, but --reward "
+                         f"{run_spec.reward} scores whole videos only; use a reward that scores every action "
+                         "(sim-dense, state:RUN, or a progress judge) or --credit rollout")
     data = Path(run_spec.data or policy_dataset(run_spec.policy)) if from_dataset else None
     scenes = parse_scenes(config.scenes) if config.scenes is not None else None
     keys = policy_keys(run_spec.policy)  # the dataset read as the policy was trained on it
@@ -251,7 +255,8 @@ def rl_step(env: VectorEnv, policy, reward: Reward, draw_starts: Callable[[int, 
     3. Dynamic sampling: keep the groups with something to learn from, refilling from fresh starts
        for at most `max_rounds` rounds. A binary reward keeps a group when its success rate lies in
        [keep_low, keep_high]; a continuous one (dense, verified) when its rewards differ at all.
-    4. Group-normalised advantages and `minibatches` clipped policy-gradient steps; the learning
+    4. Group-normalised advantages (per rollout, or per policy call with ``credit`` reward-to-go)
+       and `minibatches` clipped policy-gradient steps; the learning
        rate schedule advances even when no group was kept, so steps and the schedule stay aligned.
 
     Args:
@@ -269,8 +274,10 @@ def rl_step(env: VectorEnv, policy, reward: Reward, draw_starts: Callable[[int, 
         keyframes included.
     """
     groups, size = config.starts_per_step, config.group_size
+    per_call = config.credit == "reward-to-go"
     kept: list[Rollouts] = []
     kept_scores: list[torch.Tensor] = []
+    kept_steps: list[torch.Tensor] = []  # (G, T) each, with per-call credit
     values: dict[str, float] = {"rollout/interactions": 0, "time/rollout_s": 0.0, "time/policy_s": 0.0,
                                 "time/reward_s": 0.0}
     for round_ in range(config.max_rounds):
@@ -283,7 +290,11 @@ def rl_step(env: VectorEnv, policy, reward: Reward, draw_starts: Callable[[int, 
         values["time/rollout_s"] += time.perf_counter() - began
         values["time/policy_s"] += timer.get("policy_s", 0.0)
         began = time.perf_counter()
-        scores = score_groups(reward, rollouts, size)  # (R,)
+        if per_call:
+            steps = score_groups(reward, rollouts, size, per_step=True)  # (R, T)
+            scores = torch.nanmean(steps, dim=1)  # what score() gives
+        else:
+            scores = score_groups(reward, rollouts, size)  # (R,)
         values["time/reward_s"] += time.perf_counter() - began
         # A keyframe is restored by replaying its prefix in the env the rollout runs in.
         values["rollout/interactions"] += int(rollouts.lengths.sum()) + size * sum(len(s.prefix) for s in starts)
@@ -304,6 +315,8 @@ def rl_step(env: VectorEnv, policy, reward: Reward, draw_starts: Callable[[int, 
             index = torch.arange(g * size, (g + 1) * size)
             kept.append(rollouts.select(index))
             kept_scores.append(scores[index])
+            if per_call:
+                kept_steps.append(steps[index])
         if len(kept) == groups:
             break
     values |= {"rollout/kept_groups": len(kept), "rollout/rounds": round_ + 1}
@@ -312,12 +325,19 @@ def rl_step(env: VectorEnv, policy, reward: Reward, draw_starts: Callable[[int, 
     updated = time.perf_counter()
     if batch is not None:
         rewards = scores  # the verdicts above (dynamic sampling, the watch) stay the reward's own
+        if config.disagreement_penalty > 0 and batch.disagreement is None:
+            raise ValueError("disagreement_penalty needs rollouts from a world-model ensemble, which report disagreement")
         if config.disagreement_penalty > 0:
-            if batch.disagreement is None:
-                raise ValueError("disagreement_penalty needs rollouts from a world-model ensemble, which report disagreement")
             rewards = grpo.penalise_disagreement(scores, batch.disagreement, config.disagreement_penalty)
         advantages, advantage_metrics = grpo.group_advantages(rewards.view(-1, size), config.normalize_std)
-        values |= advantage_metrics | update_policy(policy, optimizer, batch, advantages.reshape(-1), config, reference,
+        advantages = advantages.reshape(-1)  # (R,)
+        if per_call:
+            step_rewards = torch.cat(kept_steps)  # (R, T)
+            if config.disagreement_penalty > 0:  # MOPO's own form: each imagined step's reward minus its uncertainty
+                step_rewards = step_rewards - config.disagreement_penalty * batch.disagreement
+            returns = grpo.reward_to_go(step_rewards, policy.chunk_size, batch.tokens.shape[1])  # (R, S)
+            advantages = grpo.call_advantages(returns, batch.token_mask.any(-1), size, config.normalize_std)
+        values |= advantage_metrics | update_policy(policy, optimizer, batch, advantages, config, reference,
                                                     anchor, actions)
     with warnings.catch_warnings():
         # The schedule counts RL steps, those whose rollouts left nothing to learn from included;
@@ -354,6 +374,7 @@ def update_policy(policy, optimizer: torch.optim.Optimizer, batch: Rollouts, adv
                   generator: torch.Generator | None = None) -> dict[str, float]:
     """`minibatches` clipped policy-gradient steps on the batch's policy calls; returns metrics.
 
+    `advantages` is (R,), one per rollout, or (R, S), one per policy call (per-call credit).
     Every policy call (r, s) that executed at least one action is a row; rows are processed in
     micro-batches whose gradients accumulate, normalised by the token count of the whole
     minibatch, so the step does not depend on `micro_batch`.
@@ -380,7 +401,8 @@ def update_policy(policy, optimizer: torch.optim.Optimizer, batch: Rollouts, adv
             if reference is not None:
                 with torch.no_grad():
                     ref_logp = reference.log_prob(obs, texts, tokens, config.temperature)
-            old, advantage, mask = (to_device(x, logp.device) for x in (batch.logp[r, s], advantages[r],
+            advantage = advantages[r, s] if advantages.ndim == 2 else advantages[r]
+            old, advantage, mask = (to_device(x, logp.device) for x in (batch.logp[r, s], advantage,
                                                                           batch.token_mask[r, s]))
             loss, values = grpo.policy_loss(logp, old, advantage, mask,
                                             config.clip_low, config.clip_high, total, ref_logp, config.kl_coef,
