@@ -78,6 +78,12 @@ class Reward(Protocol):
 
     def score(self, frames: torch.Tensor, instructions: Sequence[str], context: RewardContext) -> torch.Tensor:
         """(B,) float32 scores for (B, T, H, W, 3) uint8 rollout videos; NaN where one cannot be scored."""
+        ...
+
+    def metrics(self) -> dict[str, float]:
+        """What it counted so far (requests, retries, tokens...) as ``reward/...`` floats for the
+        metrics log; empty for a reward that counts nothing."""
+        ...
 
 
 @runtime_checkable
@@ -89,11 +95,6 @@ class StepReward(Reward, Protocol):
     def step_rewards(self, frames: torch.Tensor, instructions: Sequence[str], context: RewardContext) -> torch.Tensor:
         """(B, T) float32 one reward per action, NaN for steps that do not count (after an episode
         ended without success); `score` is their mean over the steps that count."""
-        ...
-
-    def metrics(self) -> dict[str, float]:
-        """What it counted so far (requests, retries, tokens...) as ``reward/...`` floats for the
-        metrics log; empty for a reward that counts nothing."""
         ...
 
 

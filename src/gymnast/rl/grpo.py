@@ -102,8 +102,8 @@ def reward_to_go(step_rewards: Tensor, chunk: int, calls: int) -> Tensor:
     A rollout's score is the mean of its counted step rewards; call s (actions s*K onward) is
     credited with their sum from action s*K on, divided by the same count, so call 0's reward-to-go
     is the score and later calls carry none of the rewards earned before them, which their
-    tokens could not have caused. Normalised within the group at each call (`group_advantages` on
-    (B * S, G)), this is GRPO with a per-call baseline: the group's other rollouts at the same call.
+    tokens could not have caused. Centred on the group's at each call (`call_advantages`), this is
+    GRPO with a per-call baseline: the group's other rollouts at the same call.
 
     Args:
         step_rewards: (R, T) per-action rewards, NaN where a step does not count (after an end);
