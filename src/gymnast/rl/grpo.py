@@ -59,6 +59,16 @@ def _at_least_float32(x: Tensor) -> Tensor:
     return x.to(torch.promote_types(x.dtype, torch.float32))
 
 
+def _centred_and_std(rewards: Tensor) -> tuple[Tensor, Tensor]:
+    """(B, G) rewards minus their group's mean over finite entries (0 where not finite), and (B, 1)
+    each group's population std (unbiased=False) over them."""
+    finite = rewards.isfinite()
+    count = finite.sum(dim=1, keepdim=True).clamp_min(1)  # (B, 1); the clamp only guards 0 / 0
+    mean = torch.where(finite, rewards, 0.0).sum(dim=1, keepdim=True) / count
+    centred = torch.where(finite, rewards - mean, 0.0)
+    return centred, (centred.square().sum(dim=1, keepdim=True) / count).sqrt()
+
+
 def group_advantages(rewards: Tensor, normalize_std: bool = True, eps: float = 1e-6) -> tuple[Tensor, dict[str, float]]:
     """GRPO's group-normalised advantage, (r - mean) / (std + eps), per group over finite rewards.
 
@@ -82,12 +92,9 @@ def group_advantages(rewards: Tensor, normalize_std: bool = True, eps: float = 1
         raise ValueError(f"rewards must be (B, G) with G >= 1, got {tuple(rewards.shape)}")
     rewards = _at_least_float32(rewards)
     finite = rewards.isfinite()  # (B, G)
-    count = finite.sum(dim=1, keepdim=True).clamp_min(1)  # (B, 1); the clamp only guards 0 / 0
-    mean = torch.where(finite, rewards, 0.0).sum(dim=1, keepdim=True) / count
-    centred = torch.where(finite, rewards - mean, 0.0)
+    centred, std = _centred_and_std(rewards)
     signal = keep_varied_groups(rewards)[:, None]  # (B, 1); a group without spread has nothing to rank
     if normalize_std:
-        std = (centred.square().sum(dim=1, keepdim=True) / count).sqrt()  # population std
         centred = centred / (std + eps)
     advantages = torch.where(signal, centred, 0.0)
     groups = max(rewards.shape[0], 1)
@@ -162,10 +169,7 @@ def call_advantages(returns: Tensor, acting: Tensor, group_size: int, normalize_
     whole = returns[:, :, 0]  # (B, G) each rollout's return: its score
     signal = keep_varied_groups(whole)[:, None, None]  # (B, 1, 1)
     if normalize_std:
-        finite = whole.isfinite()
-        n = finite.sum(dim=1, keepdim=True).clamp_min(1)
-        spread = torch.where(finite, whole - torch.where(finite, whole, 0.0).sum(1, keepdim=True) / n, 0.0)
-        std = (spread.square().sum(dim=1, keepdim=True) / n).sqrt()  # (B, 1) population std
+        _, std = _centred_and_std(whole)  # (B, 1)
         centred = centred / (std[:, :, None] + eps)
     return torch.where(signal, centred, 0.0).view(-1, calls)
 
