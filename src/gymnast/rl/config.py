@@ -19,7 +19,7 @@ from gymnast.reward.spec import RewardSpec
 from gymnast.utils.settings import saved_settings
 
 
-CREDITS = ("rollout", "reward-to-go")
+CREDITS = ("rollout", "reward-to-go", "critic")
 """How a rollout's reward is shared among its policy calls (`RLConfig.credit`)."""
 
 
@@ -93,7 +93,15 @@ class RLConfig:
     """How a rollout's reward is shared among its policy calls: rollout (GRPO: every call gets the
     rollout's advantage) or reward-to-go (each call gets the rewards of the actions from it on,
     against its group's at the same call; needs a reward that scores every action: sim-dense,
-    state:RUN or a progress judge)."""
+    state:RUN or a progress judge) or critic (the same rewards against a learned critic's values of
+    what each call saw, with generalised advantage estimation: PPO's baseline; `gymnast.rl.critic`)."""
+    critic_lr: float = 1e-4
+    """Learning rate of the critic (--credit critic)."""
+    critic_epochs: int = 2
+    """Passes of the critic over each step's policy calls (--credit critic)."""
+    gae_lambda: float = 0.95
+    """GAE's lambda over policy calls (--credit critic): 1 the return minus the value, 0 one call's
+    temporal difference."""
     normalize_std: bool = True
     """Divide group advantages by the group's standard deviation."""
     keep_low: float = 0.1
@@ -149,7 +157,7 @@ class RLConfig:
 
     def __post_init__(self) -> None:
         for name in ("steps", "starts_per_step", "group_size", "horizon", "max_rounds", "minibatches", "micro_batch",
-                     "workers", "eval_episodes", "checkpoint_every", "video_every", "imitation_batch"):
+                     "workers", "eval_episodes", "checkpoint_every", "video_every", "imitation_batch", "critic_epochs"):
             if getattr(self, name) < 1:
                 raise ValueError(f"RLConfig.{name} must be at least 1, got {getattr(self, name)}")
         if self.group_size < 2:
@@ -174,6 +182,9 @@ class RLConfig:
             raise ValueError("RLConfig.instruction is empty; give a sentence or leave it out")
         if self.credit not in CREDITS:
             raise ValueError(f"RLConfig.credit must be one of {', '.join(CREDITS)}, got {self.credit!r}")
+        if self.critic_lr <= 0 or not 0 <= self.gae_lambda <= 1:
+            raise ValueError(f"RLConfig: need critic_lr > 0 and 0 <= gae_lambda <= 1, got {self.critic_lr} and "
+                             f"{self.gae_lambda}")
         if not 0 <= self.keep_low <= self.keep_high <= 1:
             raise ValueError(f"need 0 <= keep_low <= keep_high <= 1, got {self.keep_low}, {self.keep_high}")
         parse_runner(self.runner)

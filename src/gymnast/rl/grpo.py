@@ -39,7 +39,9 @@ scores every action (the dense ones), each policy call is credited with the rewa
 actions on, normalised against the group's other rollouts at the same call, instead of every call
 of a rollout sharing the whole rollout's advantage. A call then carries none of the noise of the
 rewards earned before it, which a 150-action episode of ~19 calls otherwise spreads over all of
-them (the variance that a learned critic would also remove, without the critic).
+them (the variance that a learned critic would also remove, without the critic). With
+`--credit critic` a learned critic is that baseline (`gae_advantages`, `gymnast.rl.critic`): PPO's
+generalised advantage estimation over calls, against the critic's value of what each call saw.
 
 With one gradient step per iteration old_logp equals logp at that step, so the ratio is 1 and the
 clip acts only once a batch is reused for several steps. Both log-probs of the ratio (and the
@@ -172,6 +174,51 @@ def call_advantages(returns: Tensor, acting: Tensor, group_size: int, normalize_
         _, std = _centred_and_std(whole)  # (B, 1)
         centred = centred / (std[:, :, None] + eps)
     return torch.where(signal, centred, 0.0).view(-1, calls)
+
+
+def gae_advantages(returns: Tensor, values: Tensor, acting: Tensor, lam: float, normalize_std: bool = True,
+                   eps: float = 1e-6) -> tuple[Tensor, Tensor]:
+    """Generalised advantage estimation over policy calls, against a learned critic's values.
+
+    Call s's reward is its share of the rollout's score, ``returns[s] - returns[s + 1]``
+    (`reward_to_go`), and the rollout ends after its last acting call (value 0 beyond it); with no
+    discount, as the score is an undiscounted mean, delta_s = r_s + V_{s+1} - V_s and
+    A_s = delta_s + lam * A_{s+1}. lam = 1 gives the return minus the value, lam = 0 the one-call
+    temporal difference. The critic's targets are A + V (the lambda-returns), as PPO fits them.
+
+    Args:
+        returns: (R, S) `reward_to_go`; NaN for a rollout that could not be scored.
+        values: (R, S) the critic's values of the calls' observations (ignored where not acting).
+        acting: (R, S) bool, the calls that executed an action.
+        lam: GAE's lambda in [0, 1].
+        normalize_std: centre the advantages of the counted calls on their mean and divide by their
+            std, PPO's normalisation over the batch; False leaves them as estimated.
+        eps: added to the std.
+
+    Returns:
+        (advantages, targets), each (R, S) in at least float32; both 0 where a call did not act or
+        its rollout is unscored.
+    """
+    if not (returns.shape == values.shape == acting.shape) or returns.ndim != 2:
+        raise ValueError(f"need (R, S) returns, values and acting alike, got {tuple(returns.shape)}, "
+                         f"{tuple(values.shape)} and {tuple(acting.shape)}")
+    if not 0 <= lam <= 1:
+        raise ValueError(f"GAE's lambda must lie in [0, 1], got {lam}")
+    counted = acting & returns.isfinite()
+    returns = torch.where(counted, _at_least_float32(returns), 0.0)
+    values = torch.where(counted, _at_least_float32(values), 0.0)
+    following = torch.nn.functional.pad(returns[:, 1:], (0, 1))  # (R, S) the next call's return, 0 after the end
+    deltas = returns - following + torch.nn.functional.pad(values[:, 1:], (0, 1)) - values
+    advantages = torch.zeros_like(deltas)
+    running = torch.zeros(len(deltas), dtype=deltas.dtype)
+    for s in reversed(range(deltas.shape[1])):
+        running = torch.where(counted[:, s], deltas[:, s] + lam * running, 0.0)
+        advantages[:, s] = running
+    targets = torch.where(counted, advantages + values, 0.0)
+    if normalize_std and counted.sum() > 1:
+        chosen = advantages[counted]
+        advantages = torch.where(counted, (advantages - chosen.mean()) / (chosen.std() + eps), 0.0)
+    return advantages, targets
 
 
 def penalise_disagreement(rewards: Tensor, disagreement: Tensor, coef: float) -> Tensor:

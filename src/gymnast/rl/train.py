@@ -44,6 +44,7 @@ from gymnast.policy.lerobot_policy import LeRobotPolicy
 from gymnast.reward.base import Reward, StepReward, check_fits
 from gymnast.rl import grpo
 from gymnast.rl.config import RLConfig, RLRun
+from gymnast.rl.critic import CallCritic, ValueCritic
 from gymnast.rl.evaluate import evaluate_in_env, verdicts, watch_hacking
 from gymnast.rl.imitation import ImitationAnchor
 from gymnast.rl.inputs import check_other_robot, policy_dataset, policy_frames, policy_keys
@@ -51,7 +52,8 @@ from gymnast.rl.rollout import (Rollouts, collect_rollouts, concat_rollouts, dat
                                 own_tasks, recorded_elsewhere, score_groups)
 from gymnast.rl.videos import write_group_video
 from gymnast.utils.atomic import write_json
-from gymnast.utils.checkpoint import load_checkpoint, resolve_checkpoint, save_checkpoint, write_run_config
+from gymnast.utils.checkpoint import (load_checkpoint, load_extra, resolve_checkpoint, save_checkpoint,
+                                      write_run_config)
 from gymnast.utils.device import resolve_device, to_device
 from gymnast.utils.metrics import MetricsLog
 from gymnast.utils.optim import warmup_cosine
@@ -60,6 +62,8 @@ logger = logging.getLogger(__name__)
 
 LEROBOT_EXPORT = "lerobot/pretrained_model"
 """Where a run of a LeRobot policy writes it back as a LeRobot pretrained_model folder."""
+CRITIC = "critic"
+"""The name of the learned critic's weights and optimizer state in a checkpoint (``critic.pt``)."""
 
 
 def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False, progress: bool = True) -> dict:
@@ -91,8 +95,8 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
         reward.to(device)
     from_dataset = not config.fresh_scenes and config.scenes is None
     check_fits(reward, str(run_spec.reward), env, demonstrations=from_dataset)
-    if config.credit == "reward-to-go" and not isinstance(reward, StepReward):
-        raise ValueError(f"--credit reward-to-go gives each policy call the rewards that followed it, but --reward "
+    if config.credit != "rollout" and not isinstance(reward, StepReward):
+        raise ValueError(f"--credit {config.credit} gives each policy call the rewards that followed it, but --reward "
                          f"{run_spec.reward} scores whole videos only; use a reward that scores every action "
                          "(sim-dense, state:RUN, or a progress judge) or --credit rollout")
     data = Path(run_spec.data or policy_dataset(run_spec.policy)) if from_dataset else None
@@ -129,6 +133,10 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
                 "data": str(data) if data else None, "frames": frames}
 
     optimizer = torch.optim.AdamW(policy.parameters(), lr=config.lr, weight_decay=0.0)
+    critic = None
+    if config.credit == "critic":
+        critic = CallCritic(ValueCritic.for_policy(policy), config.critic_lr, config.critic_epochs, config.gae_lambda,
+                            config.micro_batch, config.max_grad_norm)
     schedule = torch.optim.lr_scheduler.LambdaLR(optimizer, warmup_cosine(config.warmup_steps, 10**12))
     sampler = torch.Generator().manual_seed(config.seed)  # start states and env seeds
     actions = torch.Generator().manual_seed(config.seed + 1)  # the policy's token draws
@@ -143,7 +151,10 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
              "reset_frames": len(practice or ()), "curve": [], "wall_s": 0.0}
     start_step = 0
     if resume:
-        trainer, rng = load_checkpoint(resolve_checkpoint(out), policy, optimizer)
+        checkpoint_dir = resolve_checkpoint(out)
+        trainer, rng = load_checkpoint(checkpoint_dir, policy, optimizer)
+        if critic is not None:
+            critic.load_state_dict(load_extra(checkpoint_dir, CRITIC))
         schedule.load_state_dict(trainer["schedule"])
         sampler.set_state(rng["sampler"])
         actions.set_state(rng["actions"])
@@ -185,7 +196,8 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
     def checkpoint(done: int) -> None:
         save_checkpoint(out, done, policy, resolved, optimizer,
                         {"sampler": sampler.get_state(), "actions": actions.get_state()},
-                        {"schedule": schedule.state_dict(), "state": state})
+                        {"schedule": schedule.state_dict(), "state": state},
+                        extra={CRITIC: critic.state_dict()} if critic is not None else None)
         if isinstance(policy, LeRobotPolicy):  # back to LeRobot: the newest weights as its own folder
             policy.export(out / LEROBOT_EXPORT)
 
@@ -209,7 +221,7 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
             started = time.perf_counter()
             batch, scores, values = rl_step(envs.train(config.starts_per_step * config.group_size), policy, reward,
                                             draw_starts, config, sampler, actions, optimizer, schedule, reference,
-                                            anchor)
+                                            anchor, critic)
             interactions = int(values.pop("rollout/interactions"))
             if env.real_interactions:
                 state["real_interactions"] += interactions
@@ -246,8 +258,8 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
 
 def rl_step(env: VectorEnv, policy, reward: Reward, draw_starts: Callable[[int, torch.Generator], list[Start]],
             config: RLConfig, sampler: torch.Generator, actions: torch.Generator, optimizer: torch.optim.Optimizer,
-            schedule: torch.optim.lr_scheduler.LRScheduler, reference=None, anchor: ImitationAnchor | None = None
-            ) -> tuple[Rollouts | None, torch.Tensor | None, dict[str, float]]:
+            schedule: torch.optim.lr_scheduler.LRScheduler, reference=None, anchor: ImitationAnchor | None = None,
+            critic: CallCritic | None = None) -> tuple[Rollouts | None, torch.Tensor | None, dict[str, float]]:
     """One RL step, from start states to the policy update.
 
     1. Draw B start states and roll the policy out G times from each, at the rollout temperature.
@@ -255,7 +267,8 @@ def rl_step(env: VectorEnv, policy, reward: Reward, draw_starts: Callable[[int, 
     3. Dynamic sampling: keep the groups with something to learn from, refilling from fresh starts
        for at most `max_rounds` rounds. A binary reward keeps a group when its success rate lies in
        [keep_low, keep_high]; a continuous one (dense, verified) when its rewards differ at all.
-    4. Group-normalised advantages (per rollout, or per policy call with ``credit`` reward-to-go)
+    4. Group-normalised advantages (per rollout, or per policy call with ``credit`` reward-to-go;
+       with ``credit`` critic, GAE against the critic, which is then fitted on the batch)
        and `minibatches` clipped policy-gradient steps; the learning
        rate schedule advances even when no group was kept, so steps and the schedule stay aligned.
 
@@ -267,6 +280,8 @@ def rl_step(env: VectorEnv, policy, reward: Reward, draw_starts: Callable[[int, 
         reference: the frozen starting policy of the KL penalty, or None.
         anchor: the imitation loss added to the update (`gymnast.rl.imitation`), or None; its
             demonstrations are drawn with `actions`.
+        critic: the learned critic of ``credit`` critic (`gymnast.rl.critic`), else None; its fitting
+            shuffles with `actions`.
 
     Returns:
         (the kept rollouts or None, their (R,) scores or None, metrics), the metrics including
@@ -274,7 +289,7 @@ def rl_step(env: VectorEnv, policy, reward: Reward, draw_starts: Callable[[int, 
         keyframes included.
     """
     groups, size = config.starts_per_step, config.group_size
-    per_call = config.credit == "reward-to-go"
+    per_call = config.credit != "rollout"
     kept: list[Rollouts] = []
     kept_scores: list[torch.Tensor] = []
     kept_steps: list[torch.Tensor] = []  # (G, T) each, with per-call credit
@@ -336,7 +351,11 @@ def rl_step(env: VectorEnv, policy, reward: Reward, draw_starts: Callable[[int, 
             if config.disagreement_penalty > 0:  # MOPO's own form: each imagined step's reward minus its uncertainty
                 step_rewards = step_rewards - config.disagreement_penalty * batch.disagreement
             returns = grpo.reward_to_go(step_rewards, policy.chunk_size, batch.tokens.shape[1])  # (R, S)
-            advantages = grpo.call_advantages(returns, batch.token_mask.any(-1), size, config.normalize_std)
+            if critic is not None:
+                advantages, critic_metrics = critic.advantages(batch, returns, config.normalize_std, actions)
+                values |= critic_metrics
+            else:
+                advantages = grpo.call_advantages(returns, batch.token_mask.any(-1), size, config.normalize_std)
         values |= advantage_metrics | update_policy(policy, optimizer, batch, advantages, config, reference,
                                                     anchor, actions)
     with warnings.catch_warnings():

@@ -34,8 +34,13 @@ def save_checkpoint(
     optimizer: torch.optim.Optimizer | None = None,
     rng: dict[str, torch.Tensor] | None = None,
     trainer: dict | None = None,
+    extra: dict[str, dict] | None = None,
 ) -> Path:
-    """Writes checkpoint `step` of `run` and points ``last`` at it; returns its directory."""
+    """Writes checkpoint `step` of `run` and points ``last`` at it; returns its directory.
+
+    `extra` names further state dicts saved beside the model (``NAME.pt``; `load_extra` reads one),
+    such as a second network a trainer fits with its own optimizer.
+    """
     root = Path(run) / "checkpoints"
     root.mkdir(parents=True, exist_ok=True)
     final = root / f"{step:06d}"
@@ -49,6 +54,8 @@ def save_checkpoint(
             torch.save(optimizer.state_dict(), staging / "optimizer.pt")
         if rng is not None:
             torch.save(rng, staging / "rng.pt")
+        for name, state in (extra or {}).items():
+            torch.save(state, staging / f"{name}.pt")
         if final.exists():  # a rerun of the same step replaces it (e.g. after a resume)
             shutil.rmtree(final)
         os.replace(staging, final)
@@ -81,6 +88,18 @@ def load_checkpoint(checkpoint: Path, model: nn.Module, optimizer: torch.optim.O
         optimizer.load_state_dict(torch.load(checkpoint / "optimizer.pt", weights_only=True, map_location="cpu"))
     rng = torch.load(checkpoint / "rng.pt", weights_only=True, map_location="cpu") if (checkpoint / "rng.pt").exists() else {}
     return json.loads((checkpoint / "trainer.json").read_text()), rng
+
+
+def load_extra(checkpoint: Path, name: str) -> dict:
+    """The state dict `save_checkpoint` saved under `name` in `checkpoint`, read onto the host.
+
+    Raises:
+        FileNotFoundError: the checkpoint has none (a run saved without it).
+    """
+    path = Path(checkpoint) / f"{name}.pt"
+    if not path.exists():
+        raise FileNotFoundError(f"{checkpoint} has no {path.name}: it was saved by a run without a {name}")
+    return torch.load(path, weights_only=True, map_location="cpu")
 
 
 def write_run_config(run: Path, config: dict) -> None:
