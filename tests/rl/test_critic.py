@@ -62,10 +62,10 @@ def test_the_critic_starts_from_the_policys_encoder_and_its_fit_lowers_its_error
         batch = collect_rollouts(env, policy, starts, 1.0, torch.Generator().manual_seed(0))
     returns = torch.tensor([[0.9, 0.6, 0.3], [0.1, 0.05, 0.0]])[:, :batch.tokens.shape[1]]
     fitter = CallCritic(critic, lr=1e-3, epochs=5, gae_lambda=1.0, micro_batch=4)
-    losses = [fitter.advantages(batch, returns, True, torch.Generator().manual_seed(1))[1]["critic/loss"]
+    losses = [fitter.advantages_and_fit(batch, returns, True, torch.Generator().manual_seed(1))[1]["critic/loss"]
               for _ in range(4)]
     assert losses[-1] < losses[0]
-    advantages, metrics = fitter.advantages(batch, returns, False)
+    advantages, metrics = fitter.advantages_and_fit(batch, returns, False)
     assert advantages.shape == returns.shape and metrics["critic/explained_variance"] > 0
 
 

@@ -63,6 +63,13 @@ class ValueCritic(ObservationConditioned):
         return self.head(memory.mean(dim=1)).squeeze(-1)
 
 
+def explained_variance(targets: torch.Tensor, values: torch.Tensor) -> float:
+    """1 - Var(targets - values) / Var(targets): 1 when the values foresaw the targets, 0 when they did
+    no better than the targets' mean; NaN for fewer than two targets or targets that do not vary."""
+    spread = targets.var() if len(targets) > 1 else torch.tensor(float("nan"))
+    return (1 - (targets - values).var() / spread).item() if spread > 0 else float("nan")
+
+
 class CallCritic:
     """The critic, its optimizer and what `rl_step` asks of them: advantages, then a fit.
 
@@ -82,7 +89,7 @@ class CallCritic:
         self.micro_batch, self.max_grad_norm = micro_batch, max_grad_norm
         self.optimizer = torch.optim.AdamW(critic.parameters(), lr=lr, weight_decay=0.0)
 
-    def advantages(self, batch: Rollouts, returns: torch.Tensor, normalize_std: bool,
+    def advantages_and_fit(self, batch: Rollouts, returns: torch.Tensor, normalize_std: bool,
                    generator: torch.Generator | None = None) -> tuple[torch.Tensor, dict[str, float]]:
         """(R, S) GAE advantages of the batch's calls from their (R, S) `grpo.reward_to_go`, then one
         fit of the critic on the calls' targets; returns them with the critic's metrics.
@@ -99,9 +106,7 @@ class CallCritic:
                 values[rows_r[part], rows_s[part]] = self._values(batch, rows_r[part], rows_s[part]).float().cpu()
         advantages, targets = grpo.gae_advantages(returns, values, acting, self.gae_lambda, normalize_std)
         chosen_targets, chosen_values = targets[rows_r, rows_s], values[rows_r, rows_s]
-        spread = chosen_targets.var() if len(chosen_targets) > 1 else torch.tensor(float("nan"))
-        metrics = {"critic/explained_variance": (1 - (chosen_targets - chosen_values).var() / spread).item()
-                   if spread > 0 else float("nan"),
+        metrics = {"critic/explained_variance": explained_variance(chosen_targets, chosen_values),
                    "critic/value_mean": chosen_values.mean().item() if len(chosen_values) else float("nan")}
         metrics["critic/loss"] = self._fit(batch, rows_r, rows_s, chosen_targets, generator)
         return advantages, metrics

@@ -352,7 +352,7 @@ def rl_step(env: VectorEnv, policy, reward: Reward, draw_starts: Callable[[int, 
                 step_rewards = step_rewards - config.disagreement_penalty * batch.disagreement
             returns = grpo.reward_to_go(step_rewards, policy.chunk_size, batch.tokens.shape[1])  # (R, S)
             if critic is not None:
-                advantages, critic_metrics = critic.advantages(batch, returns, config.normalize_std, actions)
+                advantages, critic_metrics = critic.advantages_and_fit(batch, returns, config.normalize_std, actions)
                 values |= critic_metrics
             else:
                 advantages = grpo.call_advantages(returns, batch.token_mask.any(-1), size, config.normalize_std)
