@@ -46,10 +46,33 @@ def test_a_feature_gymnast_cannot_give_is_refused_by_name(lerobot_act):
                       output_features={"action": PolicyFeature(FeatureType.ACTION, (4,))})
     with pytest.raises(ValueError, match=r"input feature observation.state \(STATE, shape \(6,\)\)"):
         LeRobotFeatures.of(state, "p")
-    cameras = ACTConfig(input_features={"observation.images.top": image, "observation.images.wrist": image},
+    cameras = ACTConfig(input_features={"observation.images.top": image, "observation.images.wrist": image,
+                                        "observation.environment_state": PolicyFeature(FeatureType.ENV, (3,))},
                         output_features={"action": PolicyFeature(FeatureType.ACTION, (4,))})
-    with pytest.raises(ValueError, match="input feature observation.images.wrist"):
+    with pytest.raises(ValueError, match=r"input feature observation.environment_state \(ENV"):
         LeRobotFeatures.of(cameras, "p")
+
+
+def test_each_camera_feature_is_given_its_own_view_resized_to_its_declared_shape():
+    from lerobot.configs.types import FeatureType, PolicyFeature
+    from lerobot.policies.act.configuration_act import ACTConfig
+
+    from gymnast.policy.lerobot_features import LeRobotFeatures, folder_cameras
+
+    config = ACTConfig(input_features={"observation.images.gripper": PolicyFeature(FeatureType.VISUAL, (3, 32, 32)),
+                                       "observation.images.front": PolicyFeature(FeatureType.VISUAL, (3, 16, 16))},
+                       output_features={"action": PolicyFeature(FeatureType.ACTION, (4,))})
+    features = LeRobotFeatures.of(config, "p")
+    assert features.cameras == ("gripper", "front") and features.image_size == 32
+    assert folder_cameras({"input_features": {key: {"type": "VISUAL"} for key in config.input_features}}) == (
+        "gripper", "front")
+    gripper, front = torch.zeros(1, 32, 32, 3, dtype=torch.uint8), torch.full((1, 32, 32, 3), 255, dtype=torch.uint8)
+    batch = features.batch(torch.cat([gripper, front], dim=2), ["reach the goal"])  # the policy's order, side by side
+    assert batch["observation.images.gripper"].shape == (1, 3, 32, 32) and batch["observation.images.gripper"].max() == 0
+    assert batch["observation.images.front"].shape == (1, 3, 16, 16)
+    torch.testing.assert_close(batch["observation.images.front"], torch.ones(1, 3, 16, 16))
+    with pytest.raises(ValueError, match=r"2 cameras side by side.*got \(1, 32, 33, 3\)"):
+        features.batch(torch.zeros(1, 32, 33, 3, dtype=torch.uint8), ["reach the goal"])
 
 
 def test_a_folder_without_a_lerobot_config_is_named(tmp_path):

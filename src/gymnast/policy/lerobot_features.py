@@ -1,19 +1,24 @@
 """What a LeRobot policy declares it reads and writes (its config.json's ``input_features`` and
 ``output_features``), matched to what gymnast gives a policy and takes back.
 
-gymnast shows a policy one camera image and the instruction at each call, and executes a chunk of
-K actions of A dimensions. So exactly one VISUAL input is accepted (a second camera has no view
-to be fed from); the image is resized to its declared (C, H, W) and scaled to [0, 1], as LeRobot's datasets give images; the
-instruction is its ``task``. A robot state input (STATE, ENV) is refused: neither a world model
-nor gymnast's policy contract carries one, and a constant in its place would be a silent lie.
-The one action output must have gymnast's A dimensions (the env's, checked when the run starts),
-and gymnast's chunk is the policy's ``n_action_steps``: what LeRobot executes open-loop per call.
+gymnast shows a policy its cameras' images and the instruction at each call, and executes a chunk
+of K actions of A dimensions. Each image feature is a camera named as gymnast's datasets name them
+(``observation.images.<camera>`` is ``<camera>``, another key such as ``observation.image`` is its
+own name, `gymnast.data.features.camera_name`), and gymnast shows the policy those cameras: the
+simulator's views of those names (a one-camera policy of another name sees the front view, as
+gymnast's own policies do) or a world model's of the same names, side by side in one frame that is
+split back here, one view per feature. Each image is resized to its declared
+(C, H, W) and scaled to [0, 1], as LeRobot's datasets give images; the instruction is its
+``task``. A robot state input (STATE, ENV) is refused: neither a world model nor gymnast's policy
+contract carries one, and a constant in its place would be a silent lie. The one action output
+must have gymnast's A dimensions (the env's, checked when the run starts), and gymnast's chunk
+is the policy's ``n_action_steps``: what LeRobot executes open-loop per call.
 
 lerobot 0.4.4's ACT and SmolVLA read ``observation.state`` even when they declare no state (for
 its device, and as SmolVLA's padded state token), so a policy without one gets an empty (B, 0)
 state, which is what LeRobot gives such a policy as well.
 
-Legend: B batch, H/W image size, C channels, K chunk length, A action dimensions.
+Legend: B batch, H/W image size, V cameras, C channels, K chunk length, A action dimensions.
 """
 
 from __future__ import annotations
@@ -23,6 +28,9 @@ from typing import Any, Sequence
 
 import torch
 import torch.nn.functional as F
+
+from gymnast.data.features import camera_name
+from gymnast.utils.images import split_views
 
 OBS_STATE = "observation.state"
 ACTION = "action"
@@ -34,15 +42,15 @@ class LeRobotFeatures:
     """The inputs and outputs of one LeRobot policy, checked against gymnast's.
 
     Attributes:
-        image_key: the policy's one VISUAL input feature.
-        image_shape: its declared (C, H, W).
+        image_keys: the policy's VISUAL input features, in the order gymnast shows their views.
+        image_shapes: their declared (C, H, W).
         action_dim: A, the action output's size.
         chunk_size: K, the actions gymnast executes per call (the policy's n_action_steps).
         predicted: the actions the policy predicts per call (its chunk_size >= K).
     """
 
-    image_key: str
-    image_shape: tuple[int, int, int]
+    image_keys: tuple[str, ...]
+    image_shapes: tuple[tuple[int, int, int], ...]
     action_dim: int
     chunk_size: int
     predicted: int
@@ -54,50 +62,69 @@ class LeRobotFeatures:
         Raises:
             ValueError: a feature gymnast cannot give or take (the message names it).
         """
-        images = [key for key, feature in config.input_features.items() if _kind(feature) == "VISUAL"]
-        others = {key: feature for key, feature in config.input_features.items() if _kind(feature) != "VISUAL"}
+        inputs = config.input_features
+        images = [key for key, feature in inputs.items() if _kind(feature) == "VISUAL"]
+        others = {key: feature for key, feature in inputs.items() if _kind(feature) != "VISUAL"}
         if not images:
-            raise ValueError(f"{source}: the policy declares no image input (input_features: {sorted(config.input_features)}); "
+            raise ValueError(f"{source}: the policy declares no image input (input_features: {sorted(inputs)}); "
                              "gymnast shows a policy camera images")
-        if len(images) > 1:
-            raise ValueError(f"{source}: input feature {images[1]}: the policy reads {len(images)} cameras "
-                             f"({', '.join(images)}), gymnast shows one view per call")
         for key, feature in others.items():
             raise ValueError(f"{source}: input feature {key} ({_kind(feature)}, shape {tuple(feature.shape)}): gymnast "
-                             "shows a policy the camera image and the instruction only (a world model imagines no "
+                             "shows a policy the camera images and the instruction only (a world model imagines no "
                              "robot state); use a policy trained without it")
-        shape = tuple(config.input_features[images[0]].shape)
-        if len(shape) != 3 or shape[0] != 3:
-            raise ValueError(f"{source}: input feature {images[0]} has shape {shape}; gymnast's cameras give (3, H, W) colour")
+        shapes = tuple(tuple(inputs[key].shape) for key in images)
+        for key, shape in zip(images, shapes):
+            if len(shape) != 3 or shape[0] != 3:
+                raise ValueError(f"{source}: input feature {key} has shape {shape}; gymnast's cameras give (3, H, W) colour")
         actions = dict(config.output_features)
         if list(actions) != [ACTION] or len(actions[ACTION].shape) != 1:
             raise ValueError(f"{source}: output features {({k: tuple(f.shape) for k, f in actions.items()})}: gymnast "
                              f"takes one '{ACTION}' of shape (A,)")
         chunk, predicted = int(config.n_action_steps), int(config.chunk_size)
-        return cls(images[0], shape, int(actions[ACTION].shape[0]), chunk, predicted)
+        return cls(tuple(images), shapes, int(actions[ACTION].shape[0]), chunk, predicted)
+
+    @property
+    def cameras(self) -> tuple[str, ...]:
+        """The cameras whose views the policy reads, side by side in this order."""
+        return tuple(camera_name(key) for key in self.image_keys)
 
     @property
     def image_size(self) -> int:
-        """The side of the square frames gymnast renders for this policy (its declared height)."""
-        return self.image_shape[1]
+        """The side of the square views gymnast renders for this policy (its first camera's declared
+        height; another camera of another size gets its view resized)."""
+        return self.image_shapes[0][1]
 
     def batch(self, obs: torch.Tensor, instructions: Sequence[str]) -> dict[str, Any]:
-        """(B, H, W, 3) uint8 images and B instructions -> the batch LeRobot's preprocessor takes."""
-        if obs.ndim != 4 or obs.shape[-1] != 3:
-            raise ValueError(f"images must be (B, H, W, 3), got {tuple(obs.shape)}")
+        """(B, H, V*W, 3) uint8 images (the policy's V cameras side by side) and B instructions ->
+        the batch LeRobot's preprocessor takes."""
+        views = len(self.image_keys)
+        if obs.ndim != 4 or obs.shape[-1] != 3 or obs.shape[2] % views:
+            cameras = f"{views} cameras side by side, " if views > 1 else ""
+            raise ValueError(f"images must be (B, H, W, 3) ({cameras}W a multiple of {views}), got {tuple(obs.shape)}")
         if len(instructions) != len(obs):
             raise ValueError(f"{len(obs)} images but {len(instructions)} instructions")
-        images = obs.permute(0, 3, 1, 2).float() / 255  # (B, 3, H, W) in [0, 1], as LeRobot's datasets give
-        size = self.image_shape[1:]
-        if tuple(images.shape[2:]) != size:
-            images = F.interpolate(images, size=size, mode="bilinear", antialias=True, align_corners=False)
-        return {self.image_key: images, OBS_STATE: images.new_zeros(len(obs), 0), TASK: list(instructions)}
+        images = split_views(obs, views).permute(0, 3, 1, 2).float() / 255  # (B*V, 3, H, W) in [0, 1], as LeRobot's datasets give
+        images = images.unflatten(0, (len(obs), views))  # (B, V, 3, H, W)
+        batch: dict[str, Any] = {}
+        for index, (key, shape) in enumerate(zip(self.image_keys, self.image_shapes)):
+            view = images[:, index]
+            if tuple(view.shape[2:]) != shape[1:]:
+                view = F.interpolate(view, size=shape[1:], mode="bilinear", antialias=True, align_corners=False)
+            batch[key] = view
+        return batch | {OBS_STATE: images.new_zeros(len(obs), 0), TASK: list(instructions)}
 
     def check_actions(self, actions: torch.Tensor, source: str) -> None:
         """Raises ValueError unless `actions` is (B, predicted, A), what the policy must predict."""
         if actions.ndim != 3 or actions.shape[1:] != (self.predicted, self.action_dim):
             raise ValueError(f"{source}: the policy predicted actions of shape {tuple(actions.shape)}, expected "
                              f"(B, {self.predicted}, {self.action_dim}) from its chunk_size and '{ACTION}' feature")
+
+
+def folder_cameras(config: dict) -> tuple[str, ...]:
+    """`LeRobotFeatures.cameras` read off a pretrained_model folder's config.json (as a dict),
+    without building the policy."""
+    return tuple(camera_name(key) for key, feature in config.get("input_features", {}).items()
+                 if feature.get("type") == "VISUAL")
 
 
 def _kind(feature: Any) -> str:

@@ -53,7 +53,7 @@ class LeRobotFlowPolicy(LeRobotPolicy):
         self.register_buffer("noisy", noisy, persistent=False)  # (1, P, D) the executed elements
 
     def mean_chunk(self, batch: dict[str, Any]) -> torch.Tensor:
-        zeros = torch.zeros(len(batch[self.features.image_key]), self.features.predicted, self.padded,
+        zeros = torch.zeros(len(batch[self.features.image_keys[0]]), self.features.predicted, self.padded,
                             device=self.device)
         chunk = self.policy.predict_action_chunk(batch, noise=zeros)
         self._features.clear()

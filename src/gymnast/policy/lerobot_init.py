@@ -1,9 +1,10 @@
 """A new, untrained LeRobot ACT policy written as a pretrained_model folder, for trying the
 LeRobot path end to end without a trained one (docs/lerobot.md):
 
-    python -m gymnast.policy.lerobot_init OUT [--image-size 96] [--action-dim 4] [--chunk 5]
+    python -m gymnast.policy.lerobot_init OUT [--image-size 96] [--action-dim 4] [--chunk 5] [--cameras front,gripper]
 
-The policy reads one camera image (``observation.image``, no state: gymnast shows none) and acts
+The policy reads one camera image (``observation.image``; with ``--cameras front,gripper`` one
+``observation.images.<camera>`` each; no state: gymnast shows none) and acts
 in A dimensions; actions are normalised by a mean of 0 and a standard deviation of 1, which is
 Meta-World's [-1, 1] range as it is. It is small (one encoder and one decoder layer of width 64)
 and its ResNet-18 backbone starts from random weights, since none can be downloaded here.
@@ -14,6 +15,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 from pathlib import Path
+from typing import Sequence
 
 import torch
 
@@ -22,7 +24,7 @@ from gymnast.utils.torchvision_ops import allow_torchvision_import
 
 
 def new_act(out: Path, image_size: int = 96, action_dim: int = 4, chunk: int = 5, predicted: int | None = None,
-            width: int = 64, action_std: float = 1.0, seed: int = 0) -> Path:
+            width: int = 64, action_std: float = 1.0, seed: int = 0, cameras: Sequence[str] = ()) -> Path:
     """Writes a randomly initialised ACT policy and its processors to `out`; returns `out`.
 
     Args:
@@ -33,6 +35,8 @@ def new_act(out: Path, image_size: int = 96, action_dim: int = 4, chunk: int = 5
         width: the transformer's width.
         action_std: the actions' normalisation standard deviation (their mean is 0).
         seed: the weights' seed.
+        cameras: the cameras it reads, one ``observation.images.<camera>`` each; default: one
+            ``observation.image``.
     """
     require_lerobot()
     from lerobot.configs.types import FeatureType, NormalizationMode, PolicyFeature
@@ -40,7 +44,7 @@ def new_act(out: Path, image_size: int = 96, action_dim: int = 4, chunk: int = 5
     from lerobot.policies.act.modeling_act import ACTPolicy
 
     config = ACTConfig(
-        input_features={"observation.image": PolicyFeature(FeatureType.VISUAL, (3, image_size, image_size))},
+        input_features=_image_features(cameras, image_size),
         output_features={"action": PolicyFeature(FeatureType.ACTION, (action_dim,))},
         chunk_size=predicted or chunk, n_action_steps=chunk, dim_model=width, n_heads=2, dim_feedforward=2 * width,
         n_encoder_layers=1, n_decoder_layers=1, n_vae_encoder_layers=1, latent_dim=8,
@@ -52,7 +56,8 @@ def new_act(out: Path, image_size: int = 96, action_dim: int = 4, chunk: int = 5
 
 
 def new_smolvla(out: Path, image_size: int = 96, action_dim: int = 4, chunk: int = 5, predicted: int = 8,
-                steps: int = 3, action_std: float = 1.0, seed: int = 0, full_size: bool = False) -> Path:
+                steps: int = 3, action_std: float = 1.0, seed: int = 0, full_size: bool = False,
+                cameras: Sequence[str] = ()) -> Path:
     """Writes a randomly initialised SmolVLA policy to `out`, with the vision-language model it is
     built on in ``out/vlm`` (SmolVLA reads its VLM's config, tokenizer and image processor from
     ``vlm_model_name``; a real one comes from a model hub, which is not reachable here). For
@@ -65,6 +70,7 @@ def new_smolvla(out: Path, image_size: int = 96, action_dim: int = 4, chunk: int
         full_size: LeRobot's published SmolVLA architecture (`SMOLVLM2_500M`, SmolVLA's own
             defaults for the layers kept, the image side, the token and padding lengths) instead
             of a tiny one: for timing the real thing (benchmarks/lerobot_gpu.py).
+        cameras: as `new_act`'s.
     """
     require_lerobot()
     from lerobot.configs.types import FeatureType, NormalizationMode, PolicyFeature
@@ -78,7 +84,7 @@ def new_smolvla(out: Path, image_size: int = 96, action_dim: int = 4, chunk: int
     shape = {} if full_size else {"max_state_dim": 8, "max_action_dim": 8, "tokenizer_max_length": 16,
                                   "num_vlm_layers": 2}
     config = SmolVLAConfig(
-        input_features={"observation.image": PolicyFeature(FeatureType.VISUAL, (3, image_size, image_size))},
+        input_features=_image_features(cameras, image_size),
         output_features={"action": PolicyFeature(FeatureType.ACTION, (action_dim,))},
         chunk_size=predicted, n_action_steps=chunk, num_steps=steps,
         resize_imgs_with_padding=(sizes.image_side, sizes.image_side), vlm_model_name=str(vlm.resolve()),
@@ -163,12 +169,19 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--action-dim", type=int, default=4, help="action dimensions A")
     parser.add_argument("--chunk", type=int, default=5, help="actions executed per call (gymnast's chunk K)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the random weights")
+    parser.add_argument("--cameras", default="", help="cameras it reads, comma-separated (default: one observation.image)")
     args = parser.parse_args(argv)
-    print(new_act(args.out, args.image_size, args.action_dim, args.chunk, seed=args.seed))
+    cameras = [name for name in args.cameras.split(",") if name]
+    print(new_act(args.out, args.image_size, args.action_dim, args.chunk, seed=args.seed, cameras=cameras))
 
 
-if __name__ == "__main__":
-    main()
+
+def _image_features(cameras: Sequence[str], image_size: int) -> dict:
+    """The image input features of a policy of `cameras` (none: one ``observation.image``)."""
+    from lerobot.configs.types import FeatureType, PolicyFeature
+
+    keys = [f"observation.images.{name}" for name in cameras] or ["observation.image"]
+    return {key: PolicyFeature(FeatureType.VISUAL, (3, image_size, image_size)) for key in keys}
 
 
 def _save_new(policy_class, config, out: Path, action_dim: int, action_std: float, seed: int) -> Path:
@@ -183,3 +196,7 @@ def _save_new(policy_class, config, out: Path, action_dim: int, action_std: floa
     for part in (policy, preprocessor, postprocessor):
         part.save_pretrained(out)
     return out
+
+
+if __name__ == "__main__":
+    main()

@@ -31,6 +31,7 @@ from torch import nn
 
 from gymnast.policy.lerobot_features import ACTION, LeRobotFeatures
 from gymnast.policy.lerobot_import import require_lerobot
+from gymnast.policy.observation import simulator_cameras
 
 WEIGHTS = "model.safetensors"
 """The LeRobot policy's weights in a pretrained_model folder (gymnast's checkpoint holds them)."""
@@ -55,12 +56,19 @@ class ExplorationConfig:
 
 @dataclass(frozen=True)
 class LeRobotArchitecture:
-    """What gymnast reads off a policy's ``config``: the frames it renders and the chunk it executes."""
+    """What gymnast reads off a policy's ``config``: the views it renders and the chunk it executes."""
 
     type: str
     image_size: int
     chunk_size: int
     action_dim: int
+    cameras: tuple[str, ...] = ("image",)
+    """The cameras the policy reads side by side (`LeRobotFeatures.cameras`)."""
+
+    @property
+    def env_cameras(self) -> tuple[str, ...]:
+        """The simulator's views that show the policy its cameras (`simulator_cameras`)."""
+        return simulator_cameras(self.cameras)
 
 
 class LeRobotPolicy(nn.Module):
@@ -82,7 +90,8 @@ class LeRobotPolicy(nn.Module):
         self.files, self.source, self.exploration = files, source, exploration
         self.features = LeRobotFeatures.of(policy.config, source)
         self.chunk_size, self.action_dim = self.features.chunk_size, self.features.action_dim
-        self.config = LeRobotArchitecture(policy.config.type, self.features.image_size, self.chunk_size, self.action_dim)
+        self.config = LeRobotArchitecture(policy.config.type, self.features.image_size, self.chunk_size,
+                                          self.action_dim, self.features.cameras)
         self.eval()
 
     # -- what the kinds of policy provide ------------------------------------------------------------
@@ -106,8 +115,8 @@ class LeRobotPolicy(nn.Module):
 
     def inputs(self, obs: torch.Tensor, instructions: Sequence[str],
                actions: torch.Tensor | None = None) -> dict[str, Any]:
-        """The preprocessed batch for (B, H, W, 3) uint8 images, instructions and optionally
-        (B, predicted, A) actions in env units, on the policy's device."""
+        """The preprocessed batch for (B, H, V*W, 3) uint8 images (V cameras side by side),
+        instructions and optionally (B, predicted, A) actions in env units, on the policy's device."""
         batch = self.features.batch(obs.cpu(), instructions)
         if actions is not None:
             batch[ACTION] = actions.float().cpu()

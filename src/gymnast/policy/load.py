@@ -14,7 +14,7 @@ from pathlib import Path
 from torch import nn
 
 from gymnast.config import EnvConfig
-from gymnast.policy.observation import PolicyArchitecture
+from gymnast.policy.observation import PolicyArchitecture, simulator_cameras
 from gymnast.utils.checkpoint import resolve_checkpoint
 
 POLICY_FAMILIES = {
@@ -63,7 +63,7 @@ def build_policy(spec: dict) -> nn.Module:
 def policy_env_config(env: EnvConfig, policy: str | Path | object) -> EnvConfig:
     """`env` rendering the views the policy acts on (`PolicyArchitecture.env_cameras`): a policy of
     several cameras is shown them side by side, read from its run's saved spec without building it;
-    the scripted expert, LeRobot policies and one-camera policies get `env` as it is, and so does
+    the scripted expert and one-camera policies (LeRobot's included) get `env` as it is, and so does
     an env that renders the policy's cameras and more (the actor picks the policy's,
     `gymnast.eval.actors.PolicyActor.seen`).
 
@@ -71,18 +71,31 @@ def policy_env_config(env: EnvConfig, policy: str | Path | object) -> EnvConfig:
         ValueError: `env` names cameras other than the default (front) that lack some of the policy's.
     """
     if not isinstance(policy, (str, Path)):  # a policy object
-        config = getattr(policy, "config", None)
-        cameras = config.env_cameras if isinstance(config, PolicyArchitecture) else env.cameras
-    elif is_lerobot(policy) or not Path(policy).is_dir():  # the expert, a LeRobot folder
+        cameras = getattr(getattr(policy, "config", None), "env_cameras", None) or env.cameras
+    elif is_lerobot(policy) or Path(policy).is_dir():
+        cameras = saved_env_cameras(policy)
+    else:  # the scripted expert
         cameras = env.cameras
-    else:
-        spec = json.loads((resolve_checkpoint(Path(policy)) / "config.json").read_text()).get("model", {})
-        family = next((spec[name] for name in POLICY_FAMILIES if name in spec), {})
-        names = {field.name for field in dataclasses.fields(PolicyArchitecture)}
-        cameras = PolicyArchitecture(**{key: value for key, value in family.items() if key in names}).env_cameras
     if set(cameras) <= set(env.cameras):
         return env
     if env.cameras != EnvConfig().cameras:
         raise ValueError(f"the environment renders cameras {','.join(env.cameras)}, but the policy {policy} acts on "
                          f"{','.join(cameras)}; leave --cameras out to render the policy's own")
     return dataclasses.replace(env, cameras=cameras)
+
+
+def saved_env_cameras(policy: str | Path) -> tuple[str, ...]:
+    """The simulator's views a saved policy acts on (its architecture's ``env_cameras``), read
+    from a run's spec or a LeRobot folder's config.json without building it (a folder without
+    one gets the front view here; loading it says what is missing)."""
+    from gymnast.policy.lerobot_features import folder_cameras
+
+    if is_lerobot(policy):
+        config = Path(str(policy).removeprefix(LEROBOT)) / "config.json"
+        return simulator_cameras(folder_cameras(json.loads(config.read_text())) if config.is_file() else ())
+    spec = json.loads((resolve_checkpoint(Path(policy)) / "config.json").read_text()).get("model", {})
+    if "lerobot" in spec:
+        return simulator_cameras(folder_cameras(spec["lerobot"]["files"]["config.json"]))
+    family = next((spec[name] for name in POLICY_FAMILIES if name in spec), {})
+    names = {field.name for field in dataclasses.fields(PolicyArchitecture)}
+    return PolicyArchitecture(**{key: value for key, value in family.items() if key in names}).env_cameras

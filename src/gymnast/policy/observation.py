@@ -64,13 +64,18 @@ class PolicyArchitecture:
 
     @property
     def env_cameras(self) -> tuple[str, ...]:
-        """The simulator's views that show this policy what it was trained on: its cameras where they
-        are the simulator's (`gymnast.config.CAMERAS`) or several; else the front view, as before
-        cameras were a setting (a one-camera policy of another robot's dataset, whose camera has
-        another name, acts on the front view)."""
-        if len(self.cameras) > 1 or all(name in CAMERAS for name in self.cameras):
-            return self.cameras
-        return ("front",)
+        """The simulator's views that show this policy what it was trained on (`simulator_cameras`)."""
+        return simulator_cameras(self.cameras)
+
+
+def simulator_cameras(cameras: Sequence[str]) -> tuple[str, ...]:
+    """The simulator's views that show a policy of `cameras` what it was trained on: its cameras
+    where they are the simulator's (`gymnast.config.CAMERAS`) or several; else the front view, as
+    before cameras were a setting (a one-camera policy of another robot's dataset, whose camera has
+    another name, acts on the front view)."""
+    if len(cameras) > 1 or (cameras and all(name in CAMERAS for name in cameras)):
+        return tuple(cameras)
+    return ("front",)
 
 
 def shared_architecture(config: PolicyArchitecture) -> dict:
