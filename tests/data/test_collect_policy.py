@@ -118,7 +118,7 @@ def test_a_plan_made_in_imagination_is_the_policys_closed_loop_imagined_rollout_
     start = {"frames": obs["image"][None], "instructions": [env.instruction]}
     with torch.inference_mode():
         chunks = [result.actions[0, : result.frames.shape[1]] for result in run_batch(
-            imagination, lambda images, instructions: _greedy_chunk(policy, images[0], env.instruction)[None], start)]
+            imagination, lambda images, instructions, states: _greedy_chunk(policy, images[0], env.instruction)[None], start)]
     np.testing.assert_array_equal(episode.actions, np.concatenate(chunks)[:episode.length])
     # ... and the real world executed them from the same scene (every step, open-loop).
     for action, state in zip(episode.actions, episode.states[1:]):

@@ -46,7 +46,7 @@ def test_a_vector_env_and_a_single_episode_reach_the_same_outcome_from_the_same_
     plan = rng.uniform(-1, 1, (2, 4 * 5, 4)).astype(np.float32)  # (R, T, A), T = the horizon
     chunks = iter(np.split(plan, 5, axis=1))
     with SimVectorEnv(2, chunk_size=4, config=ENV) as vector:
-        results = list(run_batch(vector, lambda images, instructions: next(chunks),
+        results = list(run_batch(vector, lambda images, instructions, states: next(chunks),
                                  {"tasks": ["reach-v3"] * 2, "seeds": [1, 2]}))
     for i, seed in enumerate((1, 2)):
         single = play_episode(env, ReplayActor(plan[i]), seed, record=("frames", "rewards"))

@@ -69,7 +69,7 @@ def test_single_env_reports_its_rollouts_disagreement_and_a_single_model_none(en
 def _replay(env: BatchedImaginedEnv) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(B, T) disagreement, (B,) actions executed and the (B, T + 1, ...) video of the plan in `env`."""
     chunks = iter(plan())
-    results = list(run_batch(env, lambda images, instructions: next(chunks), start_options(), seed=0))
+    results = list(run_batch(env, lambda images, instructions, states: next(chunks), start_options(), seed=0))
     executed = np.sum([r.executed for r in results], axis=0)
     return np.concatenate([r.disagreement for r in results], axis=1), executed, env.video()
 

@@ -40,15 +40,18 @@ def test_a_feature_gymnast_cannot_give_is_refused_by_name(lerobot_act):
 
     from gymnast.policy.lerobot_features import LeRobotFeatures
 
-    image = PolicyFeature(FeatureType.VISUAL, (3, 96, 96))
-    state = ACTConfig(input_features={"observation.image": image,
-                                      "observation.state": PolicyFeature(FeatureType.STATE, (6,))},
-                      output_features={"action": PolicyFeature(FeatureType.ACTION, (4,))})
-    with pytest.raises(ValueError, match=r"input feature observation.state \(STATE, shape \(6,\)\)"):
-        LeRobotFeatures.of(state, "p")
+    image, action = PolicyFeature(FeatureType.VISUAL, (3, 96, 96)), {"action": PolicyFeature(FeatureType.ACTION, (4,))}
+    state = LeRobotFeatures.of(ACTConfig(input_features={"observation.image": image,
+                                                         "observation.state": PolicyFeature(FeatureType.STATE, (6,))},
+                                         output_features=action), "p")
+    assert state.state_dim == 6
+    with pytest.raises(ValueError, match=r"reads observation.state \(6,\), but this env gives no robot state"):
+        state.batch(torch.zeros(1, 96, 96, 3, dtype=torch.uint8), ["reach the goal"])
+    with pytest.raises(ValueError, match=r"observation.state of shape \(6,\), got states \(1, 4\)"):
+        state.batch(torch.zeros(1, 96, 96, 3, dtype=torch.uint8), ["reach the goal"], torch.zeros(1, 4))
     cameras = ACTConfig(input_features={"observation.images.top": image, "observation.images.wrist": image,
                                         "observation.environment_state": PolicyFeature(FeatureType.ENV, (3,))},
-                        output_features={"action": PolicyFeature(FeatureType.ACTION, (4,))})
+                        output_features=action)
     with pytest.raises(ValueError, match=r"input feature observation.environment_state \(ENV"):
         LeRobotFeatures.of(cameras, "p")
 

@@ -50,3 +50,38 @@ def test_a_grpo_step_in_imagination_trains_the_lerobot_policy_and_writes_it_back
     torch.testing.assert_close(theirs, ours, atol=1e-5, rtol=0)
     untrained = load_policy(f"lerobot:{folders[kind]}").act(images, texts)
     assert not torch.allclose(untrained, ours, atol=1e-6)  # the step changed what LeRobot now loads
+
+
+@pytest.mark.slow
+def test_a_lerobot_policy_reading_the_robot_state_practises_for_real_and_is_refused_in_imagination(rl_dataset, tmp_path,
+                                                                                                   capsys):
+    from gymnast.policy.lerobot_init import new_act
+
+    folder = new_act(tmp_path / "act", chunk=5, predicted=8, action_std=0.5, state_dim=4)  # hand xyz and gripper
+    out = tmp_path / "run"
+    common = ["rl", "--policy", f"lerobot:{folder}", "--data", str(rl_dataset), "--preset", "debug", "--steps", "1",
+              "--watch-every", "0", "--imitation-coef", "0.5"]
+    main([*common, "--env", "real", "--reward", "sim-dense", "--horizon", "10", "--no-real-eval", "--out", str(out)])
+    update = next(m for m in read_metrics(out) if "train/policy_calls" in m)
+    # The update recomputes each call's density with the state it was sampled in (ratio 1), and
+    # the imitation anchor reads the demonstrations' own states.
+    assert update["train/ratio"] == pytest.approx(1.0, abs=1e-4) and update["train/imitation_loss"] > 0
+
+    trained = load_policy(out)
+    images = torch.randint(0, 256, (2, 96, 96, 3), dtype=torch.uint8, generator=torch.Generator().manual_seed(0))
+    texts, states = ["reach the goal"] * 2, torch.tensor([[0.0, 0.6, 0.2, 1.0], [0.1, 0.7, 0.1, 0.0]])
+    ours = trained.act(images, texts, states)
+    assert not torch.allclose(trained.act(images, texts, states.flip(0)), ours, atol=1e-4)  # the state counts
+    exported = out / LEROBOT_EXPORT
+    from lerobot.policies.factory import get_policy_class, make_pre_post_processors
+
+    lerobot = get_policy_class("act").from_pretrained(exported)
+    preprocessor, postprocessor = make_pre_post_processors(lerobot.config, pretrained_path=str(exported))
+    batch = preprocessor({"observation.image": images.permute(0, 3, 1, 2).float() / 255, "observation.state": states,
+                          "task": texts})
+    torch.testing.assert_close(postprocessor(lerobot.predict_action_chunk(batch))[:, :5], ours, atol=1e-5, rtol=0)
+
+    with pytest.raises(SystemExit):
+        main([*common, "--env", "imagined", "--wm", str(WORLD_MODEL), "--reward", f"judge:{JUDGE}", "--out",
+              str(tmp_path / "imagined")])
+    assert "reads the robot's state (observation.state, 4-d), but the world model" in capsys.readouterr().err

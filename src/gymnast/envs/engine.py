@@ -174,8 +174,9 @@ def play_episode(env: MetaWorldEnv, actor: Actor, seed: int, record: Collection[
     return run
 
 
-BatchActor = Callable[[np.ndarray, list[str]], np.ndarray]
-"""Maps the latest (R, H, W, 3) uint8 images and the R instructions to (R, K, A) actions."""
+BatchActor = Callable[[np.ndarray, list[str], "np.ndarray | None"], np.ndarray]
+"""Maps the latest (R, H, W, 3) uint8 images, the R instructions and the (R, D) robot states (a
+simulator's; None from a world model, which imagines none) to (R, K, A) actions."""
 
 
 @dataclass(frozen=True)
@@ -184,6 +185,7 @@ class ChunkResult:
 
     Attributes:
         observation: (R, H, W, 3) uint8 the images the actor saw.
+        states: (R, D) float32 the robot states the actor was given, or None (a world model's).
         actions: (R, K, A) the actions it chose (as it returned them).
         frames: (R, k, H, W, 3) uint8 a frame per action; k < K only at an imagined horizon, and a
             rollout that ended shows its final frame.
@@ -196,6 +198,7 @@ class ChunkResult:
     """
 
     observation: np.ndarray
+    states: np.ndarray | None
     actions: np.ndarray
     frames: np.ndarray
     executed: np.ndarray
@@ -229,8 +232,8 @@ def run_batch(env: VectorEnv, actor: BatchActor, options: dict[str, Any], seed: 
     ended = np.zeros(env.num_envs, dtype=bool)
     calls = 0
     while not ended.all() and (max_calls is None or calls < max_calls):
-        image = obs["image"]
-        actions = actor(image, instructions)
+        image, states = obs["image"], obs.get("state")
+        actions = actor(image, instructions, states)
         obs, _, terminated, truncated, infos = env.step(actions)
         frames = infos["frames"]
         executed = np.where(ended, 0, infos.get("executed", np.full(env.num_envs, frames.shape[1])))
@@ -239,5 +242,5 @@ def run_batch(env: VectorEnv, actor: BatchActor, options: dict[str, Any], seed: 
         disagreement = np.asarray(infos["disagreement"], dtype=np.float32) if "disagreement" in infos else None
         ended |= np.asarray(terminated) | np.asarray(truncated)
         calls += 1
-        yield ChunkResult(image, actions, frames, executed, rewards, success, disagreement)
+        yield ChunkResult(image, states, actions, frames, executed, rewards, success, disagreement)
 

@@ -34,7 +34,7 @@ from gymnast.config import EnvConfig
 from gymnast.envs.engine import EpisodeRun, play_chunk, start_episode
 from gymnast.envs.gap import get_gap
 from gymnast.envs.instructions import SPLITS
-from gymnast.envs.metaworld import ACTION_DIM, CONTROL_FPS, MetaWorldEnv
+from gymnast.envs.metaworld import ACTION_DIM, CONTROL_FPS, STATE_DIM, MetaWorldEnv
 from gymnast.envs.tasks import check_task
 from gymnast.envs.workers import Workers, parse_runner
 
@@ -70,7 +70,8 @@ class _Episodes:
         frames = np.stack([e.obs["image"] for e in self._episodes])  # (b, H, W, 3)
         instructions = np.array([e.instruction for e in self._episodes], dtype=object)
         prefix_steps = np.array([e.prefix_steps for e in self._episodes], np.int64)
-        return {"image": frames, "instruction": instructions, "prefix_steps": prefix_steps, **self._status()}
+        return {"image": frames, "state": self._states(), "instruction": instructions, "prefix_steps": prefix_steps,
+                **self._status()}
 
     def step(self, actions: np.ndarray) -> dict[str, np.ndarray]:
         """Runs each episode's (K, A) actions open-loop until the chunk or the episode ends."""
@@ -84,7 +85,11 @@ class _Episodes:
                 frames[i, j], rewards[i, j] = obs["image"], reward
                 executed[i] += 1
             frames[i, executed[i] :] = episode.obs["image"]  # an ended episode shows its final frame
-        return {"frames": frames, "rewards": rewards, "executed": executed, **self._status()}
+        return {"frames": frames, "state": self._states(), "rewards": rewards, "executed": executed, **self._status()}
+
+    def _states(self) -> np.ndarray:
+        """(b, D) float32 each episode's robot state now (hand position and gripper)."""
+        return np.stack([e.obs["state"] for e in self._episodes]).astype(np.float32)
 
     def _status(self) -> dict[str, np.ndarray]:
         names = {"step": ("steps", np.int64), "success": ("success", bool), "terminated": ("terminated", bool),
@@ -100,7 +105,8 @@ class _Episodes:
 class SimVectorEnv(VectorEnv):
     """B Meta-World episodes (of any tasks) stepped one action chunk at a time; no autoreset.
 
-    Observation: ``{"image": (B, H, W, 3) uint8}``, W the views side by side. Action: (B, K, A) float32 in [-1, 1].
+    Observation: ``{"image": (B, H, W, 3) uint8, "state": (B, D) float32}``, W the views side by
+    side, D the robot state's dimensions (hand xyz and gripper). Action: (B, K, A) float32 in [-1, 1].
     ``rewards`` (B,) are the dense rewards summed over the actions executed in the chunk;
     ``terminated`` (B,) means success, ``truncated`` (B,) the horizon; whichever ended an episode
     stays True. ``infos``: ``instruction`` (B,) str, ``task`` (B,) str, ``seed`` (B,) int,
@@ -135,7 +141,8 @@ class SimVectorEnv(VectorEnv):
         self.num_envs = num_envs
         size = self.config.image_size
         width = len(self.config.cameras) * size  # the views side by side (gymnast.envs.metaworld)
-        self.single_observation_space = Dict({"image": Box(0, 255, (size, width, 3), np.uint8)})
+        self.single_observation_space = Dict({"image": Box(0, 255, (size, width, 3), np.uint8),
+                                              "state": Box(-np.inf, np.inf, (STATE_DIM,), np.float32)})
         self.single_action_space = Box(-1.0, 1.0, (chunk_size, ACTION_DIM), np.float32)
         self.observation_space = batch_space(self.single_observation_space, num_envs)
         self.action_space = batch_space(self.single_action_space, num_envs)
@@ -182,7 +189,7 @@ class SimVectorEnv(VectorEnv):
         result["task"] = np.array(tasks, dtype=object)
         result["seed"] = np.array(seeds, np.int64)
         self._info = result
-        return {"image": result["image"]}, self._infos()
+        return {"image": result["image"], "state": result["state"]}, self._infos()
 
     def step(self, actions):
         """Runs one (K, A) chunk in every running episode; see the class docstring for the outputs."""
@@ -198,7 +205,7 @@ class SimVectorEnv(VectorEnv):
         result = self._call("step", [(actions[s],) for s in self._slices])
         self._info.update(step=result["step"], success=result["success"])
         infos = {**self._infos(), **{key: result[key] for key in ("frames", "rewards", "executed")}}
-        obs = {"image": result["frames"][:, -1].copy()}  # not a view into infos["frames"]
+        obs = {"image": result["frames"][:, -1].copy(), "state": result["state"]}  # not a view into infos["frames"]
         rewards = np.nansum(result["rewards"], axis=1)  # (B,); 0 where nothing was executed
         return obs, rewards, result["terminated"], result["truncated"], infos
 

@@ -65,7 +65,7 @@ class PolicyActor:
         return self._policy.chunk_size
 
     def __call__(self, env: MetaWorldEnv, obs: dict[str, np.ndarray]) -> np.ndarray:
-        return self.chunk(self.seen(obs, env.task), env.instruction, env.task)
+        return self.chunk(self.seen(obs, env.task), env.instruction, env.task, obs.get("state"))
 
     def seen(self, obs: dict, task: str) -> np.ndarray:
         """What the policy sees of an observation: its cameras side by side. The env may render
@@ -79,16 +79,21 @@ class PolicyActor:
                              f"{','.join(views)}: add {','.join(missing)} to --cameras")
         return tile_views([views[name] for name in self._cameras])
 
-    def chunk(self, image: np.ndarray, instruction: str, task: str) -> np.ndarray:
-        """(K, A) float32 actions in [-1, 1] for one (H, W, 3) uint8 image, real or imagined."""
+    def chunk(self, image: np.ndarray, instruction: str, task: str, state: np.ndarray | None = None) -> np.ndarray:
+        """(K, A) float32 actions in [-1, 1] for one (H, W, 3) uint8 image, real or imagined, and
+        the robot's (D,) state where the env has one (a policy that reads none is not given it)."""
         import torch
 
+        from gymnast.policy.base import state_inputs
+
         image = torch.as_tensor(image)[None]  # (1, H, W, 3) uint8
+        states = None if state is None else torch.as_tensor(state, dtype=torch.float32)[None]  # (1, D)
         with torch.inference_mode():
             if self._temperature > 0:
-                chunk = self._policy.sample(image, [instruction], self._temperature, self._generator).actions
+                chunk = self._policy.sample(image, [instruction], self._temperature, self._generator,
+                                            **state_inputs(self._policy, states)).actions
             else:
-                chunk = self._policy.act(image, [instruction])  # (1, K, A)
+                chunk = self._policy.act(image, [instruction], **state_inputs(self._policy, states))  # (1, K, A)
         expected = (1, self._policy.chunk_size, ACTION_DIM)
         if tuple(chunk.shape) != expected:
             raise ValueError(f"the policy returned shape {tuple(chunk.shape)}, expected (B, K, A) = {expected}")
@@ -137,7 +142,7 @@ class ImaginedPlanActor:
         self._planned = True
         imagination = BatchedImaginedEnv(self._world_model, 1, self._actor.chunk_size, self._horizon)
 
-        def act(images: np.ndarray, instructions: list[str]) -> np.ndarray:  # (1, H, W, 3) imagined -> (1, K, A)
+        def act(images: np.ndarray, instructions: list[str], states: np.ndarray | None) -> np.ndarray:  # imagined: no state
             return self._actor.chunk(images[0], env.instruction, env.task)[None]
 
         start = {"frames": obs["image"][None], "instructions": [env.instruction]}  # the first frame only

@@ -37,7 +37,8 @@ def rollout_samples(rollouts: Rollouts, chunk_size: int) -> DemoSet:
     chunks = padded.view(len(rollouts.actions), calls, chunk_size, -1)  # (R, S, K, A)
     instructions = list(dict.fromkeys(rollouts.instructions))
     which = torch.tensor([instructions.index(text) for text in rollouts.instructions]).view(-1, 1).expand(-1, calls)
-    return DemoSet(rollouts.observations[used], chunks[used], valid[used], which[used], instructions, [])
+    states = None if rollouts.states is None else rollouts.states[used]
+    return DemoSet(rollouts.observations[used], chunks[used], valid[used], which[used], instructions, [], states)
 
 
 def imagine_successes(policy_run: Path, wm_run: Path, judge_run: Path, data: Path, config: ExperimentConfig,

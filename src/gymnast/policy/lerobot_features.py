@@ -9,8 +9,11 @@ simulator's views of those names (a one-camera policy of another name sees the f
 gymnast's own policies do) or a world model's of the same names, side by side in one frame that is
 split back here, one view per feature. Each image is resized to its declared
 (C, H, W) and scaled to [0, 1], as LeRobot's datasets give images; the instruction is its
-``task``. A robot state input (STATE, ENV) is refused: neither a world model nor gymnast's policy
-contract carries one, and a constant in its place would be a silent lie. The one action output
+``task``. A robot state (``observation.state``, shape (D,)) is the env's own state at each call
+where the env has one (the real world and the software simulator: hand position and gripper,
+`gymnast.envs.metaworld`); a world model imagines no state, so such a policy practises with
+``--env real`` or ``sim`` and is refused in imagination, by name, rather than fed a constant,
+which would be a silent lie. Any other non-image input (an environment state) is refused. The one action output
 must have gymnast's A dimensions (the env's, checked when the run starts), and gymnast's chunk
 is the policy's ``n_action_steps``: what LeRobot executes open-loop per call.
 
@@ -18,7 +21,8 @@ lerobot 0.4.4's ACT and SmolVLA read ``observation.state`` even when they declar
 its device, and as SmolVLA's padded state token), so a policy without one gets an empty (B, 0)
 state, which is what LeRobot gives such a policy as well.
 
-Legend: B batch, H/W image size, V cameras, C channels, K chunk length, A action dimensions.
+Legend: B batch, H/W image size, V cameras, C channels, K chunk length, A action dimensions,
+D robot state dimensions.
 """
 
 from __future__ import annotations
@@ -47,6 +51,7 @@ class LeRobotFeatures:
         action_dim: A, the action output's size.
         chunk_size: K, the actions gymnast executes per call (the policy's n_action_steps).
         predicted: the actions the policy predicts per call (its chunk_size >= K).
+        state_dim: D, the size of its ``observation.state`` input; 0 if it reads none.
     """
 
     image_keys: tuple[str, ...]
@@ -54,6 +59,7 @@ class LeRobotFeatures:
     action_dim: int
     chunk_size: int
     predicted: int
+    state_dim: int = 0
 
     @classmethod
     def of(cls, config: Any, source: str) -> LeRobotFeatures:
@@ -64,14 +70,17 @@ class LeRobotFeatures:
         """
         inputs = config.input_features
         images = [key for key, feature in inputs.items() if _kind(feature) == "VISUAL"]
-        others = {key: feature for key, feature in inputs.items() if _kind(feature) != "VISUAL"}
+        others = {key: feature for key, feature in inputs.items() if _kind(feature) != "VISUAL" and key != OBS_STATE}
         if not images:
             raise ValueError(f"{source}: the policy declares no image input (input_features: {sorted(inputs)}); "
                              "gymnast shows a policy camera images")
         for key, feature in others.items():
             raise ValueError(f"{source}: input feature {key} ({_kind(feature)}, shape {tuple(feature.shape)}): gymnast "
-                             "shows a policy the camera images and the instruction only (a world model imagines no "
-                             "robot state); use a policy trained without it")
+                             f"shows a policy the camera images, the instruction and the robot's state ({OBS_STATE}) "
+                             "only; use a policy trained without it")
+        state = tuple(inputs[OBS_STATE].shape) if OBS_STATE in inputs else (0,)
+        if len(state) != 1:
+            raise ValueError(f"{source}: input feature {OBS_STATE} has shape {state}; gymnast gives a robot state of shape (D,)")
         shapes = tuple(tuple(inputs[key].shape) for key in images)
         for key, shape in zip(images, shapes):
             if len(shape) != 3 or shape[0] != 3:
@@ -81,7 +90,7 @@ class LeRobotFeatures:
             raise ValueError(f"{source}: output features {({k: tuple(f.shape) for k, f in actions.items()})}: gymnast "
                              f"takes one '{ACTION}' of shape (A,)")
         chunk, predicted = int(config.n_action_steps), int(config.chunk_size)
-        return cls(tuple(images), shapes, int(actions[ACTION].shape[0]), chunk, predicted)
+        return cls(tuple(images), shapes, int(actions[ACTION].shape[0]), chunk, predicted, int(state[0]))
 
     @property
     def cameras(self) -> tuple[str, ...]:
@@ -94,9 +103,14 @@ class LeRobotFeatures:
         height; another camera of another size gets its view resized)."""
         return self.image_shapes[0][1]
 
-    def batch(self, obs: torch.Tensor, instructions: Sequence[str]) -> dict[str, Any]:
-        """(B, H, V*W, 3) uint8 images (the policy's V cameras side by side) and B instructions ->
-        the batch LeRobot's preprocessor takes."""
+    def batch(self, obs: torch.Tensor, instructions: Sequence[str], states: torch.Tensor | None = None
+              ) -> dict[str, Any]:
+        """(B, H, V*W, 3) uint8 images (the policy's V cameras side by side), B instructions and,
+        for a policy that reads one, (B, D) robot states -> the batch LeRobot's preprocessor takes.
+
+        Raises:
+            ValueError: shapes that do not fit, or no states for a policy that reads them (named).
+        """
         views = len(self.image_keys)
         if obs.ndim != 4 or obs.shape[-1] != 3 or obs.shape[2] % views:
             cameras = f"{views} cameras side by side, " if views > 1 else ""
@@ -111,7 +125,19 @@ class LeRobotFeatures:
             if tuple(view.shape[2:]) != shape[1:]:
                 view = F.interpolate(view, size=shape[1:], mode="bilinear", antialias=True, align_corners=False)
             batch[key] = view
-        return batch | {OBS_STATE: images.new_zeros(len(obs), 0), TASK: list(instructions)}
+        return batch | {OBS_STATE: self._states(states, len(obs)), TASK: list(instructions)}
+
+    def _states(self, states: torch.Tensor | None, count: int) -> torch.Tensor:
+        """(B, D) float32 robot states for the policy, or (B, 0) for one that reads none."""
+        if not self.state_dim:
+            return torch.zeros(count, 0)
+        if states is None:
+            raise ValueError(f"the policy reads {OBS_STATE} ({self.state_dim},), but this env gives no robot state "
+                             "(a world model imagines images only): use it with --env real or sim")
+        if tuple(states.shape) != (count, self.state_dim):
+            raise ValueError(f"the policy reads {OBS_STATE} of shape ({self.state_dim},), got states "
+                             f"{tuple(states.shape)} for {count} observations")
+        return states.float()
 
     def check_actions(self, actions: torch.Tensor, source: str) -> None:
         """Raises ValueError unless `actions` is (B, predicted, A), what the policy must predict."""

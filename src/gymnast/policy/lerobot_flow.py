@@ -64,11 +64,11 @@ class LeRobotFlowPolicy(LeRobotPolicy):
 
     @torch.no_grad()
     def sample(self, obs: torch.Tensor, instructions: Sequence[str], temperature: float = 1.0,
-               generator: torch.Generator | None = None) -> ActionSample:
+               generator: torch.Generator | None = None, states: torch.Tensor | None = None) -> ActionSample:
         """A chunk from the stochastic sampler; ``tokens`` holds the executed elements' path (B, (S + 1) * N)."""
         if temperature <= 0:
             raise ValueError(f"temperature must be positive, got {temperature}; use act() for the deterministic sampler")
-        transition = self._transition_for(self.inputs(obs, instructions))
+        transition = self._transition_for(self.inputs(obs, instructions, states))
         device = self.device
 
         def draw(shape: Sequence[int]) -> torch.Tensor:
@@ -83,14 +83,15 @@ class LeRobotFlowPolicy(LeRobotPolicy):
                             logp=self._executed(logp).cpu())
 
     def log_prob(self, obs: torch.Tensor, instructions: Sequence[str], tokens: torch.Tensor,
-                 temperature: float = 1.0) -> torch.Tensor:
+                 temperature: float = 1.0, states: torch.Tensor | None = None) -> torch.Tensor:
         """(B, N) log-density of each executed element's path, summed over the steps; differentiable."""
-        return self.log_prob_and_entropy(obs, instructions, tokens, temperature)[0]
+        return self.log_prob_and_entropy(obs, instructions, tokens, temperature, states)[0]
 
     def log_prob_and_entropy(self, obs: torch.Tensor, instructions: Sequence[str], tokens: torch.Tensor,
-                             temperature: float = 1.0) -> tuple[torch.Tensor, torch.Tensor]:
+                             temperature: float = 1.0, states: torch.Tensor | None = None
+                             ) -> tuple[torch.Tensor, torch.Tensor]:
         """`log_prob`, and the (B, N) entropy of each executed element's transitions along the path."""
-        transition = self._transition_for(self.inputs(obs, instructions))
+        transition = self._transition_for(self.inputs(obs, instructions, states))
         logp, entropy = path_log_prob(transition, self._full_path(tokens), self.steps, temperature, self.noisy)
         return self._executed(logp), self._executed(entropy)
 

@@ -59,11 +59,11 @@ class LeRobotGaussianPolicy(LeRobotPolicy):
 
     @torch.no_grad()
     def sample(self, obs: torch.Tensor, instructions: Sequence[str], temperature: float = 1.0,
-               generator: torch.Generator | None = None) -> ActionSample:
+               generator: torch.Generator | None = None, states: torch.Tensor | None = None) -> ActionSample:
         """Actions drawn around the policy's chunk; ``tokens`` holds them in normalised units (B, N)."""
         if temperature <= 0:
             raise ValueError(f"temperature must be positive, got {temperature}; use act() for the mean chunk")
-        mean = self._mean(obs, instructions)  # (B, K, A)
+        mean = self._mean(obs, instructions, states)  # (B, K, A)
         noise = torch.randn(mean.shape, generator=generator,
                             device=generator.device if generator is not None else mean.device).to(mean.device)
         chunk = mean + temperature * self.sigma() * noise
@@ -71,17 +71,18 @@ class LeRobotGaussianPolicy(LeRobotPolicy):
         return ActionSample(actions=self.to_actions(chunk), tokens=chunk.flatten(1).cpu(), logp=logp.cpu())
 
     def log_prob(self, obs: torch.Tensor, instructions: Sequence[str], tokens: torch.Tensor,
-                 temperature: float = 1.0) -> torch.Tensor:
+                 temperature: float = 1.0, states: torch.Tensor | None = None) -> torch.Tensor:
         """(B, N) log-density of each sampled action element; differentiable."""
-        return self.log_prob_and_entropy(obs, instructions, tokens, temperature)[0]
+        return self.log_prob_and_entropy(obs, instructions, tokens, temperature, states)[0]
 
     def log_prob_and_entropy(self, obs: torch.Tensor, instructions: Sequence[str], tokens: torch.Tensor,
-                             temperature: float = 1.0) -> tuple[torch.Tensor, torch.Tensor]:
+                             temperature: float = 1.0, states: torch.Tensor | None = None
+                             ) -> tuple[torch.Tensor, torch.Tensor]:
         """`log_prob`, and the (B, N) entropy of each element's Gaussian."""
         shape = (len(tokens), self.chunk_size, self.action_dim)
         if tokens.ndim != 2 or tokens.shape[1] != math.prod(shape[1:]):
             raise ValueError(f"sampled chunks must be (B, {math.prod(shape[1:])}) = (B, K * A), got {tuple(tokens.shape)}")
-        mean = self._mean(obs, instructions)
+        mean = self._mean(obs, instructions, states)
         return self._log_prob(mean, tokens.float().view(shape).to(mean.device), temperature)
 
     def chunk_tokens(self, actions: torch.Tensor) -> torch.Tensor:
@@ -90,9 +91,9 @@ class LeRobotGaussianPolicy(LeRobotPolicy):
 
     # -- helpers ------------------------------------------------------------------------------------
 
-    def _mean(self, obs: torch.Tensor, instructions: Sequence[str]) -> torch.Tensor:
+    def _mean(self, obs: torch.Tensor, instructions: Sequence[str], states: torch.Tensor | None) -> torch.Tensor:
         """(B, K, A) the first K actions of the policy's chunk, in normalised units."""
-        return self.mean_chunk(self.inputs(obs, instructions))[:, : self.chunk_size]
+        return self.mean_chunk(self.inputs(obs, instructions, states))[:, : self.chunk_size]
 
     def _log_prob(self, mean: torch.Tensor, chunk: torch.Tensor, temperature: float
                   ) -> tuple[torch.Tensor, torch.Tensor]:

@@ -2,9 +2,11 @@
 LeRobot path end to end without a trained one (docs/lerobot.md):
 
     python -m gymnast.policy.lerobot_init OUT [--image-size 96] [--action-dim 4] [--chunk 5] [--cameras front,gripper]
+        [--state-dim 4]
 
 The policy reads one camera image (``observation.image``; with ``--cameras front,gripper`` one
-``observation.images.<camera>`` each; no state: gymnast shows none) and acts
+``observation.images.<camera>`` each; with ``--state-dim 4`` also the robot's state,
+``observation.state``, which only a simulator gives) and acts
 in A dimensions; actions are normalised by a mean of 0 and a standard deviation of 1, which is
 Meta-World's [-1, 1] range as it is. It is small (one encoder and one decoder layer of width 64)
 and its ResNet-18 backbone starts from random weights, since none can be downloaded here.
@@ -24,7 +26,8 @@ from gymnast.utils.torchvision_ops import allow_torchvision_import
 
 
 def new_act(out: Path, image_size: int = 96, action_dim: int = 4, chunk: int = 5, predicted: int | None = None,
-            width: int = 64, action_std: float = 1.0, seed: int = 0, cameras: Sequence[str] = ()) -> Path:
+            width: int = 64, action_std: float = 1.0, seed: int = 0, cameras: Sequence[str] = (),
+            state_dim: int = 0) -> Path:
     """Writes a randomly initialised ACT policy and its processors to `out`; returns `out`.
 
     Args:
@@ -37,6 +40,8 @@ def new_act(out: Path, image_size: int = 96, action_dim: int = 4, chunk: int = 5
         seed: the weights' seed.
         cameras: the cameras it reads, one ``observation.images.<camera>`` each; default: one
             ``observation.image``.
+        state_dim: D > 0 adds the robot's state, ``observation.state`` (D,), normalised by a zero
+            mean and a standard deviation of 1.
     """
     require_lerobot()
     from lerobot.configs.types import FeatureType, NormalizationMode, PolicyFeature
@@ -44,7 +49,7 @@ def new_act(out: Path, image_size: int = 96, action_dim: int = 4, chunk: int = 5
     from lerobot.policies.act.modeling_act import ACTPolicy
 
     config = ACTConfig(
-        input_features=_image_features(cameras, image_size),
+        input_features=_input_features(cameras, image_size, state_dim),
         output_features={"action": PolicyFeature(FeatureType.ACTION, (action_dim,))},
         chunk_size=predicted or chunk, n_action_steps=chunk, dim_model=width, n_heads=2, dim_feedforward=2 * width,
         n_encoder_layers=1, n_decoder_layers=1, n_vae_encoder_layers=1, latent_dim=8,
@@ -57,7 +62,7 @@ def new_act(out: Path, image_size: int = 96, action_dim: int = 4, chunk: int = 5
 
 def new_smolvla(out: Path, image_size: int = 96, action_dim: int = 4, chunk: int = 5, predicted: int = 8,
                 steps: int = 3, action_std: float = 1.0, seed: int = 0, full_size: bool = False,
-                cameras: Sequence[str] = ()) -> Path:
+                cameras: Sequence[str] = (), state_dim: int = 0) -> Path:
     """Writes a randomly initialised SmolVLA policy to `out`, with the vision-language model it is
     built on in ``out/vlm`` (SmolVLA reads its VLM's config, tokenizer and image processor from
     ``vlm_model_name``; a real one comes from a model hub, which is not reachable here). For
@@ -70,7 +75,7 @@ def new_smolvla(out: Path, image_size: int = 96, action_dim: int = 4, chunk: int
         full_size: LeRobot's published SmolVLA architecture (`SMOLVLM2_500M`, SmolVLA's own
             defaults for the layers kept, the image side, the token and padding lengths) instead
             of a tiny one: for timing the real thing (benchmarks/lerobot_gpu.py).
-        cameras: as `new_act`'s.
+        cameras, state_dim: as `new_act`'s.
     """
     require_lerobot()
     from lerobot.configs.types import FeatureType, NormalizationMode, PolicyFeature
@@ -84,7 +89,7 @@ def new_smolvla(out: Path, image_size: int = 96, action_dim: int = 4, chunk: int
     shape = {} if full_size else {"max_state_dim": 8, "max_action_dim": 8, "tokenizer_max_length": 16,
                                   "num_vlm_layers": 2}
     config = SmolVLAConfig(
-        input_features=_image_features(cameras, image_size),
+        input_features=_input_features(cameras, image_size, state_dim),
         output_features={"action": PolicyFeature(FeatureType.ACTION, (action_dim,))},
         chunk_size=predicted, n_action_steps=chunk, num_steps=steps,
         resize_imgs_with_padding=(sizes.image_side, sizes.image_side), vlm_model_name=str(vlm.resolve()),
@@ -170,28 +175,38 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--chunk", type=int, default=5, help="actions executed per call (gymnast's chunk K)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the random weights")
     parser.add_argument("--cameras", default="", help="cameras it reads, comma-separated (default: one observation.image)")
+    parser.add_argument("--state-dim", type=int, default=0, help="size of the robot state it reads (0: none)")
     args = parser.parse_args(argv)
     cameras = [name for name in args.cameras.split(",") if name]
-    print(new_act(args.out, args.image_size, args.action_dim, args.chunk, seed=args.seed, cameras=cameras))
+    print(new_act(args.out, args.image_size, args.action_dim, args.chunk, seed=args.seed, cameras=cameras,
+                  state_dim=args.state_dim))
 
 
 
-def _image_features(cameras: Sequence[str], image_size: int) -> dict:
-    """The image input features of a policy of `cameras` (none: one ``observation.image``)."""
+def _input_features(cameras: Sequence[str], image_size: int, state_dim: int) -> dict:
+    """The input features of a policy of `cameras` (none: one ``observation.image``) and, for
+    `state_dim` > 0, a robot state."""
     from lerobot.configs.types import FeatureType, PolicyFeature
 
     keys = [f"observation.images.{name}" for name in cameras] or ["observation.image"]
-    return {key: PolicyFeature(FeatureType.VISUAL, (3, image_size, image_size)) for key in keys}
+    features = {key: PolicyFeature(FeatureType.VISUAL, (3, image_size, image_size)) for key in keys}
+    if state_dim:
+        features["observation.state"] = PolicyFeature(FeatureType.STATE, (state_dim,))
+    return features
 
 
 def _save_new(policy_class, config, out: Path, action_dim: int, action_std: float, seed: int) -> Path:
     """Builds `policy_class(config)` from `seed` and writes it to `out` with its pre- and
-    post-processors, the actions normalised by a zero mean and `action_std`."""
+    post-processors, the actions normalised by a zero mean and `action_std` (a state by a zero
+    mean and a standard deviation of 1)."""
     from lerobot.policies.factory import make_pre_post_processors
 
     torch.manual_seed(seed)
     policy = policy_class(config)
     stats = {"action": {"mean": torch.zeros(action_dim), "std": torch.full((action_dim,), float(action_std))}}
+    if "observation.state" in config.input_features:
+        size = config.input_features["observation.state"].shape[0]
+        stats["observation.state"] = {"mean": torch.zeros(size), "std": torch.ones(size)}
     preprocessor, postprocessor = make_pre_post_processors(config, dataset_stats=stats)
     for part in (policy, preprocessor, postprocessor):
         part.save_pretrained(out)

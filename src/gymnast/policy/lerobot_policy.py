@@ -90,6 +90,7 @@ class LeRobotPolicy(nn.Module):
         self.files, self.source, self.exploration = files, source, exploration
         self.features = LeRobotFeatures.of(policy.config, source)
         self.chunk_size, self.action_dim = self.features.chunk_size, self.features.action_dim
+        self.state_dim = self.features.state_dim
         self.config = LeRobotArchitecture(policy.config.type, self.features.image_size, self.chunk_size,
                                           self.action_dim, self.features.cameras)
         self.eval()
@@ -103,9 +104,9 @@ class LeRobotPolicy(nn.Module):
     # -- the Policy protocol ------------------------------------------------------------------------
 
     @torch.no_grad()
-    def act(self, obs: torch.Tensor, instructions: Sequence[str]) -> torch.Tensor:
+    def act(self, obs: torch.Tensor, instructions: Sequence[str], states: torch.Tensor | None = None) -> torch.Tensor:
         """(B, K, A) what LeRobot's ``predict_action_chunk`` gives, unnormalised: the first K actions."""
-        return self.to_actions(self.mean_chunk(self.inputs(obs, instructions))[:, : self.chunk_size])
+        return self.to_actions(self.mean_chunk(self.inputs(obs, instructions, states))[:, : self.chunk_size])
 
     def chunk_tokens(self, actions: torch.Tensor) -> torch.Tensor:
         """(B, K, A) actions -> the record of a greedy rollout, which is never trained on."""
@@ -113,11 +114,12 @@ class LeRobotPolicy(nn.Module):
 
     # -- inputs and outputs -------------------------------------------------------------------------
 
-    def inputs(self, obs: torch.Tensor, instructions: Sequence[str],
+    def inputs(self, obs: torch.Tensor, instructions: Sequence[str], states: torch.Tensor | None = None,
                actions: torch.Tensor | None = None) -> dict[str, Any]:
         """The preprocessed batch for (B, H, V*W, 3) uint8 images (V cameras side by side),
-        instructions and optionally (B, predicted, A) actions in env units, on the policy's device."""
-        batch = self.features.batch(obs.cpu(), instructions)
+        instructions, (B, D) robot states where the policy reads them, and optionally
+        (B, predicted, A) actions in env units, on the policy's device."""
+        batch = self.features.batch(obs.cpu(), instructions, None if states is None else states.cpu())
         if actions is not None:
             batch[ACTION] = actions.float().cpu()
         batch = self.preprocessor(batch)
@@ -135,8 +137,10 @@ class LeRobotPolicy(nn.Module):
     # -- supervised learning (the imitation anchor) ------------------------------------------------
 
     def imitation_loss(self, images: torch.Tensor, texts: Sequence[str], chunks: torch.Tensor, valid: torch.Tensor,
-                       bf16: bool = False, generator: torch.Generator | None = None) -> tuple[torch.Tensor, dict]:
-        """LeRobot's own training loss (its ``forward``) on expert chunks (B, K, A) with (B, K) valid.
+                       bf16: bool = False, generator: torch.Generator | None = None,
+                       states: torch.Tensor | None = None) -> tuple[torch.Tensor, dict]:
+        """LeRobot's own training loss (its ``forward``) on expert chunks (B, K, A) with (B, K) valid
+        (and the (B, D) robot states they were taken in, for a policy that reads them).
 
         The chunk is padded to the policy's predicted length with its last valid action, marked as
         padding; LeRobot's own random draws (flow times, noise) come from `generator`.
@@ -148,7 +152,7 @@ class LeRobotPolicy(nn.Module):
         held[:, : chunks.shape[1]] = torch.where(valid[:, :, None], chunks, held[:, : chunks.shape[1]])
         pad = torch.ones(len(chunks), predicted, dtype=torch.bool)
         pad[:, : chunks.shape[1]] = ~valid
-        batch = self.inputs(images, texts, held)
+        batch = self.inputs(images, texts, states, held)
         # ACT names the padding action_is_pad; SmolVLA reads actions_id_pad.
         batch |= {"action_is_pad": pad.to(self.device), "actions_id_pad": pad.to(self.device)}
         seed = int(torch.randint(2**62, (1,), generator=generator)) if generator is not None else None

@@ -19,7 +19,7 @@ from typing import Any, Sequence
 
 import torch
 
-from gymnast.policy.base import ActionSample, Policy
+from gymnast.policy.base import ActionSample, Policy, state_inputs
 
 RANDOM = math.inf
 """The noise level that stands for uniformly random actions in [-1, 1] (the floor)."""
@@ -44,6 +44,7 @@ class NoisyPolicy:
             raise ValueError(f"noise must be >= 0 (or inf for random actions), got {noise}")
         self.base, self.noise, self.seed = base, float(noise), seed
         self.chunk_size, self.action_dim = base.chunk_size, base.action_dim
+        self.state_dim = getattr(base, "state_dim", 0)
         self.generator = torch.Generator().manual_seed(seed)
 
     @property
@@ -62,12 +63,12 @@ class NoisyPolicy:
         self.generator.manual_seed(self.seed if seed is None else seed)
 
     @torch.no_grad()
-    def act(self, obs: torch.Tensor, instructions: Sequence[str]) -> torch.Tensor:
+    def act(self, obs: torch.Tensor, instructions: Sequence[str], states: torch.Tensor | None = None) -> torch.Tensor:
         """(B, K, A) the base's greedy chunk plus noise, clipped to [-1, 1]."""
         shape = (len(obs), self.chunk_size, self.action_dim)
         if self.random:
             return torch.rand(shape, generator=self.generator) * 2 - 1
-        actions = self.base.act(obs, instructions).float()  # (B, K, A)
+        actions = self.base.act(obs, instructions, **state_inputs(self.base, states)).float()  # (B, K, A)
         if self.noise == 0:
             return actions
         # Drawn on the CPU from our own generator (a base on another device gets it moved), so
@@ -81,15 +82,16 @@ class NoisyPolicy:
         return self.base.chunk_tokens(actions)
 
     def sample(self, obs: torch.Tensor, instructions: Sequence[str], temperature: float = 1.0,
-               generator: torch.Generator | None = None) -> ActionSample:
+               generator: torch.Generator | None = None, states: torch.Tensor | None = None) -> ActionSample:
         raise NotImplementedError(self._untrainable("sample"))
 
     def log_prob(self, obs: torch.Tensor, instructions: Sequence[str], tokens: torch.Tensor,
-                 temperature: float = 1.0) -> torch.Tensor:
+                 temperature: float = 1.0, states: torch.Tensor | None = None) -> torch.Tensor:
         raise NotImplementedError(self._untrainable("log_prob"))
 
     def log_prob_and_entropy(self, obs: torch.Tensor, instructions: Sequence[str], tokens: torch.Tensor,
-                             temperature: float = 1.0) -> tuple[torch.Tensor, torch.Tensor]:
+                             temperature: float = 1.0, states: torch.Tensor | None = None
+                             ) -> tuple[torch.Tensor, torch.Tensor]:
         raise NotImplementedError(self._untrainable("log_prob_and_entropy"))
 
     def _untrainable(self, method: str) -> str:

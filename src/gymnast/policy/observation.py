@@ -94,6 +94,9 @@ class ObservationConditioned(nn.Module):
         views: cameras V, side by side in the input image.
     """
 
+    state_dim = 0
+    """The embedded policies read no robot state (`gymnast.policy.base.Policy.state_dim`)."""
+
     def __init__(self, vision: str, width: int, image_size: int, pretrained_vision: bool, views: int = 1) -> None:
         super().__init__()
         grid = image_size // 16

@@ -107,7 +107,8 @@ SFT_PRESETS: dict[str, SFTConfig] = {
 @dataclass(frozen=True)
 class DemoSet:
     """Training samples in memory: images (M, H, W, 3) uint8, chunks (M, K, A), valid (M, K) bool,
-    instruction (M,) index into `instructions`."""
+    instruction (M,) index into `instructions`, and the robot's states (M, D) float32 where known
+    (a policy that reads them imitates with them)."""
 
     images: torch.Tensor
     chunks: torch.Tensor
@@ -115,6 +116,7 @@ class DemoSet:
     instruction: torch.Tensor
     instructions: list[str]
     episodes: list[EpisodeInfo]
+    states: torch.Tensor | None = None
 
 
 def select_demos(dataset: EpisodeDataset, per_task: int, tasks: str = "") -> list[int]:
@@ -142,7 +144,7 @@ def select_demos(dataset: EpisodeDataset, per_task: int, tasks: str = "") -> lis
 
 def load_demos(dataset: EpisodeDataset, indices: list[int], chunk_size: int) -> DemoSet:
     """Decodes the chosen episodes into (frame, instruction, next K actions) samples."""
-    images, chunks, valid, instruction, instructions, infos = [], [], [], [], [], []
+    images, chunks, valid, instruction, instructions, infos, states = [], [], [], [], [], [], []
     for i in indices:
         episode = dataset.load(i)
         steps = episode.length
@@ -151,11 +153,13 @@ def load_demos(dataset: EpisodeDataset, indices: list[int], chunk_size: int) -> 
         chunks.append(padded.unfold(0, chunk_size, 1).transpose(1, 2))  # (T, K, A)
         valid.append(torch.arange(steps).unsqueeze(1) + torch.arange(chunk_size) < steps)  # (T, K)
         images.append(torch.from_numpy(episode.observed_frames[:steps]))  # every camera read, side by side
+        states.append(torch.from_numpy(episode.states[:steps]).float())
         if episode.info.instruction not in instructions:
             instructions.append(episode.info.instruction)
         instruction.append(torch.full((steps,), instructions.index(episode.info.instruction)))
         infos.append(episode.info)
-    return DemoSet(torch.cat(images), torch.cat(chunks), torch.cat(valid), torch.cat(instruction), instructions, infos)
+    return DemoSet(torch.cat(images), torch.cat(chunks), torch.cat(valid), torch.cat(instruction), instructions, infos,
+                   torch.cat(states))
 
 
 def random_shift(images: torch.Tensor, pad: int, generator: torch.Generator, views: int = 1) -> torch.Tensor:

@@ -125,7 +125,7 @@ def replay_actions(env: VectorEnv, starts: Sequence[Start], actions: torch.Tenso
     frames, by_chunk, rewards = [], [], []
     interactions = sum(len(start.prefix) for start in starts)  # restoring a keyframe takes real actions
     success = torch.zeros(count, dtype=torch.bool)
-    for index, result in enumerate(run_batch(env, lambda images, instructions: next(plan).numpy(),
+    for index, result in enumerate(run_batch(env, lambda images, instructions, states: next(plan).numpy(),
                                              start_options(starts), seed=0, max_calls=calls)):
         if not frames:
             frames.append(torch.from_numpy(result.observation)[:, None])  # (R, 1, H, W, 3) the start frame

@@ -16,6 +16,7 @@ from pathlib import Path
 import torch
 
 from gymnast.data.lerobot import EpisodeDataset, FeatureKeys
+from gymnast.policy.base import state_inputs
 from gymnast.policy.sft import DEMO_BEHAVIOURS, DemoSet, load_demos, select_demos
 
 DEMOS_PER_TASK = 10
@@ -64,6 +65,7 @@ class ImitationAnchor:
         """`coef` times the policy's imitation loss on a random batch of demonstrations."""
         batch = torch.randint(0, len(self.demos.images), (self.batch_size,), generator=generator)
         texts = [self.demos.instructions[i] for i in self.demos.instruction[batch].tolist()]
+        states = state_inputs(policy, None if self.demos.states is None else self.demos.states[batch])
         loss, _ = policy.imitation_loss(self.demos.images[batch], texts, self.demos.chunks[batch],
-                                        self.demos.valid[batch], generator=generator)
+                                        self.demos.valid[batch], generator=generator, **states)
         return self.coef * loss, {"train/imitation_loss": loss.item()}

@@ -33,7 +33,7 @@ from gymnast.data.lerobot import EpisodeDataset, FeatureKeys
 from gymnast.data.schema import EXTERNAL, EpisodeInfo
 from gymnast.envs.engine import run_batch
 from gymnast.envs.starts import Start, start_options
-from gymnast.policy.base import ActionSample, Policy
+from gymnast.policy.base import ActionSample, Policy, state_inputs
 from gymnast.reward.base import Reward, RewardContext
 
 EXPERTS = ("expert", "noisy_expert")  # the behaviours whose actions can serve as a reference
@@ -57,6 +57,8 @@ class Rollouts:
         env_rewards: (R, T) float32 the simulator's per-action rewards (NaN after the end), or None.
         disagreement: (R, T) float32 a world-model ensemble's disagreement on each imagined frame
             (NaN after the end), or None (simulators and single world models report none).
+        states: (R, S, D) float32 the robot state the policy was given at each call (a
+            simulator's), or None (a world model imagines none).
     """
 
     starts: tuple[Start, ...]
@@ -70,6 +72,7 @@ class Rollouts:
     success: torch.Tensor | None
     env_rewards: torch.Tensor | None
     disagreement: torch.Tensor | None = None
+    states: torch.Tensor | None = None
 
     @property
     def instructions(self) -> list[str]:
@@ -79,7 +82,7 @@ class Rollouts:
         """The rollouts at `index` (R',) int64, in that order."""
         pick = index.tolist()
         optional = {name: None if getattr(self, name) is None else getattr(self, name)[index]
-                    for name in ("success", "env_rewards", "disagreement")}
+                    for name in ("success", "env_rewards", "disagreement", "states")}
         return Rollouts(tuple(self.starts[i] for i in pick), self.observations[index], self.tokens[index],
                         self.logp[index], self.token_mask[index], self.frames[index], self.actions[index],
                         self.lengths[index], **optional)
@@ -113,20 +116,23 @@ def collect_rollouts(
     count, (chunk, action_dim) = env.num_envs, env.single_action_space.shape
     samples: list[ActionSample] = []
 
-    def act(images: np.ndarray, instructions: list[str]) -> np.ndarray:  # (R, H, W, 3) -> (R, K, A)
+    def act(images: np.ndarray, instructions: list[str], states: np.ndarray | None) -> np.ndarray:  # -> (R, K, A)
         began = time.perf_counter()
-        samples.append(_sample(policy, torch.from_numpy(images), instructions, temperature, generator))
+        given = None if states is None else torch.from_numpy(states)  # (R, D) a simulator's robot states
+        samples.append(_sample(policy, torch.from_numpy(images), instructions, temperature, generator, given))
         if timer is not None:
             timer["policy_s"] = timer.get("policy_s", 0.0) + time.perf_counter() - began
         return samples[-1].actions.numpy()
 
-    seen, masks, frames, actions, rewards, disagreement, success = [], [], [], [], [], [], None
+    seen, states, masks, frames, actions, rewards, disagreement, success = [], [], [], [], [], [], [], None
     for result in run_batch(env, act, start_options(starts), seed):
         image, new = torch.from_numpy(result.observation), torch.from_numpy(result.frames)  # new: (R, k, H, W, 3)
         if not frames:
             frames.append(image[:, None])  # (R, 1, H, W, 3) the start frame
         valid = torch.arange(chunk)[None] < torch.from_numpy(result.executed)[:, None]  # (R, K) actions really executed
         seen.append(image)
+        if result.states is not None:
+            states.append(torch.from_numpy(result.states).float())
         masks.append(valid.repeat_interleave(action_dim, dim=1))  # (R, N), tokens are chunk-major
         frames.append(new)
         actions.append(torch.from_numpy(result.actions)[:, : new.shape[1]].float() * valid[:, : new.shape[1], None])
@@ -140,6 +146,8 @@ def collect_rollouts(
     tokens, logp = [sample.tokens for sample in samples], [sample.logp for sample in samples]
     for _ in range(len(tokens), calls or 0):  # nothing happens after the end: repeat, mask, NaN
         seen.append(seen[-1])
+        if states:
+            states.append(states[-1])
         tokens.append(torch.zeros_like(tokens[-1]))
         logp.append(torch.zeros_like(logp[-1]))
         masks.append(torch.zeros_like(masks[-1]))
@@ -161,15 +169,16 @@ def collect_rollouts(
         success=success,
         env_rewards=torch.cat(rewards, dim=1) if rewards else None,
         disagreement=torch.cat(disagreement, dim=1) if disagreement else None,
+        states=torch.stack(states, dim=1) if states else None,
     )
 
 
 def _sample(policy: Policy, image: torch.Tensor, instructions: list[str], temperature: float,
-            generator: torch.Generator):
+            generator: torch.Generator, states: torch.Tensor | None):
     if temperature > 0:
-        return policy.sample(image, instructions, temperature, generator)
+        return policy.sample(image, instructions, temperature, generator, **state_inputs(policy, states))
     with torch.inference_mode():
-        actions = policy.act(image, instructions)  # (R, K, A)
+        actions = policy.act(image, instructions, **state_inputs(policy, states))  # (R, K, A)
     tokens = policy.chunk_tokens(actions)
     return ActionSample(actions, tokens, torch.zeros(tokens.shape))
 

@@ -36,10 +36,12 @@ from tqdm import tqdm
 
 from gymnast.config import EnvConfig
 from gymnast.envs.factory import EnvFactory
-from gymnast.envs.kinds import REAL
+from gymnast.envs.kinds import REAL, EnvKind
+from gymnast.envs.metaworld import STATE_DIM
 from gymnast.data.keyframes import KeyframeConfig
 from gymnast.envs.starts import Start, StartSampler, evaluation_starts, own_instruction, scene_starts
 from gymnast.envs.tasks import parse_scenes, resolve_tasks
+from gymnast.policy.base import state_inputs
 from gymnast.policy.lerobot_policy import LeRobotPolicy
 from gymnast.reward.base import Reward, StepReward, check_fits
 from gymnast.rl import grpo
@@ -66,6 +68,19 @@ CRITIC = "critic"
 """The name of the learned critic's weights and optimizer state in a checkpoint (``critic.pt``)."""
 
 
+def check_policy_state(state_dim: int, env: EnvKind, run_spec: RLRun) -> None:
+    """Raises ValueError unless the env gives the robot state a policy of `state_dim` (D > 0) reads:
+    a simulator's is Meta-World's (hand xyz and gripper); a world model imagines none."""
+    if not state_dim:
+        return
+    if env.imagined:
+        raise ValueError(f"the policy {run_spec.policy} reads the robot's state (observation.state, {state_dim}-d), "
+                         f"but the world model {run_spec.wm} imagines images only; practise it with --env real or sim")
+    if state_dim != STATE_DIM:
+        raise ValueError(f"the policy {run_spec.policy} reads a {state_dim}-d robot state (observation.state), the "
+                         f"simulator gives {STATE_DIM} (hand xyz and gripper opening)")
+
+
 def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False, progress: bool = True) -> dict:
     """Trains (or resumes) an RL run in `out`; returns the summary (also RUN/summary.json)."""
     from gymnast.policy.load import load_policy, policy_env_config
@@ -87,6 +102,7 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
     world_model = load_world_model(run_spec.wm).to(device) if run_spec.wm else None
     if env.imagined:
         check_policy_views(cameras, world_model, run_spec.policy, run_spec.wm)
+    check_policy_state(getattr(policy, "state_dim", 0), env, run_spec)
     if levers and not isinstance(world_model, EnsembleWorldModel):
         raise ValueError(f"{levers[0]} needs a world-model ensemble to disagree (gymnast "
                          f"make-ensemble); {run_spec.wm} is a single world model")
@@ -411,15 +427,17 @@ def update_policy(policy, optimizer: torch.optim.Optimizer, batch: Rollouts, adv
         for micro in part.split(config.micro_batch):
             r, s = rows_r[micro], rows_s[micro]
             obs, texts, tokens = batch.observations[r, s], [instructions[i] for i in r.tolist()], batch.tokens[r, s]
+            # (m, D) the robot states a simulator gave the policy, for a policy that reads them
+            states = state_inputs(policy, None if batch.states is None else batch.states[r, s])
             entropy = None
             if config.entropy_coef > 0:
-                logp, entropy = policy.log_prob_and_entropy(obs, texts, tokens, config.temperature)
+                logp, entropy = policy.log_prob_and_entropy(obs, texts, tokens, config.temperature, **states)
             else:
-                logp = policy.log_prob(obs, texts, tokens, config.temperature)
+                logp = policy.log_prob(obs, texts, tokens, config.temperature, **states)
             ref_logp = None
             if reference is not None:
                 with torch.no_grad():
-                    ref_logp = reference.log_prob(obs, texts, tokens, config.temperature)
+                    ref_logp = reference.log_prob(obs, texts, tokens, config.temperature, **states)
             advantage = advantages[r, s] if advantages.ndim == 2 else advantages[r]
             old, advantage, mask = (to_device(x, logp.device) for x in (batch.logp[r, s], advantage,
                                                                           batch.token_mask[r, s]))
