@@ -382,6 +382,7 @@ def rl(
     reward: str | None = None,
     wm: Path | None = None,
     data: Path | None = None,
+    robot_state: Path | None = None,
     preset: GPUPreset = "full",
     resume: bool = False,
     config: Annotated[RLFlags, tyro.conf.arg(name="")] = RLFlags(),
@@ -395,6 +396,8 @@ def rl(
         reward: judge:RUN | vlm:MODEL@BASE_URL | verified | sim | sim-dense.
         wm: the world model run (needed by --env imagined and --reward verified).
         data: dataset whose scenes are the start states (default: the one the policy was trained on).
+        robot_state: with --env imagined, a state model (or ensemble) run stepped beside the world
+            model, whose imagined robot state is given to a policy that reads one (observation.state).
         preset: debug (seconds), demo (minutes), full or gpu (400 steps of 256 rollouts; docs/gpu.md).
         resume: continue the run in OUT from its last checkpoint, with the settings, policy, env,
             reward, world model and data saved there.
@@ -412,7 +415,8 @@ def rl(
     settings, inputs = resolve(
         "rl", out, resume, RL_PRESETS[preset], overrides=dataclasses.asdict(config), saved=saved,
         inputs={"policy": policy, "env": None if env is None else env_kind(env),
-                "reward": None if reward is None else RewardSpec.parse(reward), "wm": wm, "data": data},
+                "reward": None if reward is None else RewardSpec.parse(reward), "wm": wm, "data": data,
+                "robot_state": robot_state},
         required=("policy", "env", "reward"))
     run_spec = RLRun(**{name: str(value) if isinstance(value, Path) else value for name, value in inputs.items()})
     if not resume and config.tasks is None:  # the preset's tasks may not be in the data

@@ -11,7 +11,9 @@ from gymnast.policy.load import load_policy
 from gymnast.rl.train import LEROBOT_EXPORT
 from gymnast.utils.metrics import read_metrics
 
-from rl_helpers import JUDGE, WORLD_MODEL
+from rl_helpers import JUDGE, RESULTS, WORLD_MODEL
+
+STATE_ENSEMBLE = RESULTS / "world_model" / "state_v5"
 
 
 @pytest.fixture
@@ -81,7 +83,11 @@ def test_a_lerobot_policy_reading_the_robot_state_practises_for_real_and_is_refu
                           "task": texts})
     torch.testing.assert_close(postprocessor(lerobot.predict_action_chunk(batch))[:, :5], ours, atol=1e-5, rtol=0)
 
+    # In imagination the robot's state comes from a state model stepped beside the world model.
+    imagined = ["--env", "imagined", "--wm", str(WORLD_MODEL), "--reward", f"judge:{JUDGE}", "--horizon", "10"]
     with pytest.raises(SystemExit):
-        main([*common, "--env", "imagined", "--wm", str(WORLD_MODEL), "--reward", f"judge:{JUDGE}", "--out",
-              str(tmp_path / "imagined")])
-    assert "reads the robot's state (observation.state, 4-d), but the world model" in capsys.readouterr().err
+        main([*common, *imagined, "--out", str(tmp_path / "refused")])
+    assert "imagines images only; give a state model that imagines it with --robot-state RUN" in capsys.readouterr().err
+    main([*common, *imagined, "--robot-state", str(STATE_ENSEMBLE), "--no-real-eval", "--out", str(tmp_path / "imagined")])
+    update = next(m for m in read_metrics(tmp_path / "imagined") if "train/policy_calls" in m)
+    assert update["train/ratio"] == pytest.approx(1.0, abs=1e-4)  # each call re-scored with its imagined state

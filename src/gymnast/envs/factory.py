@@ -33,12 +33,14 @@ class EnvFactory:
             disagreement exceeds this (`BatchedImaginedEnv`); None never stops.
         batch: rollouts per evaluation batch (`gymnast.rl.evaluate.evaluate_in_env`) until `train`
             sets it to the training batch. One runs a single episode at a time, in this process.
+        robot_state: the imagined env's robot state beside its frames (`BatchedImaginedEnv`), for
+            a policy that reads one; None imagines none.
     """
 
     def __init__(self, kind: EnvKind, chunk_size: int, config: EnvConfig, gap: str, workers: int, world_model=None,
-                 stop_above: float | None = None, runner: str = "local", batch: int = 1) -> None:
+                 stop_above: float | None = None, runner: str = "local", batch: int = 1, robot_state=None) -> None:
         self.kind, self.chunk_size, self.config, self.gap, self.workers = kind, chunk_size, config, gap, workers
-        self.world_model, self.stop_above, self.runner = world_model, stop_above, runner
+        self.world_model, self.stop_above, self.runner, self.robot_state = world_model, stop_above, runner, robot_state
         self.batch = batch
         self._envs: dict[tuple[str, int], VectorEnv] = {}
 
@@ -52,7 +54,7 @@ class EnvFactory:
         if key not in self._envs:
             if kind.imagined:
                 self._envs[key] = BatchedImaginedEnv(self.world_model, num_envs, self.chunk_size, self.config.horizon,
-                                                     self.stop_above)
+                                                     self.stop_above, self.robot_state)
             else:
                 gap = "none" if kind.real_interactions else self.gap
                 self._envs[key] = SimVectorEnv(num_envs, self.chunk_size, self.config, gap=gap, workers=self.workers,

@@ -18,6 +18,9 @@ where the frames come from. What differs, and why:
 - `BatchedImaginedEnv` steps B rollouts in one world-model call (where the speed is). It never
   autoresets: after truncation `step` raises until `reset`, because new rollouts need new real
   start frames, which only the RL loop has.
+- A batched env given a ``robot_state`` (`gymnast.world_model.robot_state.ImaginedRobotState`:
+  a state model stepped under the same actions from each start's recorded state) also reports
+  ``obs["state"]`` (B, D), the imagined robot state a policy that reads one is given.
 - A world model that says how much to trust each frame (an ensemble's `disagreement`, (B, k) per
   step) has it reported in ``info["disagreement"]``; a single model reports none. The batched env
   can stop a rollout where it exceeds a threshold (``stop_above``): the rollout is truncated
@@ -244,6 +247,17 @@ class ImaginedEnv(gym.Env):
         return self._sim.video()[0]
 
 
+class RobotState(Protocol):
+    """The robot's state beside the imagined frames (`gymnast.world_model.robot_state.ImaginedRobotState`)."""
+
+    dim: int
+    """D, the robot state's dimensions."""
+
+    def start(self, states: np.ndarray, last_actions: np.ndarray, instructions: Sequence[str]) -> np.ndarray: ...
+
+    def step(self, actions: np.ndarray) -> np.ndarray: ...
+
+
 class BatchedImaginedEnv(VectorEnv):
     """B imagined rollouts stepped together in one world-model call; no autoreset.
 
@@ -260,16 +274,22 @@ class BatchedImaginedEnv(VectorEnv):
             `video`), as a finished simulator episode does. ``infos`` then also hold ``executed``
             (B,) actions each rollout executed in the step and ``stopped`` (B,) bool so far.
             Needs a world model that reports disagreement (RuntimeError at `step` otherwise).
+        robot_state: if given, observations also hold ``"state"`` (B, D) float32, the robot state
+            it imagines under the same actions; reset then needs each start's recorded state
+            (``options["states"]``) and the actions that led there (``options["prefixes"]``).
     """
 
     metadata = {"autoreset_mode": AutoresetMode.DISABLED, "render_modes": [], "render_fps": CONTROL_FPS}
 
     def __init__(self, model: WorldModel, num_envs: int, chunk_size: int = 5, horizon: int = 150,
-                 stop_above: float | None = None) -> None:
+                 stop_above: float | None = None, robot_state: RobotState | None = None) -> None:
         self._sim = _Imagination(model, chunk_size, horizon)
-        self.num_envs, self.stop_above = num_envs, stop_above
+        self.num_envs, self.stop_above, self.robot_state = num_envs, stop_above, robot_state
         self._stopped = np.zeros(num_envs, dtype=bool)
         self.single_observation_space, self.single_action_space = _spaces(model, chunk_size)
+        if robot_state is not None:
+            self.single_observation_space = Dict({**self.single_observation_space.spaces, "state": Box(
+                -np.inf, np.inf, (robot_state.dim,), np.float32)})
         self.observation_space = batch_space(self.single_observation_space, num_envs)
         self.action_space = batch_space(self.single_action_space, num_envs)
         self._instructions = np.array([""] * num_envs, dtype=object)
@@ -289,7 +309,22 @@ class BatchedImaginedEnv(VectorEnv):
         self._instructions = np.array(instructions, dtype=object)
         self._stopped = np.zeros(self.num_envs, dtype=bool)
         frames = self._sim.start(context, seed=int(self.np_random.integers(2**63)))
-        return {"image": frames}, self._info()
+        obs = {"image": frames}
+        if self.robot_state is not None:
+            obs["state"] = self.robot_state.start(*self._recorded_states(options), instructions)
+        return obs, self._info()
+
+    def _recorded_states(self, options: dict[str, Any]) -> tuple[np.ndarray, np.ndarray]:
+        """(B, S) each start's recorded state and (B, A) the last action that led there (zeros at
+        a first frame), from reset ``options``; ValueError naming what is missing."""
+        states, prefixes = options.get("states"), options.get("prefixes")
+        if states is None or len(states) != self.num_envs or any(np.size(state) == 0 for state in states):
+            raise ValueError(f"an imagined robot state starts from each start's recorded state: reset(options="
+                             f"{{\"states\": {self.num_envs} (S,) arrays, ...}}) from starts that carry their state")
+        action_dim = self.single_action_space.shape[-1]
+        last = [np.asarray(p, np.float32)[-1] if p is not None and len(p) else np.zeros(action_dim, np.float32)
+                for p in (prefixes if prefixes is not None else [None] * self.num_envs)]
+        return np.stack([np.asarray(state, np.float32) for state in states]), np.stack(last)
 
     def step(self, actions):
         """Imagines one chunk per rollout; rewards 0 and terminations False (a judge scores videos)."""
@@ -306,7 +341,10 @@ class BatchedImaginedEnv(VectorEnv):
         # model on a GPU): readers copy what they change, as the RL rollout's concatenation does.
         infos = {**self._info(), "frames": frames, **extra}
         zeros = np.zeros(self.num_envs)
-        return {"image": frames[:, -1].copy()}, zeros, zeros.astype(bool), ended, infos
+        obs = {"image": frames[:, -1].copy()}
+        if self.robot_state is not None:
+            obs["state"] = self.robot_state.step(actions[:, : frames.shape[1]])  # the actions imagined
+        return obs, zeros, zeros.astype(bool), ended, infos
 
     def _stop(self, frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Stops rollouts before their first frame over `stop_above`; returns the step's (B, k, H, W, 3)

@@ -59,6 +59,7 @@ def start_options(starts: Sequence[Start]) -> dict:
         "tasks": [start.task for start in starts],
         "seeds": [start.seed for start in starts],
         "prefixes": [start.prefix for start in starts],
+        "states": [start.state for start in starts],  # recorded where the start carries one
     }
 
 

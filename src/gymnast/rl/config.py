@@ -207,18 +207,20 @@ RL_PRESETS: dict[str, RLConfig] = {
 @dataclass(frozen=True)
 class RLRun:
     """What one run trains with: the policy's run, the env and the reward (parsed), and the world
-    model's and dataset's runs."""
+    model's and dataset's runs (and the state model that imagines the robot's state beside the
+    world model, for a policy that reads one)."""
 
     policy: str
     env: EnvKind
     reward: RewardSpec
     wm: str | None = None
     data: str | None = None
+    robot_state: str | None = None
 
     def to_json(self) -> dict[str, Any]:
         """The run as RUN/config.json keeps it: the env and the reward as the command line names them."""
         return {"policy": self.policy, "env": self.env.name, "reward": str(self.reward), "wm": self.wm,
-                "data": self.data}
+                "data": self.data, "robot_state": self.robot_state}
 
     @classmethod
     def from_json(cls, saved: dict[str, Any]) -> RLRun:

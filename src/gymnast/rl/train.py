@@ -68,14 +68,29 @@ CRITIC = "critic"
 """The name of the learned critic's weights and optimizer state in a checkpoint (``critic.pt``)."""
 
 
-def check_policy_state(state_dim: int, env: EnvKind, run_spec: RLRun) -> None:
-    """Raises ValueError unless the env gives the robot state a policy of `state_dim` (D > 0) reads:
-    a simulator's is Meta-World's (hand xyz and gripper); a world model imagines none."""
+def robot_state_for(state_dim: int, env: EnvKind, run_spec: RLRun):
+    """The imagined robot state for a policy of `state_dim` (D > 0) in imagination
+    (`gymnast.world_model.robot_state.ImaginedRobotState` of ``--robot-state``), or None where the
+    env gives its own (a simulator's is Meta-World's hand xyz and gripper) or the policy reads none.
+
+    Raises:
+        ValueError: a state the env cannot give (the message says what to pass).
+    """
+    from gymnast.world_model.robot_state import ImaginedRobotState
+    from gymnast.world_model.state_model import load_state_models
+
+    if run_spec.robot_state is not None and not (env.imagined and state_dim):
+        raise ValueError(f"--robot-state imagines the robot's state for a policy that reads one, in imagination; "
+                         f"the policy {run_spec.policy} reads {state_dim or 'no'} state dimensions and --env {env} "
+                         f"is {'imagined' if env.imagined else 'not imagined'}")
     if not state_dim:
-        return
+        return None
     if env.imagined:
-        raise ValueError(f"the policy {run_spec.policy} reads the robot's state (observation.state, {state_dim}-d), "
-                         f"but the world model {run_spec.wm} imagines images only; practise it with --env real or sim")
+        if run_spec.robot_state is None:
+            raise ValueError(f"the policy {run_spec.policy} reads the robot's state (observation.state, {state_dim}-d), "
+                             f"but the world model {run_spec.wm} imagines images only; give a state model that "
+                             "imagines it with --robot-state RUN (gymnast train-state), or practise with --env real or sim")
+        return ImaginedRobotState(load_state_models(run_spec.robot_state), state_dim)
     if state_dim != STATE_DIM:
         raise ValueError(f"the policy {run_spec.policy} reads a {state_dim}-d robot state (observation.state), the "
                          f"simulator gives {STATE_DIM} (hand xyz and gripper opening)")
@@ -102,7 +117,7 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
     world_model = load_world_model(run_spec.wm).to(device) if run_spec.wm else None
     if env.imagined:
         check_policy_views(cameras, world_model, run_spec.policy, run_spec.wm)
-    check_policy_state(getattr(policy, "state_dim", 0), env, run_spec)
+    robot_state = robot_state_for(getattr(policy, "state_dim", 0), env, run_spec)
     if levers and not isinstance(world_model, EnsembleWorldModel):
         raise ValueError(f"{levers[0]} needs a world-model ensemble to disagree (gymnast "
                          f"make-ensemble); {run_spec.wm} is a single world model")
@@ -140,11 +155,13 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
     # each process keeps up to twice its episodes' scenes built, tens of MB each (`SimVectorEnv`).
     batch = min(config.starts_per_step * config.group_size, 32 * config.workers)
     envs = EnvFactory(env, policy.chunk_size, env_config, config.gap, config.workers, world_model,
-                      stop_above=config.disagreement_stop or None, runner=config.runner, batch=batch)
+                      stop_above=config.disagreement_stop or None, runner=config.runner, batch=batch,
+                      robot_state=robot_state)
     # Segments from keyframes are shorter than the task's episodes, which evaluation runs whole.
     eval_envs = envs if config.evaluation_horizon == config.horizon else EnvFactory(
         env, policy.chunk_size, dataclasses.replace(env_config, horizon=config.evaluation_horizon), config.gap,
-        config.workers, world_model, stop_above=config.disagreement_stop or None, runner=config.runner, batch=batch)
+        config.workers, world_model, stop_above=config.disagreement_stop or None, runner=config.runner, batch=batch,
+        robot_state=robot_state)
     resolved = {"rl": dataclasses.asdict(config), "run": run_spec.to_json(), "model": policy.spec(),
                 "data": str(data) if data else None, "frames": frames}
 
