@@ -117,7 +117,7 @@ def test_a_closed_loop_rollout_stepped_by_the_engine_equals_the_open_loop_rollou
     chunks = iter([plan[:, 0:3], plan[:, 3:6], np.concatenate([plan[:, 6:], np.zeros((2, 2, 4), np.float32)], 1)])
     seen = []
 
-    def actor(images: np.ndarray, instructions: list[str]) -> np.ndarray:
+    def actor(images: np.ndarray, instructions: list[str], states: None) -> np.ndarray:
         seen.append(images.shape)
         return next(chunks)
 
