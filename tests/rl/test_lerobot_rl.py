@@ -55,8 +55,8 @@ def test_a_grpo_step_in_imagination_trains_the_lerobot_policy_and_writes_it_back
 
 
 @pytest.mark.slow
-def test_a_lerobot_policy_reading_the_robot_state_practises_for_real_and_in_imagination_with_a_state_model(rl_dataset, tmp_path,
-                                                                                                   capsys):
+def test_a_lerobot_policy_reading_the_robot_state_practises_for_real_and_in_imagination_with_a_state_model(
+        rl_dataset, tmp_path, capsys):
     from gymnast.policy.lerobot_init import new_act
 
     folder = new_act(tmp_path / "act", chunk=5, predicted=8, action_std=0.5, state_dim=4)  # hand xyz and gripper
