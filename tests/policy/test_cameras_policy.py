@@ -67,6 +67,17 @@ def test_a_policy_acts_on_its_own_cameras_and_a_conflicting_camera_is_refused(tw
         policy_env_config(EnvConfig(cameras=("gripper",)), str(two))
 
 
+def test_a_policy_is_shown_the_image_size_it_was_trained_on(two_camera_demos, tmp_path):
+    run = tmp_path / "run"  # the debug dataset's frames are 32 px, so the policy sees 32 px
+    main(["sft", "--data", str(two_camera_demos), "--out", str(run), "--preset", "debug", "--camera", "front"])
+    assert policy_env_config(EnvConfig(), str(run)).image_size == 32
+    assert policy_env_config(EnvConfig(), load_policy(run)).image_size == 32
+    assert policy_env_config(EnvConfig(image_size=32), str(run)).image_size == 32
+    with pytest.raises(ValueError, match="renders 48px images, but the policy .* was trained on 32px"):
+        policy_env_config(EnvConfig(image_size=48), str(run))
+    assert policy_env_config(EnvConfig(image_size=48), "expert").image_size == 48
+
+
 def test_a_one_camera_policys_rollouts_are_recorded_with_more_cameras_than_it_sees(two_camera_demos, tmp_path):
     from gymnast.data.lerobot import EpisodeDataset
 

@@ -61,41 +61,53 @@ def build_policy(spec: dict) -> nn.Module:
 
 
 def policy_env_config(env: EnvConfig, policy: str | Path | object) -> EnvConfig:
-    """`env` rendering the views the policy acts on (`PolicyArchitecture.env_cameras`): a policy of
-    several cameras is shown them side by side, read from its run's saved spec without building it;
-    the scripted expert and one-camera policies (LeRobot's included) get `env` as it is, and so does
-    an env that renders the policy's cameras and more (the actor picks the policy's,
-    `gymnast.eval.actors.PolicyActor.seen`).
+    """`env` rendering the views the policy acts on (`PolicyArchitecture.env_cameras`) at the size
+    it was trained on: a policy of several cameras is shown them side by side, and a policy
+    trained at another image size than the default is shown that size, both read from its run's
+    saved spec without building it; the scripted expert and LeRobot policies (which resize each
+    view to their own features' shapes) keep `env`'s size, and an env that renders the policy's
+    cameras and more is kept (the actor picks the policy's, `gymnast.eval.actors.PolicyActor.seen`).
 
     Raises:
-        ValueError: `env` names cameras other than the default (front) that lack some of the policy's.
+        ValueError: `env` names cameras other than the default (front) that lack some of the
+            policy's, or an image size other than the default that is not the policy's.
     """
     if not isinstance(policy, (str, Path)):  # a policy object
-        cameras = getattr(getattr(policy, "config", None), "env_cameras", None) or env.cameras
+        config = getattr(policy, "config", None)
+        cameras = getattr(config, "env_cameras", None) or env.cameras
+        size = getattr(config, "image_size", None) if isinstance(config, PolicyArchitecture) else None
     elif is_lerobot(policy) or Path(policy).is_dir():
-        cameras = saved_env_cameras(policy)
+        cameras, size = saved_env_view(policy)
     else:  # the scripted expert
-        cameras = env.cameras
+        cameras, size = env.cameras, None
+    default = EnvConfig()
+    if size is not None and size != env.image_size:
+        if env.image_size != default.image_size:
+            raise ValueError(f"the environment renders {env.image_size}px images, but the policy {policy} was trained "
+                             f"on {size}px; leave --env.image-size out to render the policy's own")
+        env = dataclasses.replace(env, image_size=size)
     if set(cameras) <= set(env.cameras):
         return env
-    if env.cameras != EnvConfig().cameras:
+    if env.cameras != default.cameras:
         raise ValueError(f"the environment renders cameras {','.join(env.cameras)}, but the policy {policy} acts on "
                          f"{','.join(cameras)}; leave --cameras out to render the policy's own")
     return dataclasses.replace(env, cameras=cameras)
 
 
-def saved_env_cameras(policy: str | Path) -> tuple[str, ...]:
-    """The simulator's views a saved policy acts on (its architecture's ``env_cameras``), read
-    from a run's spec or a LeRobot folder's config.json without building it (a folder without
-    one gets the front view here; loading it says what is missing)."""
+def saved_env_view(policy: str | Path) -> tuple[tuple[str, ...], int | None]:
+    """The simulator's views a saved policy acts on (its architecture's ``env_cameras``) and the
+    image size it was trained on (None for a LeRobot policy, which resizes each view itself), read
+    from a run's spec or a LeRobot folder's config.json without building it (a folder without one
+    gets the front view here; loading it says what is missing)."""
     from gymnast.policy.lerobot_features import folder_cameras
 
     if is_lerobot(policy):
         config = Path(str(policy).removeprefix(LEROBOT)) / "config.json"
-        return simulator_cameras(folder_cameras(json.loads(config.read_text())) if config.is_file() else ())
+        return simulator_cameras(folder_cameras(json.loads(config.read_text())) if config.is_file() else ()), None
     spec = json.loads((resolve_checkpoint(Path(policy)) / "config.json").read_text()).get("model", {})
     if "lerobot" in spec:
-        return simulator_cameras(folder_cameras(spec["lerobot"]["files"]["config.json"]))
+        return simulator_cameras(folder_cameras(spec["lerobot"]["files"]["config.json"])), None
     family = next((spec[name] for name in POLICY_FAMILIES if name in spec), {})
     names = {field.name for field in dataclasses.fields(PolicyArchitecture)}
-    return PolicyArchitecture(**{key: value for key, value in family.items() if key in names}).env_cameras
+    architecture = PolicyArchitecture(**{key: value for key, value in family.items() if key in names})
+    return architecture.env_cameras, architecture.image_size
