@@ -94,6 +94,7 @@ def sft(
     camera: str | None = None,
     cameras: CameraNames = (),
     policy_type: Literal["tokens", "flow"] | None = None,
+    robot_state: bool | None = None,
     fit: Fit | None = None,
     device: str | None = None,
     keys: Annotated[KeyFlags, tyro.conf.arg(name="")] = KeyFlags(),
@@ -116,6 +117,8 @@ def sft(
             front,gripper); saved with the policy, so eval and rl render the same views. Default: --camera alone.
         policy_type: the policy family: tokens (the tokenized VLA, the default) or flow (the
             flow-matching VLA of VLA-RFT). Saved with the checkpoint; rl and eval read it there.
+        robot_state: True: the policy also reads the robot's state (the dataset's observation.state,
+            e.g. hand xyz and gripper); eval and rl give it the simulator's, imagination a state model's.
         fit: how frames that are not the model's square size are fitted: resize (squash the whole
             frame) or crop (the central square); saved with the run.
         device: auto (CUDA when torch sees a GPU, else the CPU), cpu, cuda or cuda:N; --resume may change it.
@@ -128,7 +131,7 @@ def sft(
         "sft", out, resume, SFT_PRESETS[preset], inputs={"data": data}, required=("data",),
         overrides={"demos_per_task": demos_per_task, "steps": steps, "tasks": tasks, "seed": seed,
                    "vla.vision": vision, "camera": camera, "cameras": cameras or None, "policy": policy_type,
-                   "fit": fit, "device": device,
+                   "robot_state": robot_state, "fit": fit, "device": device,
                    **key_overrides(keys)},
         saved=lambda: (saved_sft_config(out), saved_inputs(out, "data")))
     checkpoint = train_sft(inputs["data"], out, config, resume=resume)

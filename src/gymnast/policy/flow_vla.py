@@ -82,7 +82,8 @@ class FlowVLA(ObservationConditioned):
     """
 
     def __init__(self, config: FlowVLAConfig, pretrained_vision: bool = True) -> None:
-        super().__init__(config.vision, config.width, config.image_size, pretrained_vision, len(config.cameras))
+        super().__init__(config.vision, config.width, config.image_size, pretrained_vision, len(config.cameras),
+                         config.state_dim)
         self.config = config
         self.chunk_size, self.action_dim = config.chunk_size, config.action_dim
         width = config.width
@@ -108,19 +109,21 @@ class FlowVLA(ObservationConditioned):
         sigma = bounded_sigma(self.sigma(features), self.config.sigma_min, self.config.sigma_max)
         return self.velocity(features), sigma
 
-    def observe(self, obs: torch.Tensor, instructions: Sequence[str], bf16_vision: bool = False) -> torch.Tensor:
-        """(B, 1 + V*P, D) the memory every integration step of a chunk attends to."""
-        return self.memory(obs, self.embed_instructions(instructions, len(obs)), bf16_vision)
+    def observe(self, obs: torch.Tensor, instructions: Sequence[str], bf16_vision: bool = False,
+                states: torch.Tensor | None = None) -> torch.Tensor:
+        """(B, 1 + V*P, D) the memory every integration step of a chunk attends to (one more token
+        for a policy that reads the robot's (B, S) states)."""
+        return self.memory(obs, self.embed_instructions(instructions, len(obs)), bf16_vision, states)
 
     # -- the Policy protocol ------------------------------------------------------------------------
 
     @torch.no_grad()
     def sample(self, obs: torch.Tensor, instructions: Sequence[str], temperature: float = 1.0,
-               generator: torch.Generator | None = None) -> ActionSample:
+               generator: torch.Generator | None = None, states: torch.Tensor | None = None) -> ActionSample:
         """A chunk from the stochastic sampler; ``tokens`` holds its path (B, (S + 1) * N)."""
         if temperature <= 0:
             raise ValueError(f"temperature must be positive, got {temperature}; use act() for the deterministic sampler")
-        memory = self.observe(obs, instructions)
+        memory = self.observe(obs, instructions, states=states)
         start = self._noise((len(obs), self.chunk_size, self.action_dim), generator, memory)
         path = sample_path(self._field_at(memory), start, self.config.steps, temperature,
                            lambda shape: self._noise(shape, generator, memory))  # (B, S + 1, K, A)
@@ -128,22 +131,23 @@ class FlowVLA(ObservationConditioned):
                             logp=self._path_log_prob(memory, path, temperature)[0].cpu())
 
     def log_prob(self, obs: torch.Tensor, instructions: Sequence[str], tokens: torch.Tensor,
-                 temperature: float = 1.0) -> torch.Tensor:
+                 temperature: float = 1.0, states: torch.Tensor | None = None) -> torch.Tensor:
         """(B, N) log-density of each action element's path, summed over the steps; differentiable."""
-        memory = self.observe(obs, instructions)
+        memory = self.observe(obs, instructions, states=states)
         return self._path_log_prob(memory, self._path(tokens).to(memory.device), temperature)[0]
 
     def log_prob_and_entropy(self, obs: torch.Tensor, instructions: Sequence[str], tokens: torch.Tensor,
-                             temperature: float = 1.0) -> tuple[torch.Tensor, torch.Tensor]:
+                             temperature: float = 1.0, states: torch.Tensor | None = None
+                             ) -> tuple[torch.Tensor, torch.Tensor]:
         """`log_prob`, and the (B, N) entropy of each element's transitions along the given path."""
-        memory = self.observe(obs, instructions)
+        memory = self.observe(obs, instructions, states=states)
         return self._path_log_prob(memory, self._path(tokens).to(memory.device), temperature)
 
     @torch.no_grad()
-    def act(self, obs: torch.Tensor, instructions: Sequence[str]) -> torch.Tensor:
+    def act(self, obs: torch.Tensor, instructions: Sequence[str], states: torch.Tensor | None = None) -> torch.Tensor:
         """(B, K, A) the deterministic sampler's chunk, integrated from the zero noise (the mode of
         the starting distribution), so evaluation is reproducible without a generator."""
-        memory = self.observe(obs, instructions)
+        memory = self.observe(obs, instructions, states=states)
         start = torch.zeros(len(obs), self.chunk_size, self.action_dim, device=memory.device)
         return self._to_actions(integrate(self._field_at(memory), start, self.config.steps))
 
@@ -157,13 +161,15 @@ class FlowVLA(ObservationConditioned):
     # -- supervised learning ------------------------------------------------------------------------
 
     def imitation_loss(self, images: torch.Tensor, texts: Sequence[str], chunks: torch.Tensor, valid: torch.Tensor,
-                       bf16: bool = False, generator: torch.Generator | None = None) -> tuple[torch.Tensor, dict]:
+                       bf16: bool = False, generator: torch.Generator | None = None,
+                       states: torch.Tensor | None = None) -> tuple[torch.Tensor, dict]:
         """SFT's loss on expert chunks: `flow_loss`, and metrics."""
-        loss = self.flow_loss(images, texts, chunks, valid, generator, bf16)
+        loss = self.flow_loss(images, texts, chunks, valid, generator, bf16, states)
         return loss, {"train/loss": loss.item()}
 
     def flow_loss(self, obs: torch.Tensor, instructions: Sequence[str], actions: torch.Tensor, valid: torch.Tensor,
-                  generator: torch.Generator | None = None, bf16_vision: bool = False) -> torch.Tensor:
+                  generator: torch.Generator | None = None, bf16_vision: bool = False,
+                  states: torch.Tensor | None = None) -> torch.Tensor:
         """The flow-matching loss on expert chunks (SFT, and VLA-RFT's auxiliary loss in RL).
 
         A flow time t ~ U(0, 1) and noise x_0 per chunk; the network's velocity at
@@ -174,8 +180,9 @@ class FlowVLA(ObservationConditioned):
         Args:
             actions: (B, K, A) expert chunks in environment units.
             valid: (B, K) bool, False for the padding after an episode's end.
+            states: (B, S) the robot's states, for a policy that reads them.
         """
-        memory = self.observe(obs, instructions, bf16_vision)
+        memory = self.observe(obs, instructions, bf16_vision, states)
         # Past an episode's end the chunk holds its last valid action: the actions attend to each
         # other, so whatever stood there would leak into the valid ones' velocities.
         steps = torch.arange(valid.shape[1], device=valid.device)

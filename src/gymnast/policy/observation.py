@@ -3,7 +3,10 @@ instruction.
 
 Each camera's image becomes a grid of P vision tokens (`gymnast.policy.vision`) with learned
 positions, modulated by the instruction's MiniLM embedding (FiLM), and one more token carries the
-instruction itself: the (B, 1 + V*P, D) memory an action decoder attends to. The tokenized VLA and
+instruction itself: the (B, 1 + V*P, D) memory an action decoder attends to. A policy that reads
+the robot's state (hand position, gripper: `PolicyArchitecture.state_dim`) has one more token,
+the standardised state through a small MLP, right after the instruction's: a hand 5 cm from the
+goal and one at it can look alike in a 96 px picture, but not in the state. The tokenized VLA and
 the flow-matching VLA share it, so they differ only in how they turn it into actions.
 
 Several cameras arrive side by side in one (B, H, V*W, 3) image, as the env and the datasets'
@@ -16,7 +19,8 @@ The encoder runs where the policy's parameters are: images and instructions come
 and are copied there, and what the policies hand back to the host (actions, tokens,
 log-probabilities of samples) is on the host again.
 
-Legend: B batch, H/W one view's image size, V views, P vision tokens per view, D width.
+Legend: B batch, H/W one view's image size, V views, P vision tokens per view, D width, S robot
+state dimensions.
 """
 
 from __future__ import annotations
@@ -56,11 +60,16 @@ class PolicyArchitecture:
     cameras: tuple[str, ...] = ("front",)
     """The cameras the policy sees, side by side in its input image, the primary first (their names
     in the dataset it was trained on)."""
+    state_dim: int = 0
+    """Robot state dimensions S the policy reads beside its images (the dataset's
+    ``observation.state``, the simulator's ``obs["state"]``); 0: none (`gymnast sft --robot-state`)."""
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "cameras", tuple(self.cameras))  # a list when read back from JSON
         if not self.cameras or len(set(self.cameras)) < len(self.cameras):
             raise ValueError(f"a policy's cameras must be one or more distinct names, got {list(self.cameras)}")
+        if self.state_dim < 0:
+            raise ValueError(f"a policy's state_dim must be 0 (no state) or more, got {self.state_dim}")
 
     @property
     def env_cameras(self) -> tuple[str, ...]:
@@ -92,15 +101,21 @@ class ObservationConditioned(nn.Module):
         image_size: side of each view's square image (a multiple of 16).
         pretrained_vision: load ImageNet weights where the encoder has them.
         views: cameras V, side by side in the input image.
+        state_dim: robot state dimensions S read as one more token; 0 reads none
+            (`gymnast.policy.base.Policy.state_dim`).
     """
 
-    state_dim = 0
-    """The embedded policies read no robot state (`gymnast.policy.base.Policy.state_dim`)."""
-
-    def __init__(self, vision: str, width: int, image_size: int, pretrained_vision: bool, views: int = 1) -> None:
+    def __init__(self, vision: str, width: int, image_size: int, pretrained_vision: bool, views: int = 1,
+                 state_dim: int = 0) -> None:
         super().__init__()
         grid = image_size // 16
-        self.views = views
+        self.views, self.state_dim = views, state_dim
+        if state_dim:
+            # Standardised by the demonstrations' statistics (`standardise_states`, saved with the
+            # weights): raw positions differ by centimetres, i.e. by 0.01, which a fresh layer barely sees.
+            self.register_buffer("state_mean", torch.zeros(state_dim))
+            self.register_buffer("state_std", torch.ones(state_dim))
+            self.state_in = nn.Sequential(nn.Linear(state_dim, width), nn.SiLU(), nn.Linear(width, width))
         self.observed_shape = (image_size, views * image_size, 3)
         self.vision = make_vision_encoder(vision, width, pretrained=pretrained_vision)
         self.vision_position = nn.Parameter(torch.zeros(1, views * grid * grid, width))
@@ -114,8 +129,18 @@ class ObservationConditioned(nn.Module):
             raise ValueError(f"{batch} images but {len(instructions)} instructions")
         return to_device(self.text(instructions), self.vision_position.device).to(self.vision_position.dtype)
 
-    def memory(self, images: torch.Tensor, text: torch.Tensor, bf16_vision: bool = False) -> torch.Tensor:
-        """(B, H, V*W, 3) uint8 images and (B, 384) instruction embeddings -> (B, 1 + V*P, D).
+    def standardise_states(self, states: torch.Tensor) -> None:
+        """Sets the state token's standardisation from (M, S) states (the demonstrations')."""
+        if not self.state_dim:
+            raise ValueError("this policy reads no robot state (state_dim 0)")
+        states = self._checked_states(states, len(states))
+        self.state_mean.copy_(states.mean(0))
+        self.state_std.copy_(states.std(0).clamp(min=1e-3))  # a constant dimension (a fixed gripper) stays finite
+
+    def memory(self, images: torch.Tensor, text: torch.Tensor, bf16_vision: bool = False,
+               states: torch.Tensor | None = None) -> torch.Tensor:
+        """(B, H, V*W, 3) uint8 images, (B, 384) instruction embeddings and, for a policy that reads
+        them, (B, S) robot states -> (B, 1 + V*P, D), or (B, 2 + V*P, D) with the state's token.
 
         `bf16_vision` runs the image encoder under bfloat16 autocast where the device computes
         bfloat16 natively: about 1.4x faster for the convolutions on such a CPU, while the small
@@ -129,4 +154,17 @@ class ObservationConditioned(nn.Module):
         tokens = tokens.float().reshape(len(images), -1, tokens.shape[-1]) + self.vision_position  # (B, V*P, D)
         scale, shift = self.text_film(text).unsqueeze(1).chunk(2, dim=-1)
         tokens = tokens * (1 + scale) + shift
-        return torch.cat([self.text_token(text).unsqueeze(1), tokens], dim=1)  # (B, 1 + V*P, D)
+        first = [self.text_token(text).unsqueeze(1)]
+        if self.state_dim:
+            states = self._checked_states(states, len(images))
+            first.append(self.state_in((states - self.state_mean) / self.state_std).unsqueeze(1))
+        return torch.cat([*first, tokens], dim=1)  # (B, 1 + V*P, D), or (B, 2 + V*P, D)
+
+    def _checked_states(self, states: torch.Tensor | None, batch: int) -> torch.Tensor:
+        """(B, S) float32 states on the policy's device, or a ValueError that says what was wrong."""
+        if states is None:
+            raise ValueError(f"this policy reads the robot's state ({self.state_dim} dimensions) and was given none: "
+                             f"pass states (B, {self.state_dim}), e.g. the simulator's obs['state']")
+        if tuple(states.shape) != (batch, self.state_dim):
+            raise ValueError(f"states must be ({batch}, {self.state_dim}), got {tuple(states.shape)}")
+        return to_device(states, self.vision_position.device).float()

@@ -27,6 +27,7 @@ from gymnast.data.frames import Fit, model_image_size
 from gymnast.data.lerobot import EpisodeDataset, FeatureKeys
 from gymnast.data.schema import EpisodeInfo
 from gymnast.policy.action_tokenizer import ActionTokenizer
+from gymnast.policy.base import state_inputs
 from gymnast.policy.flow_vla import FlowVLA, FlowVLAConfig
 from gymnast.policy.observation import shared_architecture
 from gymnast.policy.vla import EmbeddedVLA, VLAConfig
@@ -55,6 +56,10 @@ class SFTConfig:
     """Several cameras the policy sees side by side, the primary first (e.g. ``front,gripper``; each
     fitted to the square image alone); default: `camera` alone. Saved with the policy, so that
     evaluation and RL render the same views."""
+    robot_state: bool = False
+    """The policy also reads the robot's state (the dataset's states, e.g. hand xyz and gripper; its
+    dimensions are the dataset's), and is then given the simulator's ``obs["state"]`` wherever it
+    acts. Saved with the policy (`PolicyArchitecture.state_dim`)."""
     keys: FeatureKeys = FeatureKeys()
     """Which dataset features are the actions and the states (--action-key, --state-key); saved with the run."""
     fit: Fit = "resize"
@@ -209,11 +214,15 @@ def train_sft(data: Path, out: Path, config: SFTConfig, resume: bool = False, pr
                                                                  cameras=dataset.cameras))
     dataset = dataset.fitted(size, config.fit)
     demos = load_demos(dataset, select_demos(dataset, config.demos_per_task, config.tasks), config.vla.chunk_size)
+    if config.robot_state and init is None:
+        config = dataclasses.replace(config, vla=dataclasses.replace(config.vla, state_dim=state_dim_of(data, demos)))
     logger.info("SFT on %d demonstrations (%d samples, %d instructions)%s", len(demos.episodes), len(demos.images),
                 len(demos.instructions), f" and {len(extra.images)} extra samples" if extra is not None else "")
     torch.manual_seed(config.seed)
     if init is None:
         model = build_sft_policy(config, stats.action_range())
+        if model.state_dim:
+            model.standardise_states(demos.states)
     with data_parallel(resolve_device(config.device)) as parallel:
         if parallel.world_size > 1 and config.policy == "flow":
             raise ValueError("sft --policy-type flow draws its noise per sample and does not train under torchrun yet; "
@@ -235,7 +244,7 @@ def _train(out: Path, config: SFTConfig, model: nn.Module, demos: DemoSet, extra
     draws the global batch and trains on its share; rank 0 writes the run."""
     pool, draw = _batch_pool(demos, extra, config.batch_size)
     share = parallel.share(config.batch_size)
-    loss_of = parallel.loss(model, lambda policy, *batch: policy.imitation_loss(*batch))
+    loss_of = parallel.loss(model, lambda policy, *batch, **states: policy.imitation_loss(*batch, **states))
     optimizer = torch.optim.AdamW(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
     schedule = torch.optim.lr_scheduler.LambdaLR(optimizer, warmup_cosine(config.warmup_steps, config.steps))
     sampler = torch.Generator().manual_seed(config.seed)
@@ -257,7 +266,8 @@ def _train(out: Path, config: SFTConfig, model: nn.Module, demos: DemoSet, extra
         batch = batch[share]
         texts = [pool.instructions[i] for i in pool.instruction[batch].tolist()]
         valid = pool.valid[batch]
-        loss, values = loss_of(images, texts, pool.chunks[batch], valid, config.bf16, sampler)
+        states = state_inputs(model, None if pool.states is None else pool.states[batch])
+        loss, values = loss_of(images, texts, pool.chunks[batch], valid, config.bf16, sampler, **states)
         # The loss is a mean over valid action steps, whose count differs between the processes' shares.
         count = valid.sum().item()
         loss, values = parallel.global_mean(loss, count), parallel.average(values, count)
@@ -273,6 +283,14 @@ def _train(out: Path, config: SFTConfig, model: nn.Module, demos: DemoSet, extra
             checkpoint = save_training(out, done, model, resolved, optimizer, schedule, sampler)
     parallel.barrier()  # the others return rank 0's last checkpoint once it is written
     return checkpoint or resolve_checkpoint(out)
+
+
+def state_dim_of(data: Path, demos: DemoSet) -> int:
+    """The robot state dimensions of the demonstrations, which a policy that reads the state learns from."""
+    if demos.states is None or demos.states.shape[1] == 0:
+        raise ValueError(f"{data} records no robot state (observation.state), so --robot-state has nothing to read; "
+                         f"name the dataset's state feature with --keys.state-key or leave --robot-state out")
+    return demos.states.shape[1]
 
 
 def build_sft_policy(config: SFTConfig, action_range: tuple[tuple[float, ...], tuple[float, ...]] | None = None) -> nn.Module:
@@ -305,9 +323,11 @@ def _batch_pool(demos: DemoSet, extra: DemoSet | None, batch_size: int):
                          f"the demonstrations {tuple(demos.images.shape[1:])} and {tuple(demos.chunks.shape[1:])}")
     instructions = list(dict.fromkeys(demos.instructions + extra.instructions))
     remap = torch.tensor([instructions.index(text) for text in extra.instructions], dtype=torch.long)
+    both_states = demos.states is not None and extra.states is not None
     pool = DemoSet(torch.cat([demos.images, extra.images]), torch.cat([demos.chunks, extra.chunks]),
                    torch.cat([demos.valid, extra.valid]), torch.cat([demos.instruction, remap[extra.instruction]]),
-                   instructions, demos.episodes + extra.episodes)
+                   instructions, demos.episodes + extra.episodes,
+                   torch.cat([demos.states, extra.states]) if both_states else None)
     first, offset = batch_size // 2, len(demos.images)
 
     def draw(generator: torch.Generator) -> torch.Tensor:

@@ -53,7 +53,8 @@ class EmbeddedVLA(ObservationConditioned):
                 f"tokenizer has {tokenizer.action_dim} dims x {tokenizer.bins} bins, "
                 f"config wants {config.action_dim} x {config.bins}"
             )
-        super().__init__(config.vision, config.width, config.image_size, pretrained_vision, len(config.cameras))
+        super().__init__(config.vision, config.width, config.image_size, pretrained_vision, len(config.cameras),
+                         config.state_dim)
         self.config, self.tokenizer = config, tokenizer
         self.chunk_size, self.action_dim = config.chunk_size, config.action_dim
         self.queries = nn.Parameter(torch.randn(1, config.num_tokens, config.width) * 0.02)
@@ -66,15 +67,18 @@ class EmbeddedVLA(ObservationConditioned):
 
     # -- the network -----------------------------------------------------------------------------
 
-    def forward(self, images: torch.Tensor, text: torch.Tensor, bf16_vision: bool = False) -> torch.Tensor:
-        """(B, H, W, 3) uint8 images (W: the views side by side) and (B, 384) instruction embeddings -> (B, N, V) logits."""
-        memory = self.memory(images, text, bf16_vision)  # (B, 1 + P, D)
+    def forward(self, images: torch.Tensor, text: torch.Tensor, bf16_vision: bool = False,
+                states: torch.Tensor | None = None) -> torch.Tensor:
+        """(B, H, W, 3) uint8 images (W: the views side by side), (B, 384) instruction embeddings and
+        the (B, S) robot states of a policy that reads them -> (B, N, V) logits."""
+        memory = self.memory(images, text, bf16_vision, states)  # (B, 1 + P, D), one more with a state
         queries = self.queries.expand(len(images), -1, -1)  # (B, N, D)
         return self.head(self.norm(self.decoder(queries, memory)))
 
-    def logits(self, obs: torch.Tensor, instructions: Sequence[str], bf16_vision: bool = False) -> torch.Tensor:
-        """(B, N, V) action-token logits for images and their instructions."""
-        return self(obs, self.embed_instructions(instructions, len(obs)), bf16_vision)
+    def logits(self, obs: torch.Tensor, instructions: Sequence[str], bf16_vision: bool = False,
+               states: torch.Tensor | None = None) -> torch.Tensor:
+        """(B, N, V) action-token logits for images and their instructions (and states)."""
+        return self(obs, self.embed_instructions(instructions, len(obs)), bf16_vision, states)
 
     # -- the Policy protocol ------------------------------------------------------------------------
 
@@ -85,31 +89,34 @@ class EmbeddedVLA(ObservationConditioned):
         instructions: Sequence[str],
         temperature: float = 1.0,
         generator: torch.Generator | None = None,
+        states: torch.Tensor | None = None,
     ) -> ActionSample:
         if temperature <= 0:
             raise ValueError(f"temperature must be positive, got {temperature}; use act() for greedy actions")
-        log_probs = torch.log_softmax(self.logits(obs, instructions).float() / temperature, dim=-1)  # (B, N, V)
+        log_probs = torch.log_softmax(self.logits(obs, instructions, states=states).float() / temperature, dim=-1)
         flat = log_probs.flatten(0, 1).exp()  # (B * N, V)
         tokens = self._draw(flat, generator).view(log_probs.shape[:2])  # (B, N)
         logp = log_probs.gather(-1, tokens.unsqueeze(-1)).squeeze(-1)
         return ActionSample(actions=self._decode(tokens), tokens=tokens.cpu(), logp=logp.cpu())
 
     def log_prob(
-        self, obs: torch.Tensor, instructions: Sequence[str], tokens: torch.Tensor, temperature: float = 1.0
+        self, obs: torch.Tensor, instructions: Sequence[str], tokens: torch.Tensor, temperature: float = 1.0,
+        states: torch.Tensor | None = None,
     ) -> torch.Tensor:
-        log_probs = torch.log_softmax(self.logits(obs, instructions).float() / temperature, dim=-1)
+        log_probs = torch.log_softmax(self.logits(obs, instructions, states=states).float() / temperature, dim=-1)
         return log_probs.gather(-1, tokens.to(log_probs.device).unsqueeze(-1)).squeeze(-1)  # (B, N)
 
     def log_prob_and_entropy(
-        self, obs: torch.Tensor, instructions: Sequence[str], tokens: torch.Tensor, temperature: float = 1.0
+        self, obs: torch.Tensor, instructions: Sequence[str], tokens: torch.Tensor, temperature: float = 1.0,
+        states: torch.Tensor | None = None,
     ) -> tuple[torch.Tensor, torch.Tensor]:
-        log_probs = torch.log_softmax(self.logits(obs, instructions).float() / temperature, dim=-1)  # (B, N, V)
+        log_probs = torch.log_softmax(self.logits(obs, instructions, states=states).float() / temperature, dim=-1)
         entropy = -(log_probs.exp() * log_probs).sum(-1)  # (B, N)
         return log_probs.gather(-1, tokens.to(log_probs.device).unsqueeze(-1)).squeeze(-1), entropy
 
     @torch.no_grad()
-    def act(self, obs: torch.Tensor, instructions: Sequence[str]) -> torch.Tensor:
-        return self._decode(self.logits(obs, instructions).argmax(-1))
+    def act(self, obs: torch.Tensor, instructions: Sequence[str], states: torch.Tensor | None = None) -> torch.Tensor:
+        return self._decode(self.logits(obs, instructions, states=states).argmax(-1))
 
     def _decode(self, tokens: torch.Tensor) -> torch.Tensor:
         """(B, N) tokens -> (B, K, A) actions on the host."""
@@ -128,10 +135,12 @@ class EmbeddedVLA(ObservationConditioned):
     # -- supervised learning ------------------------------------------------------------------------
 
     def imitation_loss(self, images: torch.Tensor, texts: Sequence[str], chunks: torch.Tensor, valid: torch.Tensor,
-                       bf16: bool = False, generator: torch.Generator | None = None) -> tuple[torch.Tensor, dict]:
-        """SFT's loss on expert chunks (B, K, A) with their (B, K) validity: the masked token
-        cross-entropy, and metrics. Nothing is drawn, so `generator` is unused."""
-        logits = self.logits(images, texts, bf16_vision=bf16)  # (B, N, V)
+                       bf16: bool = False, generator: torch.Generator | None = None,
+                       states: torch.Tensor | None = None) -> tuple[torch.Tensor, dict]:
+        """SFT's loss on expert chunks (B, K, A) with their (B, K) validity (and the (B, S) states
+        they were taken in, for a policy that reads them): the masked token cross-entropy, and
+        metrics. Nothing is drawn, so `generator` is unused."""
+        logits = self.logits(images, texts, bf16_vision=bf16, states=states)  # (B, N, V)
         targets = self.chunk_tokens(chunks).to(logits.device)  # (B, N)
         mask = valid.repeat_interleave(self.action_dim, dim=1).float().to(logits.device)  # (B, N): chunk-major like the tokens
         per_token = F.cross_entropy(logits.transpose(1, 2), targets, reduction="none")  # (B, N)
