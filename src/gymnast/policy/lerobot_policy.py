@@ -62,7 +62,7 @@ class LeRobotArchitecture:
     image_size: int
     chunk_size: int
     action_dim: int
-    cameras: tuple[str, ...] = ("image",)
+    cameras: tuple[str, ...]
     """The cameras the policy reads side by side (`LeRobotFeatures.cameras`)."""
 
     @property
