@@ -521,6 +521,7 @@ def imagination(
     runner: str = "local",
     videos: int = 4,
     seed: int = 0,
+    robot_state: Path | None = None,
 ) -> None:
     """Measure imagination under a policy: its greedy rollouts in the world model, judged, against
     the same actions replayed in the real world (agreement, false successes, PSNR per step) and
@@ -540,13 +541,15 @@ def imagination(
         runner: where they run: local, ray or ray:ADDRESS (see `gymnast eval --help`).
         videos: side-by-side videos (imagined | real replay | difference), disagreements first.
         seed: reset seed of the envs (what a stochastic world model draws from).
+        robot_state: for a policy that reads the robot's state (observation.state), a state model
+            (or ensemble) run that imagines it beside the world model (gymnast train-state).
     """
     from gymnast.experiment.imagination import ImaginationConfig, measure_imagination_runs
     from gymnast.experiment.imagination_report import format_imagination
 
     config = ImaginationConfig(tasks=tasks, episodes=episodes, horizon=horizon, batch=batch, workers=workers,
                                runner=runner, videos=videos, seed=seed)
-    report = measure_imagination_runs(policy, wm, RewardSpec.parse(reward), config, out)
+    report = measure_imagination_runs(policy, wm, RewardSpec.parse(reward), config, out, robot_state=robot_state)
     print(format_imagination(report))
     print(f"report: {out / 'imagination.md'}")
 
@@ -569,6 +572,7 @@ def rl_signal(
     data: Path | None = None,
     keyframes: Literal["first", "uniform", "near_success", "failures"] | None = None,
     heldout_fraction: float = 0.1,
+    robot_state: Path | None = None,
 ) -> None:
     """Measure whether RL in imagination would push the policy where the real world would: GRPO
     groups sampled in the world model and judged, their actions replayed in the real world from the
@@ -600,12 +604,14 @@ def rl_signal(
             success) or failures (episodes that failed) (default: --like's, else uniform).
         heldout_fraction: the share of --data's scenes the models held out, where keyframes come from;
             0 for a dataset they never trained on (e.g. the policy's own rollouts on new seeds).
+        robot_state: for a policy that reads the robot's state (observation.state), a state model
+            (or ensemble) run that imagines it beside the world model (default: --like's).
     """
     from gymnast.experiment.practice_signal import SignalConfig, batch_for, measure_signal_runs, practice_of
 
     inputs, settings = practice_of(like) if like is not None else ({}, {})
     given = {"policy": policy, "wm": wm, "reward": reward}
-    inputs |= {name: str(value) for name, value in given.items() if value is not None}
+    inputs |= {name: str(value) for name, value in (given | {"robot_state": robot_state}).items() if value is not None}
     missing = [f"--{name}" for name in given if name not in inputs]
     if missing:
         raise ValueError(f"rl-signal needs {', '.join(missing)} (or --like RUN, an RL run in imagination)")
@@ -617,5 +623,6 @@ def rl_signal(
         settings["batch"] = batch_for(settings["group_size"])
     config = SignalConfig(**settings, starts_per_task=starts_per_task, workers=workers, runner=runner,
                           heldout_fraction=heldout_fraction)
-    measure_signal_runs(inputs["policy"], inputs["wm"], RewardSpec.parse(inputs["reward"]), config, out)
+    measure_signal_runs(inputs["policy"], inputs["wm"], RewardSpec.parse(inputs["reward"]), config, out,
+                        robot_state=inputs.get("robot_state"))
     print((out / "signal.md").read_text())

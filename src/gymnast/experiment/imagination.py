@@ -82,7 +82,8 @@ class ImaginationConfig:
 
 
 def measure_imagination(policy: Policy, world_model: WorldModel, reward: Reward, config: ImaginationConfig,
-                        out: Path | None = None, progress: bool = True, labels: dict[str, str] | None = None) -> dict:
+                        out: Path | None = None, progress: bool = True, labels: dict[str, str] | None = None,
+                        robot_state=None) -> dict:
     """Measures imagination under `policy` (see the module docstring); writes the report into `out`.
 
     Args:
@@ -93,6 +94,8 @@ def measure_imagination(policy: Policy, world_model: WorldModel, reward: Reward,
         out: directory for imagination.json, imagination.md, psnr.png and videos/ (None: nothing written).
         progress: show a progress bar over the batches.
         labels: what the objects are (e.g. run paths), recorded in the settings.
+        robot_state: for a policy that reads the robot's state, what imagines it beside the world
+            model (`gymnast.world_model.robot_state.robot_state_in_imagination`).
 
     Returns:
         imagination.json's content: ``settings``; ``overall`` and ``per_task`` blocks (see
@@ -115,7 +118,8 @@ def measure_imagination(policy: Policy, world_model: WorldModel, reward: Reward,
     env_config = EnvConfig(image_size=world_model.image_size, horizon=config.horizon, cameras=replay_cameras(world_model))
     starts = evaluation_starts(tasks, config.episodes, env_config)
     size = min(config.batch, len(starts))
-    envs = EnvFactory(IMAGINED, policy.chunk_size, env_config, "none", config.workers, world_model)
+    envs = EnvFactory(IMAGINED, policy.chunk_size, env_config, "none", config.workers, world_model,
+                      robot_state=robot_state)
     # Replays run in an env that goes on after success, so each imagined frame has a real one.
     replays = EnvFactory(REAL, policy.chunk_size, dataclasses.replace(env_config, terminate_on_success=False), "none",
                          config.workers, runner=config.runner)
@@ -140,12 +144,15 @@ def measure_imagination(policy: Policy, world_model: WorldModel, reward: Reward,
 
 
 def measure_imagination_runs(policy: str | Path, wm: str | Path, reward: RewardSpec, config: ImaginationConfig,
-                             out: Path | None = None, progress: bool = True) -> dict:
+                             out: Path | None = None, progress: bool = True, robot_state: str | Path | None = None
+                             ) -> dict:
     """`measure_imagination` of saved runs: a policy run, a world-model run and a reward spec
-    (``judge:RUN`` or ``vlm:MODEL@BASE_URL``, see `gymnast.reward.spec`)."""
+    (``judge:RUN`` or ``vlm:MODEL@BASE_URL``, see `gymnast.reward.spec`), and for a policy that
+    reads the robot's state, the state model run that imagines it (``--robot-state``)."""
     from gymnast.policy.load import load_policy
     from gymnast.reward.select import make_reward
     from gymnast.world_model.base import load_world_model
+    from gymnast.world_model.robot_state import robot_state_in_imagination
     from gymnast.world_model.views import check_policy_views
 
     world_model = load_world_model(wm)
@@ -153,7 +160,10 @@ def measure_imagination_runs(policy: str | Path, wm: str | Path, reward: RewardS
     labels = {"policy": str(policy), "wm": str(wm), "reward": str(reward)}
     loaded = load_policy(policy)
     check_policy_views(getattr(loaded.config, "cameras", ()), world_model, policy, wm)
-    return measure_imagination(loaded, world_model, judge, config, out, progress, labels)
+    state = robot_state_in_imagination(getattr(loaded, "state_dim", 0), robot_state, policy, wm)
+    if robot_state is not None:
+        labels["robot_state"] = str(robot_state)
+    return measure_imagination(loaded, world_model, judge, config, out, progress, labels, state)
 
 
 @dataclass

@@ -153,7 +153,8 @@ class SignalConfig:
 
 
 def measure_signal(policy: Policy, world_model: WorldModel, reward: Reward, config: SignalConfig,
-                   out: Path | None = None, progress: bool = True, labels: dict[str, str] | None = None) -> dict:
+                   out: Path | None = None, progress: bool = True, labels: dict[str, str] | None = None,
+                   robot_state=None) -> dict:
     """Measures the GRPO signal of imagination under `policy` (see the module docstring).
 
     Args:
@@ -164,6 +165,8 @@ def measure_signal(policy: Policy, world_model: WorldModel, reward: Reward, conf
         out: directory for signal.json and signal.md (None: nothing written).
         progress: show a progress bar over the batches.
         labels: what the objects are (e.g. run paths), recorded in the settings.
+        robot_state: for a policy that reads the robot's state, what imagines it beside the world
+            model (`gymnast.world_model.robot_state.robot_state_in_imagination`).
 
     Returns:
         signal.json's content: ``settings``; ``readouts`` (a row per readout and horizon, see
@@ -184,7 +187,8 @@ def measure_signal(policy: Policy, world_model: WorldModel, reward: Reward, conf
               else fresh_starts(tasks, config.starts_per_task, env_config, config.seed))
     rollout_starts = [start for start in starts for _ in range(config.group_size)]  # groups are contiguous
     size = min(config.batch, len(rollout_starts))
-    envs = EnvFactory(IMAGINED, policy.chunk_size, env_config, "none", config.workers, world_model)
+    envs = EnvFactory(IMAGINED, policy.chunk_size, env_config, "none", config.workers, world_model,
+                      robot_state=robot_state)
     # Replays go on after success, so every horizon's outcome is read from the same replay.
     replays = EnvFactory(REAL, policy.chunk_size, dataclasses.replace(env_config, terminate_on_success=False), "none",
                          config.workers, runner=config.runner)
@@ -507,17 +511,22 @@ def practice_of(run: Path) -> tuple[dict[str, str], dict]:
     settings = {"tasks": rl.tasks, "group_size": rl.group_size, "temperature": rl.temperature,
                 "horizons": (rl.horizon,), "batch": batch_for(rl.group_size), "seed": rl.seed,
                 "data": str(data), "keyframes": rl.keyframes}
-    return {"policy": spec.policy, "wm": str(spec.wm), "reward": str(spec.reward)}, settings
+    inputs = {"policy": spec.policy, "wm": str(spec.wm), "reward": str(spec.reward)}
+    if spec.robot_state is not None:
+        inputs["robot_state"] = str(spec.robot_state)
+    return inputs, settings
 
 
 def measure_signal_runs(policy: str | Path, wm: str | Path, reward: RewardSpec, config: SignalConfig,
-                        out: Path | None = None, progress: bool = True) -> dict:
+                        out: Path | None = None, progress: bool = True, robot_state: str | Path | None = None) -> dict:
     """`measure_signal` of saved runs: a policy run, a world-model run and a reward spec that reads
     only the video (``judge:RUN`` or ``vlm:MODEL@BASE_URL``) or a grounded world model's reward head
-    (``state:RUN``), see `gymnast.reward.spec`."""
+    (``state:RUN``), see `gymnast.reward.spec`; and for a policy that reads the robot's state, the
+    state model run that imagines it (``--robot-state``)."""
     from gymnast.policy.load import load_policy
     from gymnast.reward.select import make_reward
     from gymnast.world_model.base import load_world_model
+    from gymnast.world_model.robot_state import robot_state_in_imagination
     from gymnast.world_model.views import check_policy_views
 
     if reward.kind not in ("judge", "vlm", "state"):  # said before anything loads
@@ -528,4 +537,7 @@ def measure_signal_runs(policy: str | Path, wm: str | Path, reward: RewardSpec, 
     labels = {"policy": str(policy), "wm": str(wm), "reward": str(reward)}
     loaded = load_policy(policy)
     check_policy_views(getattr(loaded.config, "cameras", ()), world_model, policy, wm)
-    return measure_signal(loaded, world_model, judge, config, out, progress, labels)
+    state = robot_state_in_imagination(getattr(loaded, "state_dim", 0), robot_state, policy, wm)
+    if robot_state is not None:
+        labels["robot_state"] = str(robot_state)
+    return measure_signal(loaded, world_model, judge, config, out, progress, labels, state)

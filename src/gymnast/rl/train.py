@@ -70,30 +70,24 @@ CRITIC = "critic"
 
 def robot_state_for(state_dim: int, env: EnvKind, run_spec: RLRun):
     """The imagined robot state for a policy of `state_dim` (D > 0) in imagination
-    (`gymnast.world_model.robot_state.ImaginedRobotState` of ``--robot-state``), or None where the
-    env gives its own (a simulator's is Meta-World's hand xyz and gripper) or the policy reads none.
+    (`gymnast.world_model.robot_state.robot_state_in_imagination` of ``--robot-state``), or None
+    where the env gives its own (a simulator's is Meta-World's hand xyz and gripper) or the policy
+    reads none.
 
     Raises:
         ValueError: a state the env cannot give (the message says what to pass).
     """
-    from gymnast.world_model.robot_state import ImaginedRobotState
-    from gymnast.world_model.state_model import load_state_models
+    from gymnast.world_model.robot_state import robot_state_in_imagination
 
-    if run_spec.robot_state is not None and not (env.imagined and state_dim):
-        raise ValueError(f"--robot-state imagines the robot's state for a policy that reads one, in imagination; "
-                         f"the policy {run_spec.policy} reads {state_dim or 'no'} state dimensions and --env {env} "
-                         f"is {'imagined' if env.imagined else 'not imagined'}")
-    if not state_dim:
-        return None
     if env.imagined:
-        if run_spec.robot_state is None:
-            raise ValueError(f"the policy {run_spec.policy} reads the robot's state (observation.state, {state_dim}-d), "
-                             f"but the world model {run_spec.wm} imagines images only; give a state model that "
-                             "imagines it with --robot-state RUN (gymnast train-state), or practise with --env real or sim")
-        return ImaginedRobotState(load_state_models(run_spec.robot_state), state_dim)
-    if state_dim != STATE_DIM:
+        return robot_state_in_imagination(state_dim, run_spec.robot_state, run_spec.policy, run_spec.wm)
+    if run_spec.robot_state is not None:
+        raise ValueError(f"--robot-state imagines the robot's state in imagination; --env {env} is a simulator, "
+                         "which gives its own: leave --robot-state out")
+    if state_dim and state_dim != STATE_DIM:
         raise ValueError(f"the policy {run_spec.policy} reads a {state_dim}-d robot state (observation.state), the "
                          f"simulator gives {STATE_DIM} (hand xyz and gripper opening)")
+    return None
 
 
 def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False, progress: bool = True) -> dict:

@@ -17,6 +17,7 @@ dimensions, k actions in one step.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -78,3 +79,28 @@ class ImaginedRobotState:
 
     def _robot(self) -> np.ndarray:
         return torch.stack(self._states).mean(dim=0)[:, : self.dim].numpy()
+
+
+def robot_state_in_imagination(state_dim: int, run: str | Path | None, policy: str | Path,
+                               wm: str | Path | None) -> ImaginedRobotState | None:
+    """What gives a policy that reads a `state_dim`-d robot state its state in imagination: the
+    state model (or ensemble) in `run` (``--robot-state``), stepped beside the world model `wm`;
+    None for a policy that reads none. Used alike by practice (`gymnast rl --env imagined`) and by
+    the measurements of imagination (`gymnast imagination`, `gymnast rl-signal`).
+
+    Raises:
+        ValueError: a policy that reads a state without a state model, or a state model for a
+            policy that reads none (the message names the policy and what to pass).
+    """
+    from gymnast.world_model.state_model import load_state_models
+
+    if not state_dim:
+        if run is not None:
+            raise ValueError(f"--robot-state {run} imagines the robot's state for a policy that reads one; "
+                             f"the policy {policy} reads none: leave --robot-state out")
+        return None
+    if run is None:
+        raise ValueError(f"the policy {policy} reads the robot's state (observation.state, {state_dim}-d), but the "
+                         f"world model {wm} imagines images only; give a state model that imagines it with "
+                         "--robot-state RUN (gymnast train-state)")
+    return ImaginedRobotState(load_state_models(run), state_dim)
