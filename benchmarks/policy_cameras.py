@@ -1,9 +1,9 @@
-"""What a second camera costs the embedded VLA: an SFT step, a greedy call and RL's sampling.
+"""What a second camera and the robot's state cost the embedded VLA: an SFT step, a greedy call and RL's sampling.
 
     .venv/bin/python benchmarks/policy_cameras.py [--rounds 3]
 
-The one-camera and the two-camera (front + gripper, side by side) policies of the default
-architecture take turns for a few rounds, in one process, and each keeps its best time, so that
+The one-camera, the two-camera (front + gripper, side by side) and the two-camera policy that also
+reads the robot's state (`--robot-state`, one more token) of the default architecture take turns for a few rounds, in one process, and each keeps its best time, so that
 a noisy shared machine shows in both alike. An SFT step is the imitation loss forward and backward
 on a batch of 64 with the image encoder under bfloat16 autocast where the CPU computes it natively,
 as `gymnast sft` trains. Untrained weights: speed does not depend on them. Prints and writes
@@ -26,7 +26,8 @@ from gymnast.utils.atomic import write_json
 from gymnast.utils.device import bf16_status
 
 RESULTS = Path(__file__).parent / "results" / "policy_cameras.json"
-SETUPS = {"front": ("front",), "front+gripper": ("front", "gripper")}
+SETUPS = {"front": VLAConfig(), "front+gripper": VLAConfig(cameras=("front", "gripper")),
+          "front+gripper+state": VLAConfig(cameras=("front", "gripper"), state_dim=4)}
 
 
 def best_seconds(fn, repeats: int) -> float:
@@ -47,20 +48,24 @@ def measure(model: EmbeddedVLA, repeats: int) -> dict[str, float]:
     def images(batch: int) -> torch.Tensor:
         return torch.randint(0, 256, (batch, size, views * size, 3), dtype=torch.uint8, generator=generator)
 
+    def states(batch: int) -> dict[str, torch.Tensor]:  # hand xyz and gripper, for a policy that reads them
+        return {"states": torch.rand(batch, model.state_dim, generator=generator)} if model.state_dim else {}
+
     train_images, texts = images(64), ["open the drawer"] * 64
     chunks, valid = torch.rand(64, model.chunk_size, model.action_dim) * 2 - 1, torch.ones(64, model.chunk_size, dtype=torch.bool)
 
     def sft_step() -> None:
         model.train()
-        loss, _ = model.imitation_loss(train_images, texts, chunks, valid, bf16=True)
+        loss, _ = model.imitation_loss(train_images, texts, chunks, valid, bf16=True, **states(64))
         loss.backward()
         model.zero_grad(set_to_none=True)
 
     one, many = images(1), images(256)
     step = best_seconds(sft_step, repeats)
     model.eval()
-    act = best_seconds(lambda: model.act(one, ["open the drawer"]), 5 * repeats)
-    sample = best_seconds(lambda: model.sample(many, ["open the drawer"] * 256, temperature=1.0), repeats)
+    one_state, many_states = states(1), states(256)
+    act = best_seconds(lambda: model.act(one, ["open the drawer"], **one_state), 5 * repeats)
+    sample = best_seconds(lambda: model.sample(many, ["open the drawer"] * 256, temperature=1.0, **many_states), repeats)
     return {"sft_step_s_b64": step, "act_latency_ms_b1": 1000 * act, "sample_obs_per_s_b256": 256 / sample}
 
 
@@ -70,7 +75,7 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=5)
     args = parser.parse_args()
     torch.manual_seed(0)
-    models = {name: EmbeddedVLA(VLAConfig(cameras=cameras)) for name, cameras in SETUPS.items()}
+    models = {name: EmbeddedVLA(config) for name, config in SETUPS.items()}
     best: dict[str, dict[str, float]] = {}
     for _ in range(args.rounds):
         for name, model in models.items():
@@ -79,7 +84,8 @@ def main() -> None:
                 best.setdefault(name, {})[key] = keep(best.get(name, {}).get(key, value), value)
     rounded = {name: {key: round(value, 4) for key, value in figures.items()} for name, figures in best.items()}
     ratio = {key: round(best["front+gripper"][key] / best["front"][key], 2) for key in best["front"]}
-    result = {"setups": rounded, "two_over_one": ratio,
+    state = {key: round(best["front+gripper+state"][key] / best["front+gripper"][key], 2) for key in best["front"]}
+    result = {"setups": rounded, "two_over_one": ratio, "state_over_none": state,
               "parameters": {name: sum(p.numel() for p in model.parameters()) for name, model in models.items()},
               "bf16": bf16_status(), "threads": torch.get_num_threads(),
               "machine": {"cpu_count": os.cpu_count(), "platform": platform.platform()}}
