@@ -23,9 +23,10 @@ CommaFloats = Annotated[
 ]
 """A tuple of floats written on the command line as ``0,0.1,0.3``."""
 
-CAMERAS = ("front", "gripper")
+CAMERAS = ("front", "gripper", "hand")
 """The named views of a scene (posed in `gymnast.envs.cameras`): ``front``, the fixed free camera
-`EnvConfig.camera`; ``gripper``, a camera that moves with the gripper and looks at its fingers."""
+`EnvConfig.camera`; ``gripper``, a camera that moves with the gripper and looks at its fingers;
+``hand``, the front view zoomed three times on the hand, following it."""
 
 CameraNames = Annotated[
     tuple[str, ...],
@@ -82,7 +83,7 @@ class EnvConfig:
     camera: CameraPose = field(default_factory=CameraPose)
     """The fixed free camera that shows the arm, the objects and the goal (the front view)."""
     cameras: CameraNames = ("front",)
-    """Views rendered into every observation (front, gripper), comma-separated, the primary first:
+    """Views rendered into every observation (front, gripper, hand), comma-separated, the primary first:
     obs["image"] shows them side by side and a dataset records each (see gymnast.envs.metaworld)."""
 
     def __post_init__(self) -> None:

@@ -1,6 +1,6 @@
 """Several cameras: the extra views are rendered only when asked, the primary view never changes,
-the observed image shows the views side by side, and the gripper view magnifies what the gripper
-reaches for."""
+the observed image shows the views side by side, and the gripper and hand views magnify what the
+gripper reaches for."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from gymnasium.utils.env_checker import check_env
 
 import gymnast  # noqa: F401
 from gymnast.config import EnvConfig
-from gymnast.envs.cameras import GRIPPER_CAMERA, camera_pose
+from gymnast.envs.cameras import GRIPPER_CAMERA, HAND_ZOOM, camera_pose
 from gymnast.envs.experts import ScriptedExpert
 from gymnast.envs.gap import get_gap
 from gymnast.envs.metaworld import MetaWorldEnv
@@ -56,9 +56,21 @@ def test_the_gripper_camera_follows_the_gripper_and_the_gap_moves_it_like_the_fr
     assert shifted.azimuth - pose.azimuth == front_shifted.azimuth - front.azimuth != 0
 
 
-def test_the_gripper_view_magnifies_the_object_the_gripper_reaches_for():
+def test_the_hand_view_is_the_front_view_looking_closer_at_the_gripper_and_the_gap_moves_it_alike():
+    config, gripper = EnvConfig(), np.array([0.1, 0.6, 0.2])
+    front, hand = (camera_pose(name, config, get_gap("none"), gripper) for name in ("front", "hand"))
+    np.testing.assert_allclose(hand.lookat, gripper)
+    assert (hand.azimuth, hand.elevation) == (front.azimuth, front.elevation)
+    assert hand.distance == pytest.approx(front.distance / HAND_ZOOM)
+    strong = get_gap("strong")
+    shifted, front_shifted = camera_pose("hand", config, strong, gripper), camera_pose("front", config, strong, gripper)
+    assert shifted.azimuth - hand.azimuth == front_shifted.azimuth - front.azimuth != 0
+
+
+@pytest.mark.parametrize("view", ["gripper", "hand"])
+def test_the_gripper_and_hand_views_magnify_the_object_the_gripper_reaches_for(view):
     front = MetaWorldEnv("pick-place-v3", EnvConfig(image_size=48))
-    gripper = MetaWorldEnv("pick-place-v3", EnvConfig(image_size=48, cameras=("gripper", "front")))
+    gripper = MetaWorldEnv("pick-place-v3", EnvConfig(image_size=48, cameras=(view, "front")))
     expert = ScriptedExpert("pick-place-v3")
     try:
         for env in (front, gripper):
@@ -67,7 +79,7 @@ def test_the_gripper_view_magnifies_the_object_the_gripper_reaches_for():
             action = expert(front.env_state)
             front.step(action)
             gripper.step(action)
-        # Segmentation is of the primary (first) view: the front camera in one, the gripper's in the other.
+        # Segmentation is of the primary (first) view: the front camera in one, the other view in the other.
         assert object_pixel_counts(gripper)["obj"] >= 5 * object_pixel_counts(front)["obj"]
     finally:
         front.close()
@@ -76,5 +88,5 @@ def test_the_gripper_view_magnifies_the_object_the_gripper_reaches_for():
 
 @pytest.mark.parametrize("cameras", [(), ("front", "front"), ("wrist",)])
 def test_unknown_missing_or_repeated_cameras_are_refused_with_the_known_names(cameras):
-    with pytest.raises(ValueError, match=r"one or more distinct names of \('front', 'gripper'\)"):
+    with pytest.raises(ValueError, match=r"one or more distinct names of \('front', 'gripper', 'hand'\)"):
         EnvConfig(cameras=cameras)
