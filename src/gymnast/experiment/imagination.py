@@ -149,21 +149,32 @@ def measure_imagination_runs(policy: str | Path, wm: str | Path, reward: RewardS
     """`measure_imagination` of saved runs: a policy run, a world-model run and a reward spec
     (``judge:RUN`` or ``vlm:MODEL@BASE_URL``, see `gymnast.reward.spec`), and for a policy that
     reads the robot's state, the state model run that imagines it (``--robot-state``)."""
-    from gymnast.policy.load import load_policy
     from gymnast.reward.select import make_reward
     from gymnast.world_model.base import load_world_model
-    from gymnast.world_model.robot_state import robot_state_in_imagination
-    from gymnast.world_model.views import check_policy_views
 
     world_model = load_world_model(wm)
     judge = make_reward(reward, world_model)
-    labels = {"policy": str(policy), "wm": str(wm), "reward": str(reward)}
+    loaded, state, labels = measured_policy(policy, world_model, wm, reward, robot_state)
+    return measure_imagination(loaded, world_model, judge, config, out, progress, labels, state)
+
+
+def measured_policy(policy: str | Path, world_model: WorldModel, wm: str | Path, reward: RewardSpec,
+                    robot_state: str | Path | None):
+    """A saved policy as the measurements of imagination take it (`measure_imagination_runs`,
+    `gymnast.experiment.practice_signal.measure_signal_runs`): loaded and checked to see the world
+    model's cameras; what imagines its robot state, if it reads one (``--robot-state``,
+    `gymnast.world_model.robot_state.robot_state_in_imagination`); and the labels the report records."""
+    from gymnast.policy.load import load_policy
+    from gymnast.world_model.robot_state import robot_state_in_imagination
+    from gymnast.world_model.views import check_policy_views
+
     loaded = load_policy(policy)
     check_policy_views(getattr(loaded.config, "cameras", ()), world_model, policy, wm)
     state = robot_state_in_imagination(getattr(loaded, "state_dim", 0), robot_state, policy, wm)
+    labels = {"policy": str(policy), "wm": str(wm), "reward": str(reward)}
     if robot_state is not None:
         labels["robot_state"] = str(robot_state)
-    return measure_imagination(loaded, world_model, judge, config, out, progress, labels, state)
+    return loaded, state, labels
 
 
 @dataclass

@@ -523,21 +523,14 @@ def measure_signal_runs(policy: str | Path, wm: str | Path, reward: RewardSpec, 
     only the video (``judge:RUN`` or ``vlm:MODEL@BASE_URL``) or a grounded world model's reward head
     (``state:RUN``), see `gymnast.reward.spec`; and for a policy that reads the robot's state, the
     state model run that imagines it (``--robot-state``)."""
-    from gymnast.policy.load import load_policy
+    from gymnast.experiment.imagination import measured_policy
     from gymnast.reward.select import make_reward
     from gymnast.world_model.base import load_world_model
-    from gymnast.world_model.robot_state import robot_state_in_imagination
-    from gymnast.world_model.views import check_policy_views
 
     if reward.kind not in ("judge", "vlm", "state"):  # said before anything loads
         raise ValueError(f"--reward {reward} reads more than the imagined video; rl-signal reads a judge "
                          "(judge:RUN or vlm:MODEL@BASE_URL) or a state model's reward head (state:RUN)")
     world_model = load_world_model(wm)
     judge = make_reward(reward, world_model)
-    labels = {"policy": str(policy), "wm": str(wm), "reward": str(reward)}
-    loaded = load_policy(policy)
-    check_policy_views(getattr(loaded.config, "cameras", ()), world_model, policy, wm)
-    state = robot_state_in_imagination(getattr(loaded, "state_dim", 0), robot_state, policy, wm)
-    if robot_state is not None:
-        labels["robot_state"] = str(robot_state)
+    loaded, state, labels = measured_policy(policy, world_model, wm, reward, robot_state)
     return measure_signal(loaded, world_model, judge, config, out, progress, labels, state)

@@ -289,7 +289,7 @@ def state_dim_of(data: Path, demos: DemoSet) -> int:
     """The robot state dimensions of the demonstrations, which a policy that reads the state learns from."""
     if demos.states is None or demos.states.shape[1] == 0:
         raise ValueError(f"{data} records no robot state (observation.state), so --robot-state has nothing to read; "
-                         f"name the dataset's state feature with --keys.state-key or leave --robot-state out")
+                         f"name the dataset's state feature with --state-key or leave --robot-state out")
     return demos.states.shape[1]
 
 
