@@ -49,6 +49,19 @@ def test_sampled_token_frequencies_match_the_predicted_probabilities():
     assert (frequencies - probs).abs().sum() / 2 < 0.12  # total variation of 4000 draws over 256 bins
 
 
+def test_a_token_of_zero_probability_is_never_drawn():
+    model = make()
+    with torch.no_grad():
+        model.head.weight.mul_(1e4)  # every token but the likeliest underflows to probability 0
+    obs, texts = observations(1)
+    many = 500
+    images, instructions = obs.expand(many, -1, -1, -1), texts * many
+    probs = torch.softmax(model.logits(images[:1], texts).float(), dim=-1)
+    assert (probs == 0).float().mean() > 0.9
+    tokens = model.sample(images, instructions, 1.0, torch.Generator().manual_seed(0)).tokens
+    assert torch.equal(tokens, model.logits(images, instructions).argmax(-1))
+
+
 def test_higher_temperature_spreads_the_samples():
     model = make()
     with torch.no_grad():
