@@ -7,15 +7,21 @@ models use it):
   world model, batches of 1024 and 4096 rollouts of random action chunks;
   ``model_fps_b*``: the world model's own `step` at the same batches, nothing copied to the host
   (what the env could reach);
-  ``imagined_obs_per_s_two_cameras_b*``: the same with two cameras' views of every rollout
-  (observations of both views per second);
+  ``imagined_obs_per_s_two_cameras_b*`` / ``_three_cameras_b*``: the same with two (front, gripper)
+  and three (and hand) cameras' views of every rollout (observations of all views per second);
 - ``wm_train_step_s``: one optimizer step of `gymnast train-wm` (clips of 32 future frames,
   backpropagated through the rollout) at batch 64, for the default model and for the larger
   model of the embedded backend's gpu preset when it has one;
-- ``policy_train_obs_per_s``: observations per second through one SFT update (the imitation loss,
-  backward and AdamW) of the default policy at batch 4096;
+- ``policy_train_obs_per_s`` / ``policy_sample_obs_per_s``: observations per second through one SFT
+  update (the imitation loss, backward and AdamW) and through RL's sampling of the default policy at
+  batch 4096, for each view setup of benchmarks/policy_cameras.py (one, two or three cameras, with or
+  without the robot's state);
 - ``rl_step_s``: one `gymnast rl --env imagined` step of 256 rollouts (32 starts x 8) of 150
-  actions with the committed judge's reward, policy update included (the median of the timed steps).
+  actions with the committed judge's reward, policy update included (the median of the timed steps);
+  ``rl_segment_step``: the same number of rollouts as short segments, 20 actions from uniformly drawn
+  real keyframes, with the committed state-model ensemble's reward (segment practice, docs/rl.md);
+- with ``--profile``: the profiler's table of two more judge steps (the ops that take the most host and
+  device time), written beside ``--out`` as ``<out>.profile.txt``.
 
 Goals on one H100: imagination >= 250,000 frames/s at batch 4096, an RL step <= 2 s.
 
@@ -50,12 +56,14 @@ from gymnast.world_model.data import ClipBatch
 from gymnast.world_model.embedded import EmbeddedWorldModel, EmbeddedWorldModelConfig
 from gymnast.world_model.train import WM_PRESETS, clip_loss
 from gymnast.world_model.views import model_views, with_cameras
+from policy_cameras import SETUPS as POLICY_SETUPS  # a sibling script (the script's folder is on the path)
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = Path(__file__).parent / "results" / "gpu.json"
 WORLD_MODEL, JUDGE = ROOT / "results/world_model/wm", ROOT / "results/judge/video_judge"
-TWO_CAMERAS = ("front", "gripper")
-SKIPPABLE = ("wm", "policy", "rl")
+STATE_ENSEMBLE = ROOT / "results/world_model/state_v5"
+SEVERAL_CAMERAS = {"two_cameras": ("front", "gripper"), "three_cameras": ("front", "gripper", "hand")}
+SKIPPABLE = ("imagine", "wm", "policy", "rl")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -70,12 +78,13 @@ class Sizes:
     rl_starts: int = 32
     rl_group: int = 8
     rl_horizon: int = 150
+    rl_segment: int = 20
     rl_steps: int = 3
     repeats: int = 5
 
 
 SMALL = Sizes(imagine_batches=(4, 8), imagine_steps=2, wm_batch=2, wm_future=4, policy_batch=4, rl_starts=2, rl_group=2,
-              rl_horizon=10, rl_steps=2, repeats=1)
+              rl_horizon=10, rl_segment=5, rl_steps=2, repeats=1)
 
 
 def synchronize(device: torch.device) -> None:
@@ -139,23 +148,32 @@ def wm_train_step_s(config: EmbeddedWorldModelConfig, sizes: Sizes, device: torc
     return timed(lambda: gradient_step(clip_loss(model, clips)[0], model, optimizer, schedule), device, sizes.repeats)
 
 
-def policy_train_obs_per_s(sizes: Sizes, device: torch.device) -> float:
-    """Observations per second through one SFT update of the default policy at `sizes.policy_batch`."""
+def policy_obs_per_s(config: VLAConfig, sizes: Sizes, device: torch.device) -> dict[str, int]:
+    """Observations per second through one SFT update and through RL's sampling of a policy of
+    `config` at `sizes.policy_batch` (untrained weights: the speed does not depend on them)."""
     torch.manual_seed(0)
-    model = EmbeddedVLA(VLAConfig()).to(device).train()
+    model = EmbeddedVLA(config, pretrained_vision=False).to(device)
     optimizer = torch.optim.AdamW(model.parameters(), lr=1e-4)
     schedule = torch.optim.lr_scheduler.LambdaLR(optimizer, lambda step: 1.0)
-    b, size = sizes.policy_batch, model.config.image_size
-    images = torch.randint(0, 256, (b, size, size, 3), dtype=torch.uint8)
+    b, size, views = sizes.policy_batch, config.image_size, len(config.cameras)
+    # Several cameras' views side by side, as the datasets' loader hands them to the policy.
+    images = torch.randint(0, 256, (b, size, views * size, 3), dtype=torch.uint8)
     texts = ["open the drawer", "push the puck to the goal"] * (b // 2) + ["reach the goal"] * (b % 2)
-    chunks = torch.rand(b, model.config.chunk_size, model.action_dim) * 2 - 1
-    valid = torch.ones(b, model.config.chunk_size, dtype=torch.bool)
+    chunks = torch.rand(b, config.chunk_size, model.action_dim) * 2 - 1
+    valid = torch.ones(b, config.chunk_size, dtype=torch.bool)
+    states = {"states": torch.rand(b, model.state_dim)} if model.state_dim else {}
 
     def update() -> None:
-        loss, _ = model.imitation_loss(images, texts, chunks, valid, bf16=True)
+        model.train()
+        loss, _ = model.imitation_loss(images, texts, chunks, valid, bf16=True, **states)
         gradient_step(loss, model, optimizer, schedule)
 
-    return b / timed(update, device, sizes.repeats)
+    def sample() -> None:
+        model.eval()
+        with torch.inference_mode():
+            model.sample(images, texts, temperature=1.0, **states)
+
+    return {"train": round(b / timed(update, device, sizes.repeats)), "sample": round(b / timed(sample, device, sizes.repeats))}
 
 
 def rl_step(data: Path, sizes: Sizes, device: torch.device, tasks: str) -> dict:
@@ -164,6 +182,27 @@ def rl_step(data: Path, sizes: Sizes, device: torch.device, tasks: str) -> dict:
 
     return time_setting("imagined", f"judge:{JUDGE}", data, sizes.rl_steps, tasks, starts_per_step=sizes.rl_starts,
                         group_size=sizes.rl_group, horizon=sizes.rl_horizon, device=str(device))
+
+
+def rl_segment_step(data: Path, sizes: Sizes, device: torch.device, tasks: str) -> dict:
+    """The timings of one imagined RL step of short segments from real keyframes with the state ensemble's reward."""
+    from rl_step import time_setting
+
+    return time_setting("imagined", f"state:{STATE_ENSEMBLE}", data, sizes.rl_steps, tasks,
+                        starts_per_step=sizes.rl_starts, group_size=sizes.rl_group, horizon=sizes.rl_segment,
+                        eval_horizon=sizes.rl_horizon, keyframes="uniform", device=str(device))
+
+
+def profile_rl_step(data: Path, sizes: Sizes, device: torch.device, tasks: str, out: Path) -> None:
+    """Writes the profiler's tables (by host time and by device time) of two judge RL steps to `out`."""
+    from torch.profiler import ProfilerActivity, profile
+
+    activities = [ProfilerActivity.CPU] + ([ProfilerActivity.CUDA] if device.type == "cuda" else [])
+    with profile(activities=activities) as profiler:
+        rl_step(data, dataclasses.replace(sizes, rl_steps=2), device, tasks)  # the first step is a warm-up
+    table = profiler.key_averages()
+    sort_keys = ["self_cpu_time_total"] + (["self_cuda_time_total"] if device.type == "cuda" else [])
+    out.write_text("\n\n".join(f"sorted by {key}\n{table.table(sort_by=key, row_limit=40)}" for key in sort_keys))
 
 
 def gpu_device(name: str, small: bool, out: Path, results: Path, script: str) -> torch.device:
@@ -187,6 +226,7 @@ def main() -> None:
     parser.add_argument("--skip", default="", help=f"measurements to leave out, comma-separated, of {SKIPPABLE} "
                         "(policy and rl need the sentence encoder's package, for the policy's instructions)")
     parser.add_argument("--out", type=Path, default=RESULTS)
+    parser.add_argument("--profile", action="store_true", help="also profile one judge RL step (<out>.profile.txt)")
     args = parser.parse_args()
     skip = {name for name in args.skip.split(",") if name}
     if skip - set(SKIPPABLE):
@@ -195,13 +235,17 @@ def main() -> None:
     sizes = SMALL if args.small else Sizes()
 
     world_model = load_world_model(WORLD_MODEL).to(device).eval()
-    result: dict = {f"imagined_fps_b{b}": round(imagined_env_fps(world_model, b, sizes.imagine_steps))
-                    for b in sizes.imagine_batches}
-    result |= {f"model_fps_b{b}": round(model_fps(world_model, b, device, sizes.repeats)) for b in sizes.imagine_batches}
-    # The same model imagining two cameras' views of each rollout (train-wm --cameras front,gripper).
-    two_cameras = with_cameras(world_model, TWO_CAMERAS)
-    result |= {f"imagined_obs_per_s_two_cameras_b{b}": round(imagined_env_fps(two_cameras, b, sizes.imagine_steps))
-               for b in sizes.imagine_batches}
+    result: dict = {}
+    if "imagine" not in skip:
+        result |= {f"imagined_fps_b{b}": round(imagined_env_fps(world_model, b, sizes.imagine_steps))
+                   for b in sizes.imagine_batches}
+        result |= {f"model_fps_b{b}": round(model_fps(world_model, b, device, sizes.repeats))
+                   for b in sizes.imagine_batches}
+        # The same model imagining several cameras' views of each rollout (train-wm --cameras front,gripper).
+        for name, cameras in SEVERAL_CAMERAS.items():
+            several = with_cameras(world_model, cameras)
+            result |= {f"imagined_obs_per_s_{name}_b{b}": round(imagined_env_fps(several, b, sizes.imagine_steps))
+                       for b in sizes.imagine_batches}
     if "wm" not in skip:
         default_wm = dataclasses.replace(EmbeddedWorldModelConfig(), image_size=world_model.image_size)
         result["wm_train_step_s"] = {"default": round(wm_train_step_s(default_wm, sizes, device), 4)}
@@ -209,10 +253,15 @@ def main() -> None:
             large = dataclasses.replace(WM_PRESETS["gpu"].model, image_size=world_model.image_size)
             result["wm_train_step_s"]["gpu_preset"] = round(wm_train_step_s(large, sizes, device), 4)
     if "policy" not in skip:
-        result["policy_train_obs_per_s"] = round(policy_train_obs_per_s(sizes, device))
+        speeds = {name: policy_obs_per_s(config, sizes, device) for name, config in POLICY_SETUPS.items()}
+        result["policy_train_obs_per_s"] = {name: speed["train"] for name, speed in speeds.items()}
+        result["policy_sample_obs_per_s"] = {name: speed["sample"] for name, speed in speeds.items()}
     if "rl" not in skip:
         rl = rl_step(args.data, sizes, device, args.tasks)
-        result |= {"rl_step_s": round(rl["step_s"], 3), "rl_step": rl}
+        result |= {"rl_step_s": round(rl["step_s"], 3), "rl_step": rl,
+                   "rl_segment_step": rl_segment_step(args.data, sizes, device, args.tasks)}
+        if args.profile:
+            profile_rl_step(args.data, sizes, device, args.tasks, args.out.with_suffix(".profile.txt"))
     if skip:
         result["not_measured"] = sorted(skip)
     result |= {

@@ -1,10 +1,11 @@
-"""What a second camera and the robot's state cost the embedded VLA: an SFT step, a greedy call and RL's sampling.
+"""What more cameras and the robot's state cost the embedded VLA: an SFT step, a greedy call and RL's sampling.
 
     .venv/bin/python benchmarks/policy_cameras.py [--rounds 3]
 
-The one-camera, the two-camera (front + gripper, side by side) and the two-camera policy that also
-reads the robot's state (`--robot-state`, one more token) of the default architecture take turns for a few rounds, in one process, and each keeps its best time, so that
-a noisy shared machine shows in both alike. An SFT step is the imitation loss forward and backward
+The one-camera, the two-camera (front + gripper, side by side), the three-camera (and hand) and the
+two-camera policy that also reads the robot's state (`--robot-state`, one more token) of the default
+architecture take turns for a few rounds, in one process, and each keeps its best time, so that a
+noisy shared machine shows in all alike. An SFT step is the imitation loss forward and backward
 on a batch of 64 with the image encoder under bfloat16 autocast where the CPU computes it natively,
 as `gymnast sft` trains. Untrained weights: speed does not depend on them. Prints and writes
 benchmarks/results/policy_cameras.json.
@@ -27,6 +28,7 @@ from gymnast.utils.device import bf16_status
 
 RESULTS = Path(__file__).parent / "results" / "policy_cameras.json"
 SETUPS = {"front": VLAConfig(), "front+gripper": VLAConfig(cameras=("front", "gripper")),
+          "front+gripper+hand": VLAConfig(cameras=("front", "gripper", "hand")),
           "front+gripper+state": VLAConfig(cameras=("front", "gripper"), state_dim=4)}
 
 
@@ -84,8 +86,9 @@ def main() -> None:
                 best.setdefault(name, {})[key] = keep(best.get(name, {}).get(key, value), value)
     rounded = {name: {key: round(value, 4) for key, value in figures.items()} for name, figures in best.items()}
     ratio = {key: round(best["front+gripper"][key] / best["front"][key], 2) for key in best["front"]}
+    three = {key: round(best["front+gripper+hand"][key] / best["front"][key], 2) for key in best["front"]}
     state = {key: round(best["front+gripper+state"][key] / best["front+gripper"][key], 2) for key in best["front"]}
-    result = {"setups": rounded, "two_over_one": ratio, "state_over_none": state,
+    result = {"setups": rounded, "two_over_one": ratio, "three_over_one": three, "state_over_none": state,
               "parameters": {name: sum(p.numel() for p in model.parameters()) for name, model in models.items()},
               "bf16": bf16_status(), "threads": torch.get_num_threads(),
               "machine": {"cpu_count": os.cpu_count(), "platform": platform.platform()}}

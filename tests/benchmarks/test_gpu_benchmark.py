@@ -35,14 +35,19 @@ def starts(tmp_path_factory) -> Path:
 def test_every_measurement_runs_at_toy_sizes_on_the_cpu(tmp_path, starts):
     data = starts
     out = tmp_path / "gpu.json"
-    done = _run("--device", "cpu", "--small", "--data", str(data), "--tasks", "reach-v3", "--out", str(out))
+    done = _run("--device", "cpu", "--small", "--data", str(data), "--tasks", "reach-v3", "--out", str(out), "--profile")
     assert done.returncode == 0, done.stderr[-3000:]
+    assert "self_cpu_time_total" in out.with_suffix(".profile.txt").read_text()
     result = json.loads(out.read_text())
     assert result["device"] == "cpu" and result["sizes"]["policy_batch"] == 4
     assert result["imagined_fps_b4"] > 0 and result["imagined_fps_b8"] > 0
     assert result["imagined_obs_per_s_two_cameras_b4"] > 0 and result["model_fps_b4"] > 0
-    assert result["wm_train_step_s"]["default"] > 0 and result["policy_train_obs_per_s"] > 0
+    assert result["imagined_obs_per_s_three_cameras_b4"] > 0 and result["wm_train_step_s"]["default"] > 0
+    setups = {"front", "front+gripper", "front+gripper+hand", "front+gripper+state"}
+    for speeds in (result["policy_train_obs_per_s"], result["policy_sample_obs_per_s"]):
+        assert set(speeds) == setups and min(speeds.values()) > 0
     assert result["rl_step"]["rollouts_per_step"] == 4 and result["rl_step_s"] > 0
+    assert result["rl_segment_step"]["horizon"] == 5 and result["rl_segment_step"]["step_s"] > 0
 
 
 def test_without_a_gpu_it_measures_nothing_and_says_why(tmp_path):
