@@ -223,14 +223,16 @@ def _demo() -> ExperimentConfig:
         world_model=dataclasses.replace(WM_PRESETS["demo"], steps=150, future=16, video_every=150, validate_every=75),
         judge=dataclasses.replace(JUDGE_PRESETS["demo"], steps=150),
         state_model=StateTrainConfig(steps=200, batch_size=64, checkpoint_every=200),
-        rl=RLConfig(steps=2, starts_per_step=4, group_size=4, lr=3e-5, eval_every=2, eval_episodes=4,
-                    watch_every=2, watch_rollouts=8, video_every=2, checkpoint_every=2),
+        # Most of an arm's minutes here were its learning curve's two real evaluations, not its two
+        # steps: two episodes per task each (the arms' final evaluations below are the comparison).
+        rl=RLConfig(steps=2, starts_per_step=4, group_size=4, lr=3e-5, eval_every=2, eval_episodes=2,
+                    watch_every=2, watch_rollouts=4, video_every=2, checkpoint_every=2),
         iter_sft=IterSFTConfig(group_size=2, steps=100),
         dyna=DynaArmConfig(rounds=2, rollouts_per_task=2, wm_steps=20, judge_steps=20),
-        equal_budget=EqualBudgetConfig(rollouts_per_task=4, wm_steps=20, judge_steps=20),
-        eval_episodes=10,
-        robustness_episodes=4,
-        worldgym_episodes=4,
+        equal_budget=EqualBudgetConfig(rollouts_per_task=2, wm_steps=20, judge_steps=20),
+        eval_episodes=6,
+        robustness_episodes=2,
+        worldgym_episodes=2,
         signal_scenes=2,
         # Each rung of the noise ladder costs about a minute here: left out to keep the 15 minutes.
         worldgym_noise=(),
