@@ -56,7 +56,9 @@ from gymnast.world_model.data import ClipBatch
 from gymnast.world_model.embedded import EmbeddedWorldModel, EmbeddedWorldModelConfig
 from gymnast.world_model.train import WM_PRESETS, clip_loss
 from gymnast.world_model.views import model_views, with_cameras
-from policy_cameras import SETUPS as POLICY_SETUPS  # a sibling script (the script's folder is on the path)
+# Sibling scripts (the script's folder is on the path).
+from policy_cameras import SETUPS as POLICY_SETUPS
+from rl_step import time_setting
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = Path(__file__).parent / "results" / "gpu.json"
@@ -178,16 +180,12 @@ def policy_obs_per_s(config: VLAConfig, sizes: Sizes, device: torch.device) -> d
 
 def rl_step(data: Path, sizes: Sizes, device: torch.device, tasks: str) -> dict:
     """The timings of one imagined RL step with the judge's reward (benchmarks/rl_step.py's measurement)."""
-    from rl_step import time_setting
-
     return time_setting("imagined", f"judge:{JUDGE}", data, sizes.rl_steps, tasks, starts_per_step=sizes.rl_starts,
                         group_size=sizes.rl_group, horizon=sizes.rl_horizon, device=str(device))
 
 
 def rl_segment_step(data: Path, sizes: Sizes, device: torch.device, tasks: str) -> dict:
     """The timings of one imagined RL step of short segments from real keyframes with the state ensemble's reward."""
-    from rl_step import time_setting
-
     return time_setting("imagined", f"state:{STATE_ENSEMBLE}", data, sizes.rl_steps, tasks,
                         starts_per_step=sizes.rl_starts, group_size=sizes.rl_group, horizon=sizes.rl_segment,
                         eval_horizon=sizes.rl_horizon, keyframes="uniform", device=str(device))
@@ -226,7 +224,7 @@ def main() -> None:
     parser.add_argument("--skip", default="", help=f"measurements to leave out, comma-separated, of {SKIPPABLE} "
                         "(policy and rl need the sentence encoder's package, for the policy's instructions)")
     parser.add_argument("--out", type=Path, default=RESULTS)
-    parser.add_argument("--profile", action="store_true", help="also profile one judge RL step (<out>.profile.txt)")
+    parser.add_argument("--profile", action="store_true", help="also profile two judge RL steps (<out>.profile.txt)")
     args = parser.parse_args()
     skip = {name for name in args.skip.split(",") if name}
     if skip - set(SKIPPABLE):
