@@ -13,7 +13,7 @@ import gymnast  # noqa: F401  (sets MUJOCO_GL before Meta-World imports mujoco)
 from gymnast.config import EnvConfig
 from gymnast.envs.experts import ScriptedExpert
 from gymnast.envs.metaworld import MetaWorldEnv
-from gymnast.envs.sim_vector import SimVectorEnv
+from gymnast.envs.sim_vector import SimVectorEnv, shared_simulator_processes
 
 K = 5
 # Long enough for reach-v3's expert on seed 3, and not a multiple of K, so that it cuts a chunk.
@@ -190,6 +190,38 @@ def test_a_dead_worker_raises_runtime_error_and_close_is_idempotent(two_workers)
     two_workers.close()
     with pytest.raises(RuntimeError, match="closed"):
         two_workers.reset(options={"tasks": TASKS, "seeds": [0, 1, 2]})
+
+
+def test_inside_a_shared_block_closed_envs_pass_their_workers_to_the_next_env_of_the_same_settings(env):
+    options = {"tasks": TASKS, "seeds": [5, 6, 7]}
+    chunks = random_chunks(2, 3)
+    expected = run(env, options, chunks)
+    with shared_simulator_processes():
+        with SimVectorEnv(3, chunk_size=K, config=SMALL, workers=2) as first:
+            pids = first.workers.pids()
+            run(first, options, random_chunks(1, 3, seed=1))
+        with SimVectorEnv(3, chunk_size=K, config=SMALL, workers=2) as second:
+            assert second.workers.pids() == pids  # the same processes, no new start
+            with SimVectorEnv(3, chunk_size=K, config=SMALL, workers=2) as third:  # open beside it: its own
+                assert not set(third.workers.pids()) & set(pids)
+            got = run(second, options, chunks)  # exactly what fresh episodes give
+            for one, two in zip(expected, got):
+                for a, b in zip(one, two):
+                    for key in a if isinstance(a, dict) else [None]:
+                        np.testing.assert_array_equal(a if key is None else a[key], b if key is None else b[key])
+        with SimVectorEnv(3, chunk_size=K, config=EnvConfig(image_size=32, horizon=20), workers=2) as other:
+            assert not set(other.workers.pids()) & set(pids)  # other settings: other processes
+            kept = other.workers
+        with SimVectorEnv(3, chunk_size=K, config=SMALL, workers=2) as failing:
+            assert failing.workers.pids() == pids
+            os.kill(pids[1], signal.SIGKILL)
+            with pytest.raises(RuntimeError, match="worker 1 failed"):
+                failing.reset(options=options)
+        with SimVectorEnv(3, chunk_size=K, config=SMALL, workers=2) as fresh:  # the failed workers were not kept
+            assert not set(fresh.workers.pids()) & set(pids)
+            run(fresh, options, chunks[:1])
+    with pytest.raises(RuntimeError, match="closed"):  # the block's end stopped the processes it kept
+        kept.call_each("close", [(), ()])
 
 
 @pytest.mark.parametrize(

@@ -16,13 +16,20 @@ plays `gymnast eval`'s and `gymnast collect`'s episodes, so success means the sa
 MuJoCo stepping and rendering are single-threaded, so ``workers > 1`` splits the B episodes into
 contiguous slices over worker processes, spawned here or Ray actors (`gymnast.envs.workers`); the
 episodes run the same code in either case, so the results are identical.
+
+Starting a worker (importing torch, MuJoCo and Meta-World, building its first scenes) costs
+seconds, and an experiment builds dozens of short-lived envs (every arm's training, evaluations,
+replays). Inside ``with shared_simulator_processes():`` a closed env's workers wait for the next
+env of the same settings instead of stopping, and are stopped at the end of the block. An env
+holds its workers alone while it is open, and workers that failed a call are never passed on.
 """
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import Any, ClassVar, Self
 
 import numpy as np
@@ -151,10 +158,13 @@ class SimVectorEnv(VectorEnv):
         self._info: dict[str, np.ndarray] | None = None
         self._local: _Episodes | None = None
         self.workers: Workers | None = None
+        self._pool_key = (runner, len(self._slices), self.config, gap, instruction_split)
+        self._healthy = True  # until a worker call fails
         if len(self._slices) == 1:
             self._local = _Episodes(self.config, gap, instruction_split)
         else:
-            self.workers = Workers(runner, len(self._slices), _Episodes, (self.config, gap, instruction_split))
+            self.workers = _shared.lease(self._pool_key) or Workers(runner, len(self._slices), _Episodes,
+                                                                    (self.config, gap, instruction_split))
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         """Starts episode i as ``MetaWorldEnv(tasks[i]).reset(seed=seeds[i])`` would.
@@ -215,7 +225,8 @@ class SimVectorEnv(VectorEnv):
             self._local.close()
             self._local = None
         if self.workers is not None:
-            self.workers.close()
+            if not (self._healthy and _shared.keep(self._pool_key, self.workers)):
+                self.workers.close()
             self.workers = None
 
     def __enter__(self) -> Self:
@@ -240,7 +251,11 @@ class SimVectorEnv(VectorEnv):
             return getattr(self._local, method)(*args[0])
         if self.workers is None:
             raise RuntimeError("the env is closed")
-        parts = self.workers.call_each(method, args)  # a worker that dies mid-rollout loses its episodes: raises
+        try:
+            parts = self.workers.call_each(method, args)  # a worker that dies mid-rollout loses its episodes: raises
+        except BaseException:
+            self._healthy = False  # a dead or failed worker is not passed on to the next env
+            raise
         return {key: np.concatenate([part[key] for part in parts]) for key in parts[0]}
 
     def _infos(self) -> dict[str, np.ndarray]:
@@ -250,3 +265,57 @@ class SimVectorEnv(VectorEnv):
 
 def _is_seed(value: Any) -> bool:
     return isinstance(value, (int, np.integer)) and not isinstance(value, bool) and value >= 0
+
+
+MAX_IDLE_POOLS = 3
+"""Idle pools a `shared_simulator_processes` block keeps, the most recently closed: each process
+holds its scenes (hundreds of MB), and an experiment's envs come in a handful of settings."""
+
+
+class _SharedPools:
+    """The idle worker pools of a `shared_simulator_processes` block, by the settings they host."""
+
+    def __init__(self) -> None:
+        self.active = False
+        self._idle: list[tuple[tuple, Workers]] = []  # oldest first
+
+    def lease(self, key: tuple) -> Workers | None:
+        """An idle pool of these settings, now the caller's alone; None outside a block or when none waits."""
+        for index in range(len(self._idle) - 1, -1, -1):
+            if self._idle[index][0] == key:
+                return self._idle.pop(index)[1]
+        return None
+
+    def keep(self, key: tuple, workers: Workers) -> bool:
+        """Keeps `workers` for the next env of these settings (stopping the oldest idle pool past
+        `MAX_IDLE_POOLS`); False outside a block, where the caller stops them."""
+        if not self.active:
+            return False
+        self._idle.append((key, workers))
+        while len(self._idle) > MAX_IDLE_POOLS:
+            self._idle.pop(0)[1].close()
+        return True
+
+    def close(self) -> None:
+        for _, workers in self._idle:
+            workers.close()
+        self._idle.clear()
+
+
+_shared = _SharedPools()
+
+
+@contextlib.contextmanager
+def shared_simulator_processes() -> Iterator[None]:
+    """Within the block, closed `SimVectorEnv` s keep their worker processes for the next env of the
+    same settings (runner, worker count, env config, gap, instruction split); they stop at its end.
+    Nested blocks share the outer one's processes."""
+    if _shared.active:
+        yield
+        return
+    _shared.active = True
+    try:
+        yield
+    finally:
+        _shared.active = False
+        _shared.close()

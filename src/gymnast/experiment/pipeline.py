@@ -28,6 +28,7 @@ from pathlib import Path
 from gymnast.config import EnvConfig
 from gymnast.data.lerobot import EpisodeDataset
 from gymnast.envs.parallel import kept_workers
+from gymnast.envs.sim_vector import shared_simulator_processes
 from gymnast.experiment.arms import ARMS, PERTURBATIONS, ROBUSTNESS_ARMS, arm, dyna_setup, rl_setup
 from gymnast.experiment.config import ExperimentConfig
 from gymnast.experiment.stages import Stages
@@ -39,7 +40,16 @@ from gymnast.utils.settings import from_json, saved_settings
 
 def run_experiment(config: ExperimentConfig, out: Path, reuse: dict[str, Path] | None = None,
                    progress: bool = True) -> dict:
-    """Runs (or finishes) the experiment in `out`; returns summary.json's content."""
+    """Runs (or finishes) the experiment in `out`; returns summary.json's content.
+
+    Its stages build dozens of short-lived simulator envs (every arm's training, evaluations and
+    replays): they pass their worker processes on instead of starting new ones (`shared_simulator_processes`).
+    """
+    with shared_simulator_processes():
+        return _run_experiment(config, out, reuse, progress)
+
+
+def _run_experiment(config: ExperimentConfig, out: Path, reuse: dict[str, Path] | None, progress: bool) -> dict:
     from gymnast.experiment.report import write_report
 
     config = config.resolved()
