@@ -1,5 +1,7 @@
 """The reward-hacking watch, against the real simulator."""
 
+import copy
+
 import torch
 from rl_helpers import POLICY
 
@@ -7,7 +9,9 @@ from gymnast.config import EnvConfig
 from gymnast.envs.factory import EnvFactory
 from gymnast.envs.kinds import REAL
 from gymnast.policy.load import load_policy
-from gymnast.rl.evaluate import watch_hacking
+from gymnast.envs.starts import evaluation_starts
+from gymnast.reward.sim import SimSuccess
+from gymnast.rl.evaluate import evaluate_in_env, policy_fingerprint, shared_evaluations, watch_hacking
 from gymnast.rl.rollout import collect_rollouts, dataset_starts
 
 CONFIG = EnvConfig(image_size=96, horizon=60)
@@ -29,3 +33,30 @@ def test_replaying_real_rollouts_in_the_real_world_agrees_with_their_outcomes(rl
         assert watched["eval/watch_false_success"] == 1 - outcome.mean().item()
     finally:
         envs.close()
+
+
+def test_a_shared_evaluation_runs_once_and_gives_exactly_the_figures_of_running_it_again():
+    policy = load_policy(POLICY)
+    starts = evaluation_starts(["reach-v3", "drawer-close-v3"], 2, CONFIG)
+
+    def evaluate(built: list) -> dict:
+        envs = EnvFactory(REAL, policy.chunk_size, CONFIG, "none", workers=1, batch=4)
+        try:
+            figures = evaluate_in_env(envs, REAL, policy, SimSuccess(), starts, prefix="eval/real")
+            built.append(bool(envs._envs))  # whether it built a simulator to run episodes in
+            return figures
+        finally:
+            envs.close()
+
+    built = []
+    fresh = evaluate(built)
+    with shared_evaluations():
+        first, again = evaluate(built), evaluate(built)
+        changed = copy.deepcopy(policy)
+        with torch.no_grad():
+            next(changed.parameters()).add_(0.5)
+        assert policy_fingerprint(changed) != policy_fingerprint(policy)
+    assert fresh == first == again and fresh["eval/real_episodes"] == 4 and "eval/real_success/reach-v3" in fresh
+    assert built == [True, True, False]  # the repeated one ran no episode
+    with shared_evaluations():
+        assert evaluate(built) == fresh and built[-1]  # a new block runs it again

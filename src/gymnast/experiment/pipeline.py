@@ -33,6 +33,7 @@ from gymnast.experiment.arms import ARMS, PERTURBATIONS, ROBUSTNESS_ARMS, arm, d
 from gymnast.experiment.config import ExperimentConfig
 from gymnast.experiment.stages import Stages
 from gymnast.reward.spec import RewardSpec
+from gymnast.rl.evaluate import shared_evaluations
 from gymnast.utils.atomic import write_json
 from gymnast.utils.device import resolve_device
 from gymnast.utils.settings import from_json, saved_settings
@@ -44,8 +45,10 @@ def run_experiment(config: ExperimentConfig, out: Path, reuse: dict[str, Path] |
 
     Its stages build dozens of short-lived simulator envs (every arm's training, evaluations and
     replays): they pass their worker processes on instead of starting new ones (`shared_simulator_processes`).
+    Every arm starts by evaluating the same SFT policy on the same seeds: that evaluation runs once
+    (`gymnast.rl.evaluate.shared_evaluations`).
     """
-    with shared_simulator_processes():
+    with shared_simulator_processes(), shared_evaluations():
         return _run_experiment(config, out, reuse, progress)
 
 

@@ -9,11 +9,20 @@ starts from the real first frame of an evaluation seed (`gymnast.envs.starts.eva
 and is judged by the run's reward. Its protocol matches `gymnast eval` (greedy chunks executed
 open-loop, success at any step, the same horizon and seeds), so real-world figures are comparable
 with it.
+
+Every arm of an experiment starts from the same SFT policy and evaluates it on the same seeds
+before its first step. Inside ``with shared_evaluations():`` an evaluation in a simulator (the
+real world or the software one) of a policy with the same weights, on the same starts, env and
+batch, is run once and its figures given to every later asker: greedy episodes of a deterministic
+simulator are the same episodes (a test checks that the figures are identical). Each run still
+counts the evaluation's interactions as its own, so the runs' counts stay comparable.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import contextlib
+import hashlib
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 
 import torch
@@ -48,6 +57,18 @@ def evaluate_in_env(envs: EnvFactory, kind: EnvKind, policy, reward: Reward, sta
     interactions when `kind` declares ``real_interactions``) and, when any episode could be judged, ``_success``,
     ``_ci_low``, ``_ci_high`` and ``_success/<task>`` for every task.
     """
+    key = _remembered.key(envs, kind, policy, starts)
+    if key in _remembered.figures:
+        return {f"{prefix}_{name}": value for name, value in _remembered.figures[key].items()}
+    values = _evaluate_in_env(envs, kind, policy, reward, starts, progress)
+    if key is not None:
+        _remembered.figures[key] = values
+    return {f"{prefix}_{name}": value for name, value in values.items()}
+
+
+def _evaluate_in_env(envs: EnvFactory, kind: EnvKind, policy, reward: Reward, starts: Sequence[Start],
+                     progress: bool) -> dict[str, float]:
+    """`evaluate_in_env`'s figures, without the prefix."""
     env = envs.get(kind, envs.batch)
     outcomes, interactions = [], 0
     bar = tqdm(total=len(starts), desc=f"evaluate {kind}", unit="ep", disable=not progress, leave=False)
@@ -64,14 +85,57 @@ def evaluate_in_env(envs: EnvFactory, kind: EnvKind, policy, reward: Reward, sta
     success = torch.cat(outcomes)
     judged = success[torch.isfinite(success)]
     wins, total = int(judged.sum()), len(judged)
-    values = {f"{prefix}_episodes": total, f"{prefix}_interactions": interactions}
+    values = {"episodes": total, "interactions": interactions}
     if total:  # nothing judged: a continuous reward on imagined video has no notion of success
         low, high = wilson_interval(wins, total)
-        values |= {f"{prefix}_success": wins / total, f"{prefix}_ci_low": low, f"{prefix}_ci_high": high}
+        values |= {"success": wins / total, "ci_low": low, "ci_high": high}
         for task in dict.fromkeys(start.task for start in starts):
             mine = success[[i for i, start in enumerate(starts) if start.task == task]]
-            values[f"{prefix}_success/{task}"] = torch.nanmean(mine).item()
+            values[f"success/{task}"] = torch.nanmean(mine).item()
     return values
+
+
+class _Remembered:
+    """The simulator evaluations of a `shared_evaluations` block, by what decides their episodes."""
+
+    def __init__(self) -> None:
+        self.active = False
+        self.figures: dict[tuple, dict[str, float]] = {}
+
+    def key(self, envs: EnvFactory, kind: EnvKind, policy, starts: Sequence[Start]) -> tuple | None:
+        """What decides a greedy evaluation's episodes; None outside a block, in imagination (a
+        world model's episodes also depend on its reward and weights, which change with Dyna) and
+        for a policy that is not one module of weights (a wrapper that adds noise acts otherwise)."""
+        if not self.active or kind.imagined or not isinstance(policy, torch.nn.Module):
+            return None
+        scenes = tuple((s.task, s.seed, s.instruction, s.prefix.tobytes()) for s in starts)
+        return (kind.name, envs.config, envs.gap, envs.chunk_size, envs.batch, scenes, policy_fingerprint(policy))
+
+
+_remembered = _Remembered()
+
+
+def policy_fingerprint(policy) -> str:
+    """A digest of the policy's weights and buffers: equal for policies that act alike."""
+    digest = hashlib.sha256(type(policy).__qualname__.encode())
+    for name, tensor in policy.state_dict().items():
+        digest.update(name.encode())
+        digest.update(tensor.detach().cpu().contiguous().view(torch.uint8).numpy().tobytes())
+    return digest.hexdigest()
+
+
+@contextlib.contextmanager
+def shared_evaluations() -> Iterator[None]:
+    """Within the block, an evaluation in a simulator repeated with the same policy weights, starts,
+    env and batch gives the first one's figures without running again (nested blocks share the outer one's)."""
+    if _remembered.active:
+        yield
+        return
+    _remembered.active = True
+    try:
+        yield
+    finally:
+        _remembered.active, _remembered.figures = False, {}
 
 
 @dataclass(frozen=True)
