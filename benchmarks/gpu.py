@@ -146,7 +146,8 @@ def wm_train_step_s(config: EmbeddedWorldModelConfig, sizes: Sizes, device: torc
     b, c, f, size = sizes.wm_batch, config.context_frames, sizes.wm_future, config.image_size
     clips = ClipBatch(torch.randint(0, 256, (b, c, size, size, 3), dtype=torch.uint8, device=device),
                       torch.rand(b, f, config.action_dim, device=device) * 2 - 1,
-                      torch.randint(0, 256, (b, f, size, size, 3), dtype=torch.uint8, device=device))
+                      torch.randint(0, 256, (b, f, size, size, 3), dtype=torch.uint8, device=device),
+                      torch.zeros(b, f, 0, device=device))
     return timed(lambda: gradient_step(clip_loss(model, clips)[0], model, optimizer, schedule), device, sizes.repeats)
 
 

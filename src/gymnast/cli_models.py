@@ -51,6 +51,8 @@ def train_wm(
     seed: int | None = None,
     moving_weight: float | None = None,
     action_dropout: float | None = None,
+    grounded: bool | None = None,
+    state_noise: float | None = None,
     init: Path | None = None,
     extra_data: tuple[Path, ...] = (),
     camera: str | None = None,
@@ -74,6 +76,10 @@ def train_wm(
         moving_weight: extra loss weight of moving pixels, normalised (0 = plain mean squared error).
         action_dropout: share of training steps whose action is hidden, so that the model can be
             imagined with action guidance (`guidance` in its config.json; docs/world_model.md).
+        grounded: render every frame at the episode's recorded state (embedded backend): the model
+            then imagines beside a state model that gives it the states (`gymnast rl --robot-state`).
+        state_noise: with --grounded, noise on the recorded states in training, in units of their spread
+            (a state model's imagined states are that far off).
         init: fine-tune: start from the weights of this world-model run or checkpoint (same model spec).
         extra_data: more dataset directories to train on (same image size), split by the same scene hash.
         camera: the dataset camera to read, by name (front: observation.images.front) or by feature key
@@ -91,7 +97,8 @@ def train_wm(
     config, inputs = resolve(
         "train-wm", out, resume, wm_preset(preset, backend or "embedded"), inputs={"data": data}, required=("data",),
         overrides={"backend": backend, "device": device, "steps": steps, "seed": seed, "moving_weight": moving_weight,
-                   f"{'flow' if backend == 'flow' else 'model'}.action_dropout": action_dropout, "init": init, "extra_data": extra_data or None, "camera": camera, "cameras": cameras or None, "fit": fit,
+                   f"{'flow' if backend == 'flow' else 'model'}.action_dropout": action_dropout,
+                   "grounded": grounded, "state_noise": state_noise, "init": init, "extra_data": extra_data or None, "camera": camera, "cameras": cameras or None, "fit": fit,
                    **key_overrides(keys)},
         saved=lambda: (saved_train_config(out), saved_inputs(out, "data")))
     checkpoint = train_world_model(inputs["data"], out, config, resume=resume)
@@ -180,6 +187,7 @@ def eval_wm(
     reanchor_every: int | None = None,
     camera: str | None = None,
     device: str = "auto",
+    robot_state: Path | None = None,
     keys: Annotated[KeyFlags, tyro.conf.arg(name="")] = KeyFlags(),
 ) -> None:
     """Measure a world model's open-loop fidelity and controllability on held-out episodes.
@@ -196,6 +204,8 @@ def eval_wm(
         camera: the dataset camera to read, by name (front: observation.images.front) or by feature key
             (image, observation.images.top); default: its first video (else image) feature.
         device: where the world model imagines: auto (CUDA when torch sees a GPU, else the CPU), cpu, cuda or cuda:N.
+        robot_state: for a grounded world model (train-wm --grounded), the state model (or ensemble) run whose
+            imagined states it renders at, from each rollout's real start; default: the recorded states.
         keys: which dataset features are the actions and the states (default: LeRobot's action and
             observation.state).
     """
@@ -204,7 +214,7 @@ def eval_wm(
 
     config = WorldModelEvalConfig(max_episodes=max_episodes, videos=videos, gifs=gifs,
                                   controllability=ControllabilityConfig(scenes=control_scenes), reanchor_every=reanchor_every,
-                                  camera=camera, device=device, keys=feature_keys(keys))
+                                  camera=camera, device=device, keys=feature_keys(keys), robot_state=robot_state)
     report = evaluate_world_model(wm, data, out, config)
     print(format_report(report))
     print(f"report: {out}")

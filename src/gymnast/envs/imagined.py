@@ -21,6 +21,9 @@ where the frames come from. What differs, and why:
 - A batched env given a ``robot_state`` (`gymnast.world_model.robot_state.ImaginedRobotState`:
   a state model stepped under the same actions from each start's recorded state) also reports
   ``obs["state"]`` (B, D), the imagined robot state a policy that reads one is given.
+- A grounded world model (``state_dim`` S > 0) renders every frame at a state: the batched env
+  then needs a ``robot_state``, steps it first and gives the model its whole state after each
+  action. ``obs["state"]`` is reported only where the robot state has D > 0 (a policy reads it).
 - A world model that says how much to trust each frame (an ensemble's `disagreement`, (B, k) per
   step) has it reported in ``info["disagreement"]``; a single model reports none. The batched env
   can stop a rollout where it exceeds a threshold (``stop_above``): the rollout is truncated
@@ -145,15 +148,21 @@ class _Imagination:
         self.steps, self.chunks = 0, [context[:, -1:]]
         return context[:, -1].copy()
 
-    def step(self, actions: np.ndarray) -> tuple[np.ndarray, bool]:
-        """Applies (B, K, A) actions, cut at the horizon; returns (B, k, H, W, 3) frames, truncated."""
+    def remaining(self, actions: np.ndarray) -> np.ndarray:
+        """(B, K, A) actions cut at the horizon: the (B, k, A) that `step` imagines."""
         if self.state is None:
             raise RuntimeError("call reset() with real start frames before step()")
         if self.steps >= self.horizon:
             raise RuntimeError(f"the episode was truncated at its horizon of {self.horizon} actions; call reset()")
-        actions = actions[:, : self.horizon - self.steps]  # (B, k, A)
+        return actions[:, : self.horizon - self.steps]
+
+    def step(self, actions: np.ndarray, states: torch.Tensor | None = None) -> tuple[np.ndarray, bool]:
+        """Applies (B, K, A) actions, cut at the horizon (a grounded model's frames at the (B, k, S)
+        `states`); returns (B, k, H, W, 3) frames, truncated."""
+        actions = self.remaining(actions)  # (B, k, A)
         tensor = torch.from_numpy(actions).to(self.device)
-        self.state, frames = self.model.step(self.state, tensor, generator=self.generator)
+        grounding = {} if states is None else {"states": states.to(self.device)}
+        self.state, frames = self.model.step(self.state, tensor, generator=self.generator, **grounding)
         frames = self._to_host(frames)  # (B, k, H, W, 3) uint8
         disagreement = getattr(self.state, "disagreement", None)  # only ensembles know how far to trust a frame
         self.disagreement = None if disagreement is None else disagreement.float().cpu().numpy()  # (B, k)
@@ -255,7 +264,15 @@ class RobotState(Protocol):
 
     def start(self, states: np.ndarray, last_actions: np.ndarray, instructions: Sequence[str]) -> np.ndarray: ...
 
-    def step(self, actions: np.ndarray) -> np.ndarray: ...
+    def imagine(self, actions: np.ndarray) -> torch.Tensor: ...
+
+    def robot(self) -> np.ndarray: ...
+
+
+def grounded_state_dim(model: Any) -> int:
+    """S of a world model that renders every frame at a state; 0 for one that is not grounded (the
+    contract's `gymnast.world_model.base.grounded_state_dim`, restated here below world models)."""
+    return int(getattr(model, "state_dim", 0))
 
 
 class BatchedImaginedEnv(VectorEnv):
@@ -275,8 +292,13 @@ class BatchedImaginedEnv(VectorEnv):
             (B,) actions each rollout executed in the step and ``stopped`` (B,) bool so far.
             Needs a world model that reports disagreement (RuntimeError at `step` otherwise).
         robot_state: if given, observations also hold ``"state"`` (B, D) float32, the robot state
-            it imagines under the same actions; reset then needs each start's recorded state
-            (``options["states"]``) and the actions that led there (``options["prefixes"]``).
+            it imagines under the same actions (none where D is 0); reset then needs each start's
+            recorded state (``options["states"]``) and the actions that led there
+            (``options["prefixes"]``). A grounded world model needs one: its frames are rendered at
+            the states it imagines.
+
+    Raises:
+        ValueError: a grounded world model without a robot state.
     """
 
     metadata = {"autoreset_mode": AutoresetMode.DISABLED, "render_modes": [], "render_fps": CONTROL_FPS}
@@ -285,9 +307,13 @@ class BatchedImaginedEnv(VectorEnv):
                  stop_above: float | None = None, robot_state: RobotState | None = None) -> None:
         self._sim = _Imagination(model, chunk_size, horizon)
         self.num_envs, self.stop_above, self.robot_state = num_envs, stop_above, robot_state
+        self.grounded = grounded_state_dim(model) > 0
+        if self.grounded and robot_state is None:
+            raise ValueError(f"the world model renders every frame at a {grounded_state_dim(model)}-d state: the imagined "
+                             "env needs a robot_state (a state model, --robot-state RUN) that imagines it")
         self._stopped = np.zeros(num_envs, dtype=bool)
         self.single_observation_space, self.single_action_space = _spaces(model, chunk_size)
-        if robot_state is not None:
+        if self._reports_state:
             self.single_observation_space = Dict({**self.single_observation_space.spaces, "state": Box(
                 -np.inf, np.inf, (robot_state.dim,), np.float32)})
         self.observation_space = batch_space(self.single_observation_space, num_envs)
@@ -311,8 +337,15 @@ class BatchedImaginedEnv(VectorEnv):
         frames = self._sim.start(context, seed=int(self.np_random.integers(2**63)))
         obs = {"image": frames}
         if self.robot_state is not None:
-            obs["state"] = self.robot_state.start(*self._recorded_states(options), instructions)
+            state = self.robot_state.start(*self._recorded_states(options), instructions)
+            if self._reports_state:
+                obs["state"] = state
         return obs, self._info()
+
+    @property
+    def _reports_state(self) -> bool:
+        """Whether observations hold the robot's state (a policy reads it)."""
+        return self.robot_state is not None and self.robot_state.dim > 0
 
     def _recorded_states(self, options: dict[str, Any]) -> tuple[np.ndarray, np.ndarray]:
         """(B, S) each start's recorded state and (B, A) the last action that led there (zeros at
@@ -329,7 +362,9 @@ class BatchedImaginedEnv(VectorEnv):
     def step(self, actions):
         """Imagines one chunk per rollout; rewards 0 and terminations False (a judge scores videos)."""
         actions = _check_actions(actions, self.action_space, "(num_envs, chunk_size, action_dim)")
-        frames, truncated = self._sim.step(actions)
+        # A grounded model's frames are drawn where the state model says things are after each action.
+        states = self.robot_state.imagine(self._sim.remaining(actions)) if self.grounded else None
+        frames, truncated = self._sim.step(actions, states)
         ended, extra = np.full(self.num_envs, truncated), {}
         if self._sim.disagreement is not None:
             extra["disagreement"] = self._sim.disagreement.copy()
@@ -342,8 +377,10 @@ class BatchedImaginedEnv(VectorEnv):
         infos = {**self._info(), "frames": frames, **extra}
         zeros = np.zeros(self.num_envs)
         obs = {"image": frames[:, -1].copy()}
-        if self.robot_state is not None:
-            obs["state"] = self.robot_state.step(actions[:, : frames.shape[1]])  # the actions imagined
+        if self.robot_state is not None and not self.grounded:
+            self.robot_state.imagine(actions[:, : frames.shape[1]])  # the actions imagined
+        if self._reports_state:
+            obs["state"] = self.robot_state.robot()
         return obs, zeros, zeros.astype(bool), ended, infos
 
     def _stop(self, frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

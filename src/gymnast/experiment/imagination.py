@@ -165,12 +165,14 @@ def measured_policy(policy: str | Path, world_model: WorldModel, wm: str | Path,
     model's cameras; what imagines its robot state, if it reads one (``--robot-state``,
     `gymnast.world_model.robot_state.robot_state_in_imagination`); and the labels the report records."""
     from gymnast.policy.load import load_policy
+    from gymnast.world_model.base import grounded_state_dim
     from gymnast.world_model.robot_state import robot_state_in_imagination
     from gymnast.world_model.views import check_policy_views
 
     loaded = load_policy(policy)
     check_policy_views(getattr(loaded.config, "cameras", ()), world_model, policy, wm)
-    state = robot_state_in_imagination(getattr(loaded, "state_dim", 0), robot_state, policy, wm)
+    state = robot_state_in_imagination(getattr(loaded, "state_dim", 0), robot_state, policy, wm,
+                                       grounded_state_dim(world_model))
     labels = {"policy": str(policy), "wm": str(wm), "reward": str(reward)}
     if robot_state is not None:
         labels["robot_state"] = str(robot_state)

@@ -68,19 +68,21 @@ CRITIC = "critic"
 """The name of the learned critic's weights and optimizer state in a checkpoint (``critic.pt``)."""
 
 
-def robot_state_for(state_dim: int, env: EnvKind, run_spec: RLRun):
-    """The imagined robot state for a policy of `state_dim` (D > 0) in imagination
-    (`gymnast.world_model.robot_state.robot_state_in_imagination` of ``--robot-state``), or None
-    where the env gives its own (a simulator's is Meta-World's hand xyz and gripper) or the policy
-    reads none.
+def robot_state_for(state_dim: int, env: EnvKind, run_spec: RLRun, world_model=None):
+    """The imagined robot state for a policy of `state_dim` (D > 0) and/or a grounded `world_model`
+    in imagination (`gymnast.world_model.robot_state.robot_state_in_imagination` of
+    ``--robot-state``), or None where the env gives its own (a simulator's is Meta-World's hand xyz
+    and gripper) or nothing reads one.
 
     Raises:
         ValueError: a state the env cannot give (the message says what to pass).
     """
+    from gymnast.world_model.base import grounded_state_dim
     from gymnast.world_model.robot_state import robot_state_in_imagination
 
     if env.imagined:
-        return robot_state_in_imagination(state_dim, run_spec.robot_state, run_spec.policy, run_spec.wm)
+        return robot_state_in_imagination(state_dim, run_spec.robot_state, run_spec.policy, run_spec.wm,
+                                          grounded_state_dim(world_model))
     if run_spec.robot_state is not None:
         raise ValueError(f"--robot-state imagines the robot's state in imagination; --env {env} is a simulator, "
                          "which gives its own: leave --robot-state out")
@@ -111,7 +113,7 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
     world_model = load_world_model(run_spec.wm).to(device) if run_spec.wm else None
     if env.imagined:
         check_policy_views(cameras, world_model, run_spec.policy, run_spec.wm)
-    robot_state = robot_state_for(getattr(policy, "state_dim", 0), env, run_spec)
+    robot_state = robot_state_for(getattr(policy, "state_dim", 0), env, run_spec, world_model)
     if levers and not isinstance(world_model, EnsembleWorldModel):
         raise ValueError(f"{levers[0]} needs a world-model ensemble to disagree (gymnast "
                          f"make-ensemble); {run_spec.wm} is a single world model")

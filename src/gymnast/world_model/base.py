@@ -38,6 +38,8 @@ class WorldModel(Protocol):
     action_dim: int  # A
     # A model of V cameras (`gymnast.world_model.views`) also has `views` (V) and `cameras` (their
     # names), and its frames are (..., H, V*W, 3), the views side by side; one without them sees one.
+    # A grounded model has `state_dim` S > 0 and its `step` takes ``states``, (B, K, S) the state
+    # each frame is rendered at (`grounded_state_dim`); one without it follows the actions alone.
 
     def init_state(self, context: torch.Tensor, generator: torch.Generator | None = None) -> Any:
         """State after the real (B, C', H, W, 3) uint8 context frames, the last one being "now".
@@ -74,6 +76,27 @@ def check_actions(actions: torch.Tensor, action_dim: int, batch: int) -> None:
         raise ValueError(f"actions must be {expected}, got {tuple(actions.shape)}")
     if not actions.is_floating_point():
         raise ValueError(f"actions must be {expected}, got dtype {actions.dtype}")
+
+
+def grounded_state_dim(model: Any) -> int:
+    """S, the state a grounded world model renders every frame at; 0 for one that is not grounded."""
+    return int(getattr(model, "state_dim", 0))
+
+
+def check_states(states: torch.Tensor | None, state_dim: int, leading: tuple[int, ...]) -> None:
+    """Raises ValueError unless `states` is None for a model that is not grounded (`state_dim` 0),
+    or (B, K, state_dim) floating point, (B, K) = `leading`, for a grounded one."""
+    if not state_dim:
+        if states is not None:
+            raise ValueError("this world model is not grounded in a state (state_dim 0); it takes no states")
+        return
+    expected = f"({', '.join(map(str, leading))}, {state_dim}) float: the state each frame is rendered at"
+    if states is None:
+        raise ValueError(f"this world model is grounded: step() needs states {expected} (a state model imagines them, "
+                         "gymnast.world_model.robot_state)")
+    if not isinstance(states, torch.Tensor) or tuple(states.shape) != (*leading, state_dim) or not states.is_floating_point():
+        got = tuple(states.shape) if isinstance(states, torch.Tensor) else type(states).__name__
+        raise ValueError(f"states must be {expected}, got {got}")
 
 
 def pad_context(context: torch.Tensor, frames: int) -> torch.Tensor:
@@ -131,7 +154,7 @@ class ConfiguredWorldModel(torch.nn.Module):
 
     backend: str
     config_class: type
-    _TUPLES = ("widths", "action_low", "action_high")  # config fields that JSON keeps as lists
+    _TUPLES = ("widths", "action_low", "action_high", "state_mean", "state_std")  # config fields that JSON keeps as lists
 
     @property
     def context_frames(self) -> int:
@@ -182,7 +205,7 @@ class ImaginedRollout:
 
 
 def rollout(model: WorldModel, context: torch.Tensor, actions: torch.Tensor,
-            generator: torch.Generator | None = None) -> ImaginedRollout:
+            generator: torch.Generator | None = None, states: torch.Tensor | None = None) -> ImaginedRollout:
     """Imagines fixed actions open-loop from real context frames, in one model call.
 
     Args:
@@ -191,10 +214,12 @@ def rollout(model: WorldModel, context: torch.Tensor, actions: torch.Tensor,
         actions: (B, T, A) the actions (both copied to the model's device; the frames come back
             to the host).
         generator: passed to the model (stochastic backends draw from it).
+        states: for a grounded model, (B, T, S) the state after each action (`check_states`).
     """
     device = module_device(model) if isinstance(model, torch.nn.Module) else torch.device("cpu")
     state = model.init_state(to_device(context, device), generator=generator)
-    state, frames = model.step(state, to_device(actions, device), generator=generator)
+    grounding = {} if states is None else {"states": to_device(states, device)}
+    state, frames = model.step(state, to_device(actions, device), generator=generator, **grounding)
     disagreement = getattr(state, "disagreement", None)  # only ensembles know how far to trust a frame
     return ImaginedRollout(frames.cpu(), actions.float(), None if disagreement is None else disagreement.float().cpu())
 

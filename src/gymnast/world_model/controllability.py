@@ -26,6 +26,7 @@ from gymnast.envs.engine import ReplayActor, play_episode
 from gymnast.envs.gap import GAPS
 from gymnast.envs.metaworld import MetaWorldEnv
 from gymnast.world_model.base import WorldModel, rollout
+from gymnast.world_model.grounding import StateSource
 from gymnast.world_model.metrics import psnr, to_unit_float
 from gymnast.world_model.views import replay_cameras
 
@@ -52,15 +53,18 @@ def random_sequences(count: int, horizon: int, hold: int, action_dim: int, rng: 
     return np.repeat(directions, hold, axis=1)[:, :horizon]
 
 
-def simulate(env: MetaWorldEnv, seed: int, actions: np.ndarray) -> np.ndarray:
-    """(T, H, W, 3) frames the simulator renders for (T, A) actions from the scene of `seed`."""
-    return np.stack(play_episode(env, ReplayActor(actions), seed, record=("frames",)).frames[1:])
+def simulate(env: MetaWorldEnv, seed: int, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(T, H, W, 3) frames the simulator renders and (T, E) its environment states after (T, A)
+    actions from the scene of `seed`."""
+    run = play_episode(env, ReplayActor(actions), seed, record=("frames", "env_states"))
+    return np.stack(run.frames[1:]), np.stack(run.env_states[1:]).astype(np.float32)
 
 
 def check_controllability(model: WorldModel, dataset: EpisodeDataset, heldout: list[int], config: ControllabilityConfig,
-                          progress: bool = True) -> dict:
+                          progress: bool = True, grounding: StateSource | None = None) -> dict:
     """Runs the check on the first `config.scenes` held-out scenes; returns its figures (none when
-    no held-out scene can be replayed: episodes recorded on another robot have no simulator)."""
+    no held-out scene can be replayed: episodes recorded on another robot have no simulator). A
+    grounded model renders at the states `grounding` gives (the simulator's own, or a state model's)."""
     scenes, seen = [], set()
     worlds = {gap.env_variant for gap in GAPS.values()}
     for index in heldout:
@@ -83,10 +87,15 @@ def check_controllability(model: WorldModel, dataset: EpisodeDataset, heldout: l
         start_psnr.append(float(psnr(to_unit_float(torch.from_numpy(start)), to_unit_float(torch.from_numpy(episode.observed_frames[0])))))
         sequences = np.concatenate([episode.actions[None, : config.horizon].astype(np.float32),
                                     random_sequences(config.sequences - 1, config.horizon, config.hold, model.action_dim, rng)])
-        real = torch.from_numpy(np.stack([simulate(env, info.seed, s) for s in sequences]))  # (S, T, H, W, 3)
+        simulated = [simulate(env, info.seed, s) for s in sequences]
+        real = torch.from_numpy(np.stack([frames for frames, _ in simulated]))  # (S, T, H, W, 3)
         env.close()
+        states = None if grounding is None else grounding.states(
+            episode.env_states[0], np.zeros(model.action_dim, np.float32), episode.info.instruction, sequences,
+            np.stack([env_states for _, env_states in simulated]))
         context = torch.from_numpy(start)[None, None].expand(len(sequences), 1, -1, -1, -1)
-        imagined = rollout(model, context, torch.from_numpy(sequences), torch.Generator().manual_seed(config.seed)).frames  # (S, T, H, W, 3)
+        imagined = rollout(model, context, torch.from_numpy(sequences), torch.Generator().manual_seed(config.seed),
+                           states).frames  # (S, T, H, W, 3)
         pred, target = to_unit_float(imagined), to_unit_float(real)
         # M[i, j]: imagined rollout i against real rollout j, mean PSNR over the T frames.
         matrices.append(torch.stack([psnr(pred, target[j : j + 1].expand_as(target)).mean(1) for j in range(len(target))], 1).numpy())

@@ -10,6 +10,7 @@ evaluation seeds (`gymnast.envs.tasks.EVAL_SEEDS`) are never used at all.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import zlib
 from collections.abc import Sequence
@@ -49,11 +50,14 @@ class ClipBatch:
         context: (B, C, H, W, 3) uint8.
         actions: (B, F, A) float32; action f moves frame C-1+f to frame C+f.
         future: (B, F, H, W, 3) uint8.
+        states: (B, F, S) float32 the recorded state of each future frame (what a grounded model
+            renders it at); S = 0 where the episodes record none.
     """
 
     context: torch.Tensor
     actions: torch.Tensor
     future: torch.Tensor
+    states: torch.Tensor
 
 
 class EpisodeBank:
@@ -78,15 +82,19 @@ class EpisodeBank:
         cameras: the camera whose frames the entry holds.
         infos, frames, actions: the episode's facts, the camera's (T+1, H, W, 3) uint8 frames and
             the episode's (T, A) actions.
+        states: the episode's (T+1, S) float32 states: its environment state where recorded (the
+            objects' too), else its ``observation.state``, as the state model reads them.
     """
 
     def __init__(self, dataset: EpisodeDataset, indices: Sequence[int], progress: bool = False) -> None:
         if not indices:
             raise ValueError(f"{dataset.root}: no episodes to load (is the held-out fraction too large?)")
         self.indices, self.roots, self.cameras, self.infos, self.frames, self.actions = [], [], [], [], [], []
+        self.states = []
         for i in tqdm(indices, desc="loading episodes", disable=not progress):
             episode = dataset.load(i)
             actions = torch.from_numpy(episode.actions).float()  # (T, A)
+            states = torch.from_numpy(episode.env_states if episode.env_states.shape[1] else episode.states).float()
             for camera, frames in (episode.views or {dataset.camera_key: episode.frames}).items():
                 self.indices.append(i)
                 self.roots.append(dataset.root)
@@ -94,6 +102,7 @@ class EpisodeBank:
                 self.infos.append(dataset.episodes[i])
                 self.frames.append(torch.from_numpy(frames))  # (T+1, H, W, 3)
                 self.actions.append(actions)
+                self.states.append(states)
 
     @classmethod
     def union(cls, parts: Sequence[tuple[EpisodeDataset, Sequence[int]]], progress: bool = False) -> EpisodeBank:
@@ -108,7 +117,7 @@ class EpisodeBank:
             raise ValueError(f"{roots}: no episodes to load (is the held-out fraction too large?)")
         bank = banks[0]
         for other in banks[1:]:
-            for name in ("indices", "roots", "cameras", "infos", "frames", "actions"):
+            for name in ("indices", "roots", "cameras", "infos", "frames", "actions", "states"):
                 getattr(bank, name).extend(getattr(other, name))
         return bank
 
@@ -130,7 +139,8 @@ class EpisodeBank:
         action_index = torch.arange(start + context - 1, start + context - 1 + future)
         clip_actions = torch.where((action_index >= 0)[:, None], actions[action_index.clamp(min=0)], 0.0)
         clip_frames = frames[index]
-        return ClipBatch(clip_frames[None, :context], clip_actions[None], clip_frames[None, context:])
+        return ClipBatch(clip_frames[None, :context], clip_actions[None], clip_frames[None, context:],
+                         self.states[k][index[context:]][None])
 
     def sample(self, batch: int, context: int, future: int, generator: torch.Generator) -> ClipBatch:
         """`batch` clips drawn uniformly over episodes, then over start positions."""
@@ -143,4 +153,24 @@ class EpisodeBank:
             last_start = len(self.actions[k]) + 1 - context - future
             start = int(torch.randint(1 - context, last_start + 1, (1,), generator=generator))
             clips.append(self.clip(k, start, context, future))
-        return ClipBatch(*(torch.cat(parts) for parts in zip(*((c.context, c.actions, c.future) for c in clips))))
+        widths = {c.states.shape[-1] for c in clips}
+        if len(widths) > 1:  # only a grounded model reads them; the others train on any mix
+            clips = [dataclasses.replace(c, states=c.states[..., :0]) for c in clips]
+        return ClipBatch(*(torch.cat(parts) for parts in zip(*((c.context, c.actions, c.future, c.states) for c in clips))))
+
+    def state_stats(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
+        """(S,) mean and spread of every recorded state in the bank, which a grounded model
+        normalises its state input by (a spread of 0, a number that never changes, counts as 1).
+
+        Raises:
+            ValueError: the episodes record no state, or states of different widths.
+        """
+        widths = {states.shape[1] for states in self.states}
+        if len(widths) != 1 or 0 in widths:
+            roots = ", ".join(sorted({str(root) for root in self.roots}))
+            raise ValueError(f"{roots}: a grounded world model needs every episode to record a state of one width "
+                             f"(observation.environment_state or observation.state); found widths {sorted(widths)}")
+        everything = torch.cat(self.states)
+        spread = everything.std(dim=0)
+        spread = torch.where(spread > 1e-6, spread, torch.ones_like(spread))
+        return tuple(everything.mean(dim=0).tolist()), tuple(spread.tolist())

@@ -9,6 +9,7 @@ channels, h/w = H/8, W/8 latent grid.
     frame = alpha * rgb + (1 - alpha) * warp(last context frame, flow)
     every `reanchor_every` steps: encode the last C imagined frames as the new context
     with `action_dropout` in training, guidance w: z' = z'(no action) + w (z'(action) - z'(no action))
+    grounded (`state_dim` S > 0): the FiLM condition also holds the state each frame shows (B, K, S)
 
 Why this shape (docs/world_model.md has the measurements):
 - Meta-World is deterministic given the scene, and the context frames show the scene, so a
@@ -29,6 +30,11 @@ Why this shape (docs/world_model.md has the measurements):
   under actions that miss its handle). Hiding the action in a share of training steps teaches the
   latent step what happens without one; guidance w > 1 then scales up what the action changes
   (classifier-free guidance, as in the flow backend, on the latent step).
+- A video model does not know where the hand is: its arm drifts centimetres off within tens of
+  steps, and it can open a door the hand never touched. A grounded model renders every frame at a
+  state given from outside (the recorded one in training, a state model's in imagination,
+  `gymnast.world_model.robot_state`), so where things are is decided by a model that tracks them,
+  and the video model only draws them there.
 """
 
 from __future__ import annotations
@@ -40,7 +46,8 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from gymnast.world_model.base import ActionScale, ConfiguredWorldModel, check_action_range, check_actions, check_context, pad_context
+from gymnast.world_model.base import (ActionScale, ConfiguredWorldModel, check_action_range, check_actions, check_context,
+                                      check_states, pad_context)
 
 
 @dataclass(frozen=True)
@@ -80,6 +87,13 @@ class EmbeddedWorldModelConfig:
     """Action guidance when imagining: each latent step is the "no action" step plus w times what
     the action changes (1 = the action's step alone; > 1 sharpens the action's effect, and computes
     the latent step twice). Changes how the weights are used, not what they are: set at load time."""
+    state_dim: int = 0
+    """S > 0: a grounded model, which renders every frame at the state it is given (the dataset's
+    environment state where recorded, else its ``observation.state``); 0: frames follow the actions alone."""
+    state_mean: tuple[float, ...] = ()
+    """(S,) the training data's mean state, which the model's state input subtracts (set by training)."""
+    state_std: tuple[float, ...] = ()
+    """(S,) the training data's state spread, by which the model's state input divides (set by training)."""
 
     def __post_init__(self) -> None:
         if self.image_size % 8:
@@ -91,6 +105,9 @@ class EmbeddedWorldModelConfig:
         check_action_range(self.action_low, self.action_high, self.action_dim)
         if not 0 <= self.action_dropout < 1:
             raise ValueError(f"action_dropout must be in [0, 1), got {self.action_dropout}")
+        if self.state_dim < 0 or len(self.state_mean) != len(self.state_std) or self.state_mean and len(self.state_mean) != self.state_dim:
+            raise ValueError(f"a grounded model of {self.state_dim}-d states needs that many state_mean and state_std "
+                             f"values, got {len(self.state_mean)} and {len(self.state_std)}")
         if self.guidance != 1 and self.action_dropout == 0:
             raise ValueError(f"guidance {self.guidance} needs a model trained with action_dropout > 0 "
                              "(it has no 'no action' step to guide from); use guidance 1")
@@ -168,6 +185,16 @@ class EmbeddedWorldModel(ConfiguredWorldModel):
             nn.Linear(config.action_dim, config.action_width), nn.SiLU(), nn.Linear(config.action_width, config.action_width)
         )
         self.blocks = nn.ModuleList(ActionBlock(z, config.action_width) for _ in range(config.blocks))
+        # Only grounded models have it. Its last layer starts at zero, so a grounded fine-tune of an
+        # ungrounded model starts exactly where that model was.
+        self.embed_state = None
+        if config.state_dim:
+            self.embed_state = nn.Sequential(nn.Linear(config.state_dim, config.action_width), nn.SiLU(),
+                                             nn.Linear(config.action_width, config.action_width))
+            nn.init.zeros_(self.embed_state[2].weight)
+            nn.init.zeros_(self.embed_state[2].bias)
+            self.register_buffer("state_mean", torch.tensor(config.state_mean or (0.0,) * config.state_dim), persistent=False)
+            self.register_buffer("state_std", torch.tensor(config.state_std or (1.0,) * config.state_dim), persistent=False)
         # Only models trained with action dropout have it: older runs' weights load unchanged.
         self.no_action = nn.Parameter(torch.zeros(config.action_width)) if config.action_dropout > 0 else None
         self.up_coarse = nn.ConvTranspose2d(z, coarse, 4, 2, 1)
@@ -192,14 +219,22 @@ class EmbeddedWorldModel(ConfiguredWorldModel):
         with self.autocast():
             return self.encode(frames)
 
+    @property
+    def state_dim(self) -> int:
+        """S, the state every frame is rendered at (0: not grounded)."""
+        return self.config.state_dim
+
     @torch.inference_mode()
     def step(
-        self, state: LatentState, actions: torch.Tensor, generator: torch.Generator | None = None
+        self, state: LatentState, actions: torch.Tensor, generator: torch.Generator | None = None,
+        states: torch.Tensor | None = None,
     ) -> tuple[LatentState, torch.Tensor]:
-        """See `WorldModel.step`; deterministic, so `generator` is unused."""
+        """See `WorldModel.step`; deterministic, so `generator` is unused. A grounded model also
+        takes `states`, (B, K, S) the state after each action (`check_states`)."""
         check_actions(actions, self.action_dim, state.z.shape[0])
+        check_states(states, self.state_dim, actions.shape[:2])
         with self.autocast():
-            state, frames = self.imagine(state, actions.float())
+            state, frames = self.imagine(state, actions.float(), None if states is None else states.float())
         # +0.5 then truncation rounds (values are >= 0); in place, as this runs once per imagined frame.
         return state, frames.permute(0, 1, 3, 4, 2).float().mul_(255.0).add_(0.5).clamp_(0, 255).to(torch.uint8)
 
@@ -211,14 +246,17 @@ class EmbeddedWorldModel(ConfiguredWorldModel):
         coarse = self.encode_coarse(fine)  # (B, W2, H/4, W/4)
         return LatentState(self.encode_latent(coarse), self.skip_fine(fine), self.skip_coarse(coarse), context[:, -1], context)
 
-    def imagine(self, state: LatentState, actions: torch.Tensor) -> tuple[LatentState, torch.Tensor]:
-        """Applies (B, K, A) actions; returns the new state and (B, K, 3, H, W) float frames."""
-        actions = self.scale_actions(actions)
+    def imagine(self, state: LatentState, actions: torch.Tensor,
+                states: torch.Tensor | None = None) -> tuple[LatentState, torch.Tensor]:
+        """Applies (B, K, A) actions, each frame rendered at the (B, K, S) `states` of a grounded
+        model; returns the new state and (B, K, 3, H, W) float frames."""
+        embedded = self.embed_action(self.scale_actions(actions))  # (B, K, action_width)
+        grounding = None if self.embed_state is None else self.embed_state((states - self.state_mean) / self.state_std)
         frames = []
         for k in range(actions.shape[1]):
             if state.since_anchor == self.config.reanchor_every:
                 state = self.encode(state.recent)  # imagined frames become the new context
-            z = self._latent_step(state.z, self.embed_action(actions[:, k]))
+            z = self._latent_step(state.z, embedded[:, k], None if grounding is None else grounding[:, k])
             frame = self._decode(z, state)  # (B, 3, H, W)
             recent = state.recent
             if self.config.reanchor_every and state.since_anchor >= self.config.reanchor_every - len(recent[0]):
@@ -228,17 +266,20 @@ class EmbeddedWorldModel(ConfiguredWorldModel):
             frames.append(frame)
         return state, torch.stack(frames, dim=1)
 
-    def _latent_step(self, z: torch.Tensor, condition: torch.Tensor) -> torch.Tensor:
-        """(B, Z, h, w) latent and (B, action_width) action embedding -> the latent one action later."""
+    def _latent_step(self, z: torch.Tensor, action: torch.Tensor, grounding: torch.Tensor | None = None) -> torch.Tensor:
+        """(B, Z, h, w) latent, (B, action_width) action embedding and, for a grounded model, the
+        (B, action_width) embedding of the state to render -> the latent one action later. Action
+        dropout and guidance act on the action alone: the state is what the frame must show either way."""
+        ground = (lambda condition: condition) if grounding is None else (lambda condition: condition + grounding)
         if self.no_action is None:
-            return self._blocks(z, condition)
-        no_action = self.no_action.to(condition.dtype).expand_as(condition)
+            return self._blocks(z, ground(action))
+        no_action = self.no_action.to(action.dtype).expand_as(action)
         if self.training:  # hide the action in `action_dropout` of the steps
-            hidden = torch.rand(len(condition), 1, device=condition.device) < self.config.action_dropout
-            return self._blocks(z, torch.where(hidden, no_action, condition))
+            hidden = torch.rand(len(action), 1, device=action.device) < self.config.action_dropout
+            return self._blocks(z, ground(torch.where(hidden, no_action, action)))
         if self.config.guidance == 1:
-            return self._blocks(z, condition)
-        guided, free = self._blocks(z.repeat(2, 1, 1, 1), torch.cat([condition, no_action])).chunk(2)
+            return self._blocks(z, ground(action))
+        guided, free = self._blocks(z.repeat(2, 1, 1, 1), torch.cat([ground(action), ground(no_action)])).chunk(2)
         return free + self.config.guidance * (guided - free)
 
     def _blocks(self, z: torch.Tensor, condition: torch.Tensor) -> torch.Tensor:

@@ -31,7 +31,7 @@ import torch
 from torch import nn
 
 from gymnast.utils.atomic import write_json
-from gymnast.world_model.base import ENSEMBLE_FILE, WorldModel, check_context, load_world_model
+from gymnast.world_model.base import ENSEMBLE_FILE, WorldModel, check_context, grounded_state_dim, load_world_model
 from gymnast.world_model.views import model_cameras, model_views
 
 
@@ -77,7 +77,8 @@ class EnsembleWorldModel(nn.Module):
         if len(members) < 2:
             raise ValueError(f"an ensemble needs at least two members, got {len(members)}")
         for name, values in (("image_size", [m.image_size for m in members]), ("action_dim", [m.action_dim for m in members]),
-                             ("cameras", [model_cameras(m) for m in members])):
+                             ("cameras", [model_cameras(m) for m in members]),
+                             ("state_dim", [grounded_state_dim(m) for m in members])):
             if len(set(values)) > 1:
                 raise ValueError(f"the members' {name} differ: {values}")
         self.members = nn.ModuleList(members)
@@ -103,6 +104,10 @@ class EnsembleWorldModel(nn.Module):
         return self.members[0].action_dim
 
     @property
+    def state_dim(self) -> int:
+        return grounded_state_dim(self.members[0])
+
+    @property
     def action_range(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
         """The first member's (see `EmbeddedWorldModel.action_range`)."""
         default = ((-1.0,) * self.action_dim, (1.0,) * self.action_dim)
@@ -114,13 +119,15 @@ class EnsembleWorldModel(nn.Module):
         return EnsembleState(tuple(m.init_state(context, generator=generator) for m in self.members))
 
     @torch.inference_mode()
-    def step(self, state: EnsembleState, actions: torch.Tensor,
-             generator: torch.Generator | None = None) -> tuple[EnsembleState, torch.Tensor]:
-        """See `WorldModel.step`: every member applies the actions; returns the first member's frames.
+    def step(self, state: EnsembleState, actions: torch.Tensor, generator: torch.Generator | None = None,
+             states: torch.Tensor | None = None) -> tuple[EnsembleState, torch.Tensor]:
+        """See `WorldModel.step`: every member applies the actions (grounded members at the same
+        `states`); returns the first member's frames.
 
         The members' disagreement on these frames is in the returned state's `disagreement`.
         """
-        states, frames = zip(*(m.step(s, actions, generator=generator) for m, s in zip(self.members, state.members)))
+        grounding = {} if states is None else {"states": states}
+        states, frames = zip(*(m.step(s, actions, generator=generator, **grounding) for m, s in zip(self.members, state.members)))
         return EnsembleState(tuple(states), frame_disagreement(frames)), frames[0]
 
     def spec(self) -> dict:

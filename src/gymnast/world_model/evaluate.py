@@ -13,6 +13,9 @@ A world model of several cameras (`gymnast.world_model.views`) is measured on th
 side, and on each camera's view alone (``per_camera``): the gripper camera's view changes far more
 than the front one's as the hand moves, so the two fail differently.
 
+A grounded model (one that renders every frame at a state, `gymnast.world_model.grounding`) is
+measured at the recorded states, or at a state model's (``robot_state``): ``grounding`` says which.
+
 For an ensemble (`gymnast.world_model.ensemble`) the frames measured are its first member's, and
 the report adds the members' per-frame disagreement (disagreement_h1 ... _full) and how well it
 predicts that member's error (see `disagreement_error`): the evidence for stopping or discounting
@@ -41,10 +44,12 @@ from gymnast.utils.atomic import write_json
 from gymnast.utils.checkpoint import resolve_checkpoint
 from gymnast.utils.device import resolve_device
 from gymnast.utils.images import split_views
-from gymnast.world_model.base import load_world_model, rollout
+from gymnast.world_model.base import grounded_state_dim, load_world_model, rollout
 from gymnast.world_model.controllability import ControllabilityConfig, check_controllability
 from gymnast.world_model.data import split_episodes
 from gymnast.world_model.ensemble import EnsembleWorldModel, is_ensemble, member_paths
+from gymnast.world_model.grounding import StateSource
+from gymnast.world_model.state_model import load_state_models
 from gymnast.world_model.metrics import PerceptualDistance, masked_psnr, moving_mask, pearson, psnr, ssim, summarize_horizons, to_unit_float
 from gymnast.world_model.videos import side_by_side, write_gif, write_side_by_side
 from gymnast.world_model.views import model_cameras
@@ -76,6 +81,9 @@ class WorldModelEvalConfig:
     """Which dataset features are the actions and the states (--action-key, --state-key)."""
     device: str = "auto"
     """Where the world model imagines: auto (CUDA when torch sees a GPU, else the CPU), cpu, cuda or cuda:N."""
+    robot_state: Path | None = None
+    """For a grounded world model: the state model (or ensemble) run whose imagined states it renders
+    at, from each rollout's real start (what practice gives it); default: the recorded states."""
 
 
 def evaluate_world_model(wm: Path, data: Path, out: Path, config: WorldModelEvalConfig = WorldModelEvalConfig(),
@@ -96,6 +104,7 @@ def evaluate_world_model(wm: Path, data: Path, out: Path, config: WorldModelEval
         heldout = heldout[: config.max_episodes]
     if not heldout:
         raise ValueError(f"{data} has no held-out episodes for this run (held-out fraction {fraction})")
+    grounding = state_source(model, config.robot_state)
     perceptual = PerceptualDistance()
     rows: dict[str, list[np.ndarray]] = defaultdict(list)  # measure -> one (T,) array per rollout
     camera_rows = {camera: defaultdict(list) for camera in cameras}  # each view's, of a multi-view model
@@ -105,9 +114,13 @@ def evaluate_world_model(wm: Path, data: Path, out: Path, config: WorldModelEval
     for n, index in enumerate(tqdm(heldout, desc="eval-wm", disable=not progress)):
         episode = dataset.load(index)
         frames, actions = torch.from_numpy(episode.observed_frames), torch.from_numpy(episode.actions).float()
+        recorded = episode.env_states if episode.env_states.shape[1] else episode.states  # (T + 1, S)
         for start in range(0, len(actions), config.start_every):
             context = frames[max(0, start + 1 - model.context_frames) : start + 1][None]
-            imagination = rollout(model, context, actions[None, start:], generator)
+            states = None if grounding is None else grounding.states(
+                recorded[start], episode.actions[start - 1] if start else np.zeros_like(episode.actions[0]),
+                episode.info.instruction, episode.actions[None, start:], recorded[None, start + 1 :])
+            imagination = rollout(model, context, actions[None, start:], generator, states)
             imagined = imagination.frames[0]  # (T, H, W, 3)
             real = frames[start + 1 :]
             if ensemble:
@@ -135,13 +148,37 @@ def evaluate_world_model(wm: Path, data: Path, out: Path, config: WorldModelEval
     for task in sorted(set(tasks)):
         chosen = np.array([t == task for t in tasks])
         report["per_task"][task] = _summary({k: v[chosen] for k, v in table.items()}, np.array(full_rollout)[chosen])
-    report["controllability"] = check_controllability(model, dataset, heldout, config.controllability, progress=progress)
+    report["controllability"] = check_controllability(model, dataset, heldout, config.controllability, progress=progress,
+                                                      grounding=grounding)
+    if grounding is not None:
+        report["grounding"] = {"states": grounding.name, "robot_state": str(config.robot_state) if config.robot_state else None}
     report |= {"wm": str(wm), "model": model.spec() if hasattr(model, "spec") else None, "data": str(data),
                "episodes": len(heldout), "rollouts": len(tasks),
-               "config": asdict(config), "videos": str(video_dir) if config.videos else None,
+               "config": {**asdict(config), "robot_state": None if config.robot_state is None else str(config.robot_state)}, "videos": str(video_dir) if config.videos else None,
                "seconds": round(time.perf_counter() - started, 1)}
     write_json(out, report)
     return report
+
+
+def state_source(model, robot_state: Path | None) -> StateSource | None:
+    """Where a grounded `model`'s states come from (the state model in `robot_state`, else the
+    recorded ones); None for a model that is not grounded.
+
+    Raises:
+        ValueError: a state model for a model that is not grounded, or one of other states.
+    """
+    size = grounded_state_dim(model)
+    if not size:
+        if robot_state is not None:
+            raise ValueError(f"--robot-state {robot_state} gives a grounded world model its states; this one is not grounded")
+        return None
+    if robot_state is None:
+        return StateSource()
+    models = load_state_models(robot_state)
+    if models[0].config.state_dim != size:
+        raise ValueError(f"the world model renders at {size}-d states, the state model {robot_state} imagines "
+                         f"{models[0].config.state_dim}-d ones")
+    return StateSource(models)
 
 
 def heldout_fraction(wm: Path) -> float:

@@ -10,6 +10,11 @@ and a state model of another robot's dataset imagines its ``observation.state`` 
 first D dimensions are the robot's state in both. An ensemble's members each step their own
 rollout, and the robot state given is their mean.
 
+A grounded world model (`gymnast.world_model.embedded`, ``state_dim`` S) renders every frame at a
+state: the env gives it this object's whole imagined state after each action (`imagine`), so the
+frames show where the state model says things are, and a policy that reads the robot's state reads
+the same rollout's. With a policy that reads none, D is 0 and the env reports no state.
+
 Legend: B rollouts, S the state model's state dimensions, D the robot state's, A action
 dimensions, k actions in one step.
 """
@@ -31,7 +36,8 @@ class ImaginedRobotState:
 
     Args:
         models: the state model, or an ensemble's members (`load_state_models`).
-        dim: D, the robot state's dimensions the policy reads (the first D of the model's state).
+        dim: D, the robot state's dimensions the policy reads (the first D of the model's state);
+            0 where only a grounded world model reads the state.
 
     Raises:
         ValueError: no model, or a D the models' state does not have.
@@ -42,7 +48,7 @@ class ImaginedRobotState:
         if not self.models:
             raise ValueError("an imagined robot state needs at least one state model")
         size = self.models[0].config.state_dim
-        if not 0 < dim <= size:
+        if not 0 <= dim <= size:
             raise ValueError(f"the policy reads a {dim}-d robot state, the state model imagines {size}-d states")
         self.dim, self.encoder = dim, InstructionEncoder()
         self._start = self._last = torch.zeros(0)
@@ -66,41 +72,56 @@ class ImaginedRobotState:
         self._start, self._last = start, torch.as_tensor(np.asarray(last_actions, np.float32))
         self._texts = [model.embed_text(embedding) for model in self.models]
         self._states = [start.clone() for _ in self.models]
-        return self._robot()
+        return self.robot()
 
-    @torch.inference_mode()
     def step(self, actions: np.ndarray) -> np.ndarray:
         """(B, D) float32 the robot's state after (B, k, A) actions, one state-model step each."""
+        self.imagine(actions)
+        return self.robot()
+
+    @torch.inference_mode()
+    def imagine(self, actions: np.ndarray) -> torch.Tensor:
+        """Steps the rollouts by (B, k, A) actions; returns (B, k, S) float32 the whole imagined state
+        after each (the members' mean), what a grounded world model renders its k frames at."""
+        after = []
         for action in torch.as_tensor(np.asarray(actions, np.float32)).unbind(dim=1):  # (B, A) each
             self._states = [model.next_state(state, self._start, action, self._last, text)
                             for model, state, text in zip(self.models, self._states, self._texts)]
             self._last = action
-        return self._robot()
+            after.append(torch.stack(self._states).mean(dim=0))
+        return torch.stack(after, dim=1)
 
-    def _robot(self) -> np.ndarray:
+    def robot(self) -> np.ndarray:
+        """(B, D) float32 the robot's state now (the members' mean)."""
         return torch.stack(self._states).mean(dim=0)[:, : self.dim].numpy()
 
 
 def robot_state_in_imagination(state_dim: int, run: str | Path | None, policy: str | Path,
-                               wm: str | Path | None) -> ImaginedRobotState | None:
-    """What gives a policy that reads a `state_dim`-d robot state its state in imagination: the
-    state model (or ensemble) in `run` (``--robot-state``), stepped beside the world model `wm`;
-    None for a policy that reads none. Used alike by practice (`gymnast rl --env imagined`) and by
-    the measurements of imagination (`gymnast imagination`, `gymnast rl-signal`).
+                               wm: str | Path | None, grounded: int = 0) -> ImaginedRobotState | None:
+    """What imagines the state beside the world model `wm`: the state model (or ensemble) in `run`
+    (``--robot-state``), for a policy that reads a `state_dim`-d robot state and/or a world model
+    grounded in a `grounded`-d state (S > 0, which it renders every frame at); None where neither
+    reads one. Used alike by practice (`gymnast rl --env imagined`) and by the measurements of
+    imagination (`gymnast imagination`, `gymnast rl-signal`).
 
     Raises:
-        ValueError: a policy that reads a state without a state model, or a state model for a
-            policy that reads none (the message names the policy and what to pass).
+        ValueError: a state needed without a state model, a state model nothing reads, or one whose
+            state is not the grounded world model's (the message names the runs and what to pass).
     """
     from gymnast.world_model.state_model import load_state_models
 
-    if not state_dim:
+    if not state_dim and not grounded:
         if run is not None:
-            raise ValueError(f"--robot-state {run} imagines the robot's state for a policy that reads one; "
-                             f"the policy {policy} reads none: leave --robot-state out")
+            raise ValueError(f"--robot-state {run} imagines the state that a policy or a grounded world model reads; "
+                             f"the world model {wm} is not grounded and the policy {policy} reads none: leave --robot-state out")
         return None
     if run is None:
-        raise ValueError(f"the policy {policy} reads the robot's state (observation.state, {state_dim}-d), but the "
-                         f"world model {wm} imagines images only; give a state model that imagines it with "
-                         "--robot-state RUN (gymnast train-state)")
-    return ImaginedRobotState(load_state_models(run), state_dim)
+        reader = (f"the world model {wm} renders every frame at a {grounded}-d state" if grounded else
+                  f"the policy {policy} reads the robot's state (observation.state, {state_dim}-d), but the "
+                  f"world model {wm} imagines images only")
+        raise ValueError(f"{reader}; give a state model that imagines it with --robot-state RUN (gymnast train-state)")
+    imagined = ImaginedRobotState(load_state_models(run), state_dim)
+    if grounded and imagined.state_dim != grounded:
+        raise ValueError(f"the world model {wm} renders at {grounded}-d states, the state model {run} imagines "
+                         f"{imagined.state_dim}-d ones: train both on the same dataset's states")
+    return imagined

@@ -179,6 +179,8 @@ class StateModel(nn.Module):
 def load_state_model(run: str | Path) -> StateModel:
     """The newest checkpoint of a state-model run (or a checkpoint directory), in eval mode."""
     def build(spec: dict) -> StateModel:
+        if "backend" in spec:  # a video model (a grounded one has a state_dim too)
+            raise ValueError(f"{run} is not a state-model run: it holds a {spec['backend']} world model")
         if "state_dim" not in spec:
             raise ValueError(f"{run} is not a state-model run (its model has no state_dim: {sorted(spec)})")
         fields = {k: tuple(v) if k in ("action_low", "action_high") else v for k, v in spec.items()}
@@ -206,7 +208,8 @@ def is_state_model(run: str | Path) -> bool:
         spec = json.loads((resolve_checkpoint(Path(run)) / "config.json").read_text()).get("model", {})
     except (FileNotFoundError, ValueError):
         return False
-    return isinstance(spec, dict) and "state_dim" in spec
+    # A video model's spec names its backend (and a grounded one has a state_dim too).
+    return isinstance(spec, dict) and "state_dim" in spec and "backend" not in spec
 
 
 def write_state_ensemble(out: Path, members: Sequence[Path]) -> list[StateModel]:

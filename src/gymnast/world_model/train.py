@@ -28,7 +28,7 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 import torch
 from safetensors.torch import load_file
@@ -43,7 +43,7 @@ from gymnast.utils.distributed import Parallel, data_parallel
 from gymnast.utils.metrics import MetricsLog
 from gymnast.utils.optim import gradient_step, warmup_cosine
 from gymnast.utils.settings import from_json, saved_settings
-from gymnast.world_model.base import WorldModel, rollout
+from gymnast.world_model.base import WorldModel, grounded_state_dim, rollout
 from gymnast.world_model.data import ClipBatch, EpisodeBank, split_episodes
 from gymnast.world_model.views import with_cameras
 from gymnast.world_model.embedded import EmbeddedWorldModel, EmbeddedWorldModelConfig
@@ -103,6 +103,14 @@ class WorldModelTrainConfig:
     alone. Saved with the model, so RL starts it from the same views a policy of those cameras sees."""
     keys: FeatureKeys = FeatureKeys()
     """Which dataset features are the actions and the states (--action-key, --state-key); saved with the run."""
+    grounded: bool = False
+    """Render every frame at the episode's recorded state (its environment state where recorded,
+    else observation.state): a grounded model (`EmbeddedWorldModelConfig.state_dim`), which then
+    imagines beside a state model that gives it the states (`gymnast rl --robot-state`). Embedded
+    backend only."""
+    state_noise: float = 0.0
+    """Gaussian noise added to the recorded states a grounded model is trained at, in units of each
+    number's spread: imagination gives it a state model's states, which are that far off."""
     fit: Fit = "resize"
     """How frames become the model's square image when they are not square or larger than 256 px
     (they are then fitted to the model's `image_size`): resize (the whole frame, aspect ratio not kept) or
@@ -201,7 +209,13 @@ def _train(data: Path, out: Path, config: WorldModelTrainConfig, datasets: list[
         raise ValueError("train-wm --backend flow draws its noise per clip and does not train under torchrun yet; "
                          "run it as one process")
     dataset = datasets[0]
+    if config.grounded and config.backend != "embedded":
+        raise ValueError(f"train-wm --grounded renders at recorded states with the embedded backend; the {config.backend} "
+                         "backend is not grounded")
     bank, heldout, counts = load_banks(datasets, config.heldout_fraction, progress and parallel.is_main)
+    if config.grounded:  # a resumed run keeps the normalisation its weights were trained with
+        mean, std = _saved_state_stats(resolve_checkpoint(out)) if resume else bank.state_stats()
+        config = with_architecture(config, dataclasses.replace(config.model, state_dim=len(mean), state_mean=mean, state_std=std))
     context = architecture(config).context_frames
     share, device = parallel.share(config.batch_size), parallel.device
     model = build_model(config if not resume else dataclasses.replace(config, init=None)).to(device)
@@ -229,8 +243,8 @@ def _train(data: Path, out: Path, config: WorldModelTrainConfig, datasets: list[
         model.train()
         future = future_at(step, config)
         clips = bank.sample(config.batch_size, context, future, sampler)  # the global batch: every process draws it
-        clips = ClipBatch(*(to_device(t[share], device) for t in (clips.context, clips.actions, clips.future)))
-        extra = (sampler,) if config.backend == "flow" else ()
+        clips = ClipBatch(*(to_device(t[share], device) for t in (clips.context, clips.actions, clips.future, clips.states)))
+        extra = (sampler,) if config.backend == "flow" else (config.state_noise,)
         loss, values = loss_of(clips, *extra, config.moving_weight)
         # Equal slices: the mean of the processes' means is the global batch's (with moving_weight,
         # each process weighs its pixels by its own mean weight, a slight difference).
@@ -297,6 +311,12 @@ def _saved_action_range(checkpoint: Path) -> tuple:
     return tuple(saved.get("action_low", ())), tuple(saved.get("action_high", ()))
 
 
+def _saved_state_stats(checkpoint: Path) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """(mean, spread) of the states a grounded model's checkpoint was trained at."""
+    saved = json.loads((checkpoint / "config.json").read_text()).get("model", {})
+    return tuple(saved.get("state_mean", ())), tuple(saved.get("state_std", ()))
+
+
 def load_banks(datasets: Sequence[EpisodeDataset], heldout_fraction: float,
                progress: bool = False) -> tuple[EpisodeBank, EpisodeBank | None, list[dict]]:
     """The training and held-out episodes of several datasets, each split by scene.
@@ -320,8 +340,8 @@ def load_banks(datasets: Sequence[EpisodeDataset], heldout_fraction: float,
 # The cameras too: one view's weights start a model of several (`gymnast.world_model.views`).
 _WEIGHT_FREE = ("bf16", "reanchor_every", "sample_steps", "context_noise", "guidance", "cameras")
 # Training settings a fine-tune may change; the weights they add (the embedded backend's "no action"
-# embedding, with action dropout) start fresh.
-_TRAINING_ONLY = ("action_dropout",)
+# embedding, with action dropout; its state embedding, grounded) start fresh.
+_TRAINING_ONLY = ("action_dropout", "state_dim", "state_mean", "state_std")
 
 
 def build_model(config: WorldModelTrainConfig) -> EmbeddedWorldModel | FlowWorldModel:
@@ -340,9 +360,10 @@ def build_model(config: WorldModelTrainConfig) -> EmbeddedWorldModel | FlowWorld
     # A field the checkpoint predates (say, the action range) had its default value then.
     defaults = json.loads(json.dumps(dataclasses.asdict(type(architecture(config))())))
     source = defaults | json.loads((checkpoint / "config.json").read_text()).get("model", {})
-    # The weights were trained on actions normalised by their own range: it comes with them.
-    action_range = {name: tuple(source.get(name, ())) for name in ("action_low", "action_high")}
-    model = backend(dataclasses.replace(architecture(config), **action_range))
+    # The weights were trained on actions normalised by their own range: it comes with them, and so
+    # do a grounded model's state and its normalisation.
+    kept = ("action_low", "action_high") + (("state_dim", "state_mean", "state_std") if source.get("state_dim") else ())
+    model = backend(dataclasses.replace(architecture(config), **{name: _as_field(source[name]) for name in kept}))
     wanted = json.loads(json.dumps(model.spec()))  # tuples as JSON lists, like the saved spec
     differ = sorted(k for k in source.keys() | wanted.keys()
                     if k not in _WEIGHT_FREE + _TRAINING_ONLY and source.get(k) != wanted.get(k))
@@ -350,11 +371,16 @@ def build_model(config: WorldModelTrainConfig) -> EmbeddedWorldModel | FlowWorld
         fields = ", ".join(f"{k} ({source.get(k)!r} there, {wanted.get(k)!r} here)" for k in differ)
         raise ValueError(f"--init {config.init}: its model differs from this run's in {fields}")
     missing, unexpected = model.load_state_dict(load_file(checkpoint / "model.safetensors"), strict=False)
-    if unexpected or set(missing) - {"no_action"}:
+    if unexpected or {name for name in missing if name != "no_action" and not name.startswith("embed_state.")}:
         raise ValueError(f"--init {config.init}: its weights do not fit this model "
                          f"(missing here: {sorted(unexpected)}; missing there: {sorted(missing)})")
     logger.info("starting from the weights of %s", checkpoint)
     return model
+
+
+def _as_field(value: Any) -> Any:
+    """A saved spec's value as its config field holds it (JSON lists as tuples)."""
+    return tuple(value) if isinstance(value, list) else value
 
 
 def future_at(step: int, config: WorldModelTrainConfig) -> int:
@@ -365,11 +391,16 @@ def future_at(step: int, config: WorldModelTrainConfig) -> int:
     return max(min(4, config.future), round(4 + (config.future - 4) * step / ramp))
 
 
-def clip_loss(model: EmbeddedWorldModel, clips: ClipBatch, moving_weight: float = 0.0) -> tuple[torch.Tensor, dict[str, float]]:
-    """`frame_loss` of the F frames imagined open-loop from the context; (loss, metrics)."""
+def clip_loss(model: EmbeddedWorldModel, clips: ClipBatch, state_noise: float = 0.0,
+              moving_weight: float = 0.0) -> tuple[torch.Tensor, dict[str, float]]:
+    """`frame_loss` of the F frames imagined open-loop from the context (a grounded model's at the
+    recorded states, `state_noise` spreads off); (loss, metrics)."""
     target = to_unit_float(clips.future)  # (B, F, 3, H, W)
+    states = None
+    if model.state_dim:
+        states = clips.states + state_noise * torch.randn_like(clips.states) * model.state_std
     with model.autocast():
-        _, imagined = model.imagine(model.encode(to_unit_float(clips.context)), clips.actions)
+        _, imagined = model.imagine(model.encode(to_unit_float(clips.context)), clips.actions, states)
     return frame_loss(imagined.float(), target, to_unit_float(clips.context[:, -1:]), moving_weight)
 
 
@@ -406,7 +437,8 @@ def validate(model: WorldModel, clips: ClipBatch) -> dict[str, float]:
     A generative model samples with a fixed seed, so the figures do not depend on what ran before.
     """
     model.eval()
-    imagined = to_unit_float(rollout(model, clips.context, clips.actions, torch.Generator().manual_seed(0)).frames)
+    states = clips.states if grounded_state_dim(model) else None
+    imagined = to_unit_float(rollout(model, clips.context, clips.actions, torch.Generator().manual_seed(0), states).frames)
     values = psnr(imagined, to_unit_float(clips.future))  # (B, F)
     return {"wm/val_psnr": values.mean().item(), "wm/val_psnr_h1": values[:, 0].mean().item(),
             f"wm/val_psnr_h{values.shape[1]}": values[:, -1].mean().item()}
@@ -418,7 +450,8 @@ def _write_video(model: WorldModel, heldout: EpisodeBank, path: Path, fps: int) 
     model.eval()
     k = max(range(len(heldout)), key=lambda i: len(heldout.actions[i]))
     frames, actions = heldout.frames[k], heldout.actions[k]
-    imagined = rollout(model, frames[None, :1], actions[None], torch.Generator().manual_seed(0)).frames[0]  # (T, H, W, 3)
+    states = heldout.states[k][None, 1:] if grounded_state_dim(model) else None  # a grounded model at the recorded states
+    imagined = rollout(model, frames[None, :1], actions[None], torch.Generator().manual_seed(0), states).frames[0]  # (T, H, W, 3)
     write_side_by_side(path, frames[1:].numpy(), imagined.numpy(), fps)
 
 

@@ -30,7 +30,7 @@ import torch
 from torch import nn
 
 from gymnast.utils.images import join_views, split_views
-from gymnast.world_model.base import WorldModel, check_actions, check_context
+from gymnast.world_model.base import WorldModel, check_actions, check_context, check_states, grounded_state_dim
 
 
 class MultiViewWorldModel(nn.Module):
@@ -70,6 +70,10 @@ class MultiViewWorldModel(nn.Module):
         return self.model.action_dim
 
     @property
+    def state_dim(self) -> int:
+        return grounded_state_dim(self.model)
+
+    @property
     def action_range(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
         default = ((-1.0,) * self.action_dim, (1.0,) * self.action_dim)
         return getattr(self.model, "action_range", default)
@@ -80,13 +84,16 @@ class MultiViewWorldModel(nn.Module):
         check_context(context, self.image_size, self.views)
         return self.model.init_state(split_views(context, self.views), generator=generator)
 
-    def step(self, state: Any, actions: torch.Tensor,
-             generator: torch.Generator | None = None) -> tuple[Any, torch.Tensor]:
-        """See `WorldModel.step`: every view applies the same (B, K, A) actions; returns (B, K, H, V*W, 3)."""
+    def step(self, state: Any, actions: torch.Tensor, generator: torch.Generator | None = None,
+             states: torch.Tensor | None = None) -> tuple[Any, torch.Tensor]:
+        """See `WorldModel.step`: every view applies the same (B, K, A) actions (a grounded model's at
+        the same (B, K, S) `states`); returns (B, K, H, V*W, 3)."""
         if isinstance(actions, torch.Tensor):  # else the single-view model's own check names the type
             check_actions(actions, self.action_dim, actions.shape[0])
+            check_states(states, self.state_dim, tuple(actions.shape[:2]))
             actions = actions.repeat_interleave(self.views, dim=0)
-        state, frames = self.model.step(state, actions, generator=generator)
+        grounding = {} if states is None else {"states": states.repeat_interleave(self.views, dim=0)}
+        state, frames = self.model.step(state, actions, generator=generator, **grounding)
         return state, join_views(frames, self.views)
 
     def spec(self) -> dict:
