@@ -81,7 +81,7 @@ def keyframe_start(episode: Episode, t: int, config: KeyframeConfig) -> Start:
                          f"({episode.info.task}, seed {episode.info.seed})")
     # Frames before the first repeat it (the robot standing still), so every start has C frames.
     frames = episode.observed_frames[np.clip(np.arange(t - config.context_frames + 1, t + 1), 0, None)]  # (C, H, V*W, 3)
-    state = episode.env_states[t] if episode.env_states.shape[1] else episode.states[t]
+    state = episode.full_states[t]
     return Start(episode.info.task, episode.info.seed, episode.info.instruction, frames,
                  reference_actions=episode.actions[t: t + config.horizon].astype(np.float32),
                  prefix=episode.actions[:t].astype(np.float32), state=np.asarray(state, np.float32))

@@ -132,6 +132,12 @@ class Episode:
     info: EpisodeInfo
     views: Mapping[str, np.ndarray] = field(default_factory=dict)
 
+    @property
+    def full_states(self) -> np.ndarray:
+        """(T+1, S) the fullest state recorded: the environment state where there is one (objects
+        and goal too), else the robot's own; what state models and grounded world models read."""
+        return self.env_states if self.env_states.shape[1] else self.states
+
     def __post_init__(self) -> None:
         n_steps = len(self.actions)
         expected = {

@@ -324,7 +324,7 @@ def dataset_starts(data: Path, tasks: Sequence[str] | None = None, image_size: i
     starts = []
     for key in sorted(best):
         episode = dataset.load(best[key])
-        state = episode.env_states[0] if episode.env_states.shape[1] else episode.states[0]
+        state = episode.full_states[0]
         starts.append(Start(episode.info.task, episode.info.seed, episode.info.instruction,
                             episode.observed_frames[:1].copy(), episode.actions.astype(np.float32),
                             state=np.asarray(state, np.float32)))

@@ -91,7 +91,7 @@ def check_controllability(model: WorldModel, dataset: EpisodeDataset, heldout: l
         real = torch.from_numpy(np.stack([frames for frames, _ in simulated]))  # (S, T, H, W, 3)
         env.close()
         states = None if grounding is None else grounding.states(
-            episode.env_states[0], np.zeros(model.action_dim, np.float32), episode.info.instruction, sequences,
+            episode.full_states[0], np.zeros(model.action_dim, np.float32), episode.info.instruction, sequences,
             np.stack([env_states for _, env_states in simulated]))
         context = torch.from_numpy(start)[None, None].expand(len(sequences), 1, -1, -1, -1)
         imagined = rollout(model, context, torch.from_numpy(sequences), torch.Generator().manual_seed(config.seed),

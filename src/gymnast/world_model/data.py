@@ -94,7 +94,7 @@ class EpisodeBank:
         for i in tqdm(indices, desc="loading episodes", disable=not progress):
             episode = dataset.load(i)
             actions = torch.from_numpy(episode.actions).float()  # (T, A)
-            states = torch.from_numpy(episode.env_states if episode.env_states.shape[1] else episode.states).float()
+            states = torch.from_numpy(episode.full_states).float()
             for camera, frames in (episode.views or {dataset.camera_key: episode.frames}).items():
                 self.indices.append(i)
                 self.roots.append(dataset.root)

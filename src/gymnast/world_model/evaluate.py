@@ -114,7 +114,7 @@ def evaluate_world_model(wm: Path, data: Path, out: Path, config: WorldModelEval
     for n, index in enumerate(tqdm(heldout, desc="eval-wm", disable=not progress)):
         episode = dataset.load(index)
         frames, actions = torch.from_numpy(episode.observed_frames), torch.from_numpy(episode.actions).float()
-        recorded = episode.env_states if episode.env_states.shape[1] else episode.states  # (T + 1, S)
+        recorded = episode.full_states  # (T + 1, S)
         for start in range(0, len(actions), config.start_every):
             context = frames[max(0, start + 1 - model.context_frames) : start + 1][None]
             states = None if grounding is None else grounding.states(

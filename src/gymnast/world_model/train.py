@@ -196,7 +196,7 @@ def train_world_model(data: Path, out: Path, config: WorldModelTrainConfig, resu
     if config.init is not None and not resume:  # on resume the weights come from the run's own checkpoint
         config = dataclasses.replace(config, init=resolve_checkpoint(config.init))
     # A resumed run keeps the action range its weights were trained with, whatever `config` says.
-    kept = _saved_action_range(resolve_checkpoint(out)) if resume else None
+    kept = _saved_pair(resolve_checkpoint(out), "action_low", "action_high") if resume else None
     config, datasets, stats = fit_to_data(config, datasets, action_range=kept)
     with data_parallel(resolve_device(config.device)) as parallel:
         return _train(data, out, config, datasets, stats, resume, progress, parallel)
@@ -214,7 +214,7 @@ def _train(data: Path, out: Path, config: WorldModelTrainConfig, datasets: list[
                          "backend is not grounded")
     bank, heldout, counts = load_banks(datasets, config.heldout_fraction, progress and parallel.is_main)
     if config.grounded:  # a resumed run keeps the normalisation its weights were trained with
-        mean, std = _saved_state_stats(resolve_checkpoint(out)) if resume else bank.state_stats()
+        mean, std = _saved_pair(resolve_checkpoint(out), "state_mean", "state_std") if resume else bank.state_stats()
         config = with_architecture(config, dataclasses.replace(config.model, state_dim=len(mean), state_mean=mean, state_std=std))
     context = architecture(config).context_frames
     share, device = parallel.share(config.batch_size), parallel.device
@@ -304,17 +304,12 @@ def with_architecture(config: WorldModelTrainConfig,
     return dataclasses.replace(config, **{"flow" if config.backend == "flow" else "model": model})
 
 
-def _saved_action_range(checkpoint: Path) -> tuple:
-    """(low, high) of the model a checkpoint saved (both empty, the identity, for a model saved
-    before action ranges were)."""
+def _saved_pair(checkpoint: Path, first: str, second: str) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """Two fields of the model a checkpoint saved, as tuples (empty where it predates them): its
+    action range (action_low, action_high, empty: the identity) or a grounded model's state
+    normalisation (state_mean, state_std), which its weights were trained with."""
     saved = json.loads((checkpoint / "config.json").read_text()).get("model", {})
-    return tuple(saved.get("action_low", ())), tuple(saved.get("action_high", ()))
-
-
-def _saved_state_stats(checkpoint: Path) -> tuple[tuple[float, ...], tuple[float, ...]]:
-    """(mean, spread) of the states a grounded model's checkpoint was trained at."""
-    saved = json.loads((checkpoint / "config.json").read_text()).get("model", {})
-    return tuple(saved.get("state_mean", ())), tuple(saved.get("state_std", ()))
+    return tuple(saved.get(first, ())), tuple(saved.get(second, ()))
 
 
 def load_banks(datasets: Sequence[EpisodeDataset], heldout_fraction: float,

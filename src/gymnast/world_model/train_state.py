@@ -143,7 +143,7 @@ def episode_tensors(dataset: EpisodeDataset | list[tuple[EpisodeDataset, list[in
 
     states = []
     for (data, i), episode in zip(pairs, loaded):
-        state = episode.env_states if episode.env_states.shape[1] else episode.states
+        state = episode.full_states
         if state.shape[1] == 0:
             raise ValueError(f"{data.root}: episode {i} records no observation.state; the state model learns from it")
         if states and state.shape[1] != states[0].shape[1]:
