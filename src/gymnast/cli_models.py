@@ -51,6 +51,7 @@ def train_wm(
     seed: int | None = None,
     moving_weight: float | None = None,
     action_dropout: float | None = None,
+    actions_per_frame: int | None = None,
     grounded: bool | None = None,
     state_noise: float | None = None,
     init: Path | None = None,
@@ -76,6 +77,9 @@ def train_wm(
         moving_weight: extra loss weight of moving pixels, normalised (0 = plain mean squared error).
         action_dropout: share of training steps whose action is hidden, so that the model can be
             imagined with action guidance (`guidance` in its config.json; docs/world_model.md).
+        actions_per_frame: imagine one frame per chunk of this many actions, one latent step each (the
+            policy's action chunk, e.g. 5; embedded backend; 1 = a frame per action). Fine-tunes from a
+            model of one frame per action.
         grounded: render every frame at the episode's recorded state (embedded backend): the model
             then imagines beside a state model that gives it the states (`gymnast rl --robot-state`).
         state_noise: with --grounded, noise on the recorded states in training, in units of their spread
@@ -98,6 +102,7 @@ def train_wm(
         "train-wm", out, resume, wm_preset(preset, backend or "embedded"), inputs={"data": data}, required=("data",),
         overrides={"backend": backend, "device": device, "steps": steps, "seed": seed, "moving_weight": moving_weight,
                    f"{'flow' if backend == 'flow' else 'model'}.action_dropout": action_dropout,
+                   "model.actions_per_frame": actions_per_frame,
                    "grounded": grounded, "state_noise": state_noise, "init": init, "extra_data": extra_data or None, "camera": camera, "cameras": cameras or None, "fit": fit,
                    **key_overrides(keys)},
         saved=lambda: (saved_train_config(out), saved_inputs(out, "data")))
@@ -188,6 +193,7 @@ def eval_wm(
     camera: str | None = None,
     device: str = "auto",
     robot_state: Path | None = None,
+    measure_every: int | None = None,
     keys: Annotated[KeyFlags, tyro.conf.arg(name="")] = KeyFlags(),
 ) -> None:
     """Measure a world model's open-loop fidelity and controllability on held-out episodes.
@@ -206,6 +212,9 @@ def eval_wm(
         device: where the world model imagines: auto (CUDA when torch sees a GPU, else the CPU), cpu, cuda or cuda:N.
         robot_state: for a grounded world model (train-wm --grounded), the state model (or ensemble) run whose
             imagined states it renders at, from each rollout's real start; default: the recorded states.
+        measure_every: measure the frames after actions N, 2N, ... of each rollout (default: those the model
+            imagines: every frame, or each chunk's last for a model of one frame per chunk); e.g. 5 to
+            compare a model of one frame per action with one per 5-action chunk on the same frames.
         keys: which dataset features are the actions and the states (default: LeRobot's action and
             observation.state).
     """
@@ -214,7 +223,8 @@ def eval_wm(
 
     config = WorldModelEvalConfig(max_episodes=max_episodes, videos=videos, gifs=gifs,
                                   controllability=ControllabilityConfig(scenes=control_scenes), reanchor_every=reanchor_every,
-                                  camera=camera, device=device, keys=feature_keys(keys), robot_state=robot_state)
+                                  camera=camera, device=device, keys=feature_keys(keys), robot_state=robot_state,
+                                  measure_every=measure_every)
     report = evaluate_world_model(wm, data, out, config)
     print(format_report(report))
     print(f"report: {out}")

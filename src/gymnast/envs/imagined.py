@@ -133,6 +133,13 @@ class _Imagination:
     def __init__(self, model: WorldModel, chunk_size: int, horizon: int) -> None:
         if chunk_size < 1 or horizon < 1:
             raise ValueError(f"need chunk_size >= 1 and horizon >= 1, got {chunk_size}, {horizon}")
+        # A model of one frame per N actions (the contract's `actions_per_frame`) shows a chunk that
+        # ends mid-way through its N the frame before it: the policy would act on a stale frame.
+        per_frame = int(getattr(model, "actions_per_frame", 1))
+        if chunk_size % per_frame:
+            raise ValueError(f"the world model imagines one frame per {per_frame} actions; a policy chunk of {chunk_size} "
+                             f"actions would read a frame from before its last actions (use a chunk that is a multiple "
+                             f"of {per_frame}, or a world model of one frame per action)")
         self.model, self.horizon = model, horizon
         parameters = getattr(model, "parameters", None)  # a module's device; modules store none
         self.device = next(parameters(), torch.zeros(0)).device if parameters else torch.device("cpu")

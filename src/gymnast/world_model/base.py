@@ -40,6 +40,9 @@ class WorldModel(Protocol):
     # names), and its frames are (..., H, V*W, 3), the views side by side; one without them sees one.
     # A grounded model has `state_dim` S > 0 and its `step` takes ``states``, (B, K, S) the state
     # each frame is rendered at (`grounded_state_dim`); one without it follows the actions alone.
+    # A model that imagines one frame per chunk of N actions has `actions_per_frame` N > 1: the frame
+    # after a chunk's last action is imagined, the others repeat the last imagined one
+    # (`imagined_frame_mask`); actions that do not fill a chunk wait for the next `step` call.
 
     def init_state(self, context: torch.Tensor, generator: torch.Generator | None = None) -> Any:
         """State after the real (B, C', H, W, 3) uint8 context frames, the last one being "now".
@@ -81,6 +84,23 @@ def check_actions(actions: torch.Tensor, action_dim: int, batch: int) -> None:
 def grounded_state_dim(model: Any) -> int:
     """S, the state a grounded world model renders every frame at; 0 for one that is not grounded."""
     return int(getattr(model, "state_dim", 0))
+
+
+def actions_per_frame(model: Any) -> int:
+    """N, the actions of one imagined frame: 1 for a model that imagines a frame per action."""
+    return int(getattr(model, "actions_per_frame", 1))
+
+
+def imagined_frame_mask(model: Any, frames: int) -> torch.Tensor:
+    """(frames,) bool: which of the frames a rollout from a fresh state returns are imagined, not a
+    repeat of the last one: every N-th (`actions_per_frame`), so all of them for N = 1. What the
+    frames' quality is measured on."""
+    return every_nth_frame(frames, actions_per_frame(model))
+
+
+def every_nth_frame(frames: int, n: int) -> torch.Tensor:
+    """(frames,) bool: True at the frames after actions n, 2n, ... of a rollout."""
+    return (torch.arange(frames) + 1) % n == 0
 
 
 def check_states(states: torch.Tensor | None, state_dim: int, leading: tuple[int, ...]) -> None:

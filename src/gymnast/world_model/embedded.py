@@ -10,6 +10,8 @@ channels, h/w = H/8, W/8 latent grid.
     every `reanchor_every` steps: encode the last C imagined frames as the new context
     with `action_dropout` in training, guidance w: z' = z'(no action) + w (z'(action) - z'(no action))
     grounded (`state_dim` S > 0): the FiLM condition also holds the state each frame shows (B, K, S)
+    `actions_per_frame` N > 1: one latent step and one frame per chunk of N actions (the policy's
+    chunk); the frames of a chunk's other actions show the last imagined frame
 
 Why this shape (docs/world_model.md has the measurements):
 - Meta-World is deterministic given the scene, and the context frames show the scene, so a
@@ -35,6 +37,11 @@ Why this shape (docs/world_model.md has the measurements):
   state given from outside (the recorded one in training, a state model's in imagination,
   `gymnast.world_model.robot_state`), so where things are is decided by a model that tracks them,
   and the video model only draws them there.
+- Every latent step is a chance to drift. A policy acts in chunks and reads the frame only after
+  each, so a model that imagines one frame per chunk (`actions_per_frame`, as WMPO and World-Gymnast
+  do) takes N times fewer autoregressive steps through an episode, and decodes N times fewer frames.
+  Its latent step reads the chunk's actions in order (their embeddings, concatenated and mixed);
+  actions that do not yet fill a chunk wait in the state for the next `step` call.
 """
 
 from __future__ import annotations
@@ -94,6 +101,10 @@ class EmbeddedWorldModelConfig:
     """(S,) the training data's mean state, which the model's state input subtracts (set by training)."""
     state_std: tuple[float, ...] = ()
     """(S,) the training data's state spread, by which the model's state input divides (set by training)."""
+    actions_per_frame: int = 1
+    """N: actions per latent step and imagined frame (the policy's action chunk, e.g. 5). N > 1 imagines
+    one frame per chunk; within a chunk the frames show the last imagined frame (a policy reads the
+    frame once per chunk), and training scores the chunks' last frames alone."""
 
     def __post_init__(self) -> None:
         if self.image_size % 8:
@@ -108,6 +119,11 @@ class EmbeddedWorldModelConfig:
         if self.state_dim < 0 or len(self.state_mean) != len(self.state_std) or self.state_mean and len(self.state_mean) != self.state_dim:
             raise ValueError(f"a grounded model of {self.state_dim}-d states needs that many state_mean and state_std "
                              f"values, got {len(self.state_mean)} and {len(self.state_std)}")
+        if self.actions_per_frame < 1:
+            raise ValueError(f"actions_per_frame must be at least 1, got {self.actions_per_frame}")
+        if self.actions_per_frame > 1 and self.state_dim:
+            raise ValueError(f"a grounded model (state_dim {self.state_dim}) renders one frame per action at its "
+                             f"state; actions_per_frame must be 1, got {self.actions_per_frame}")
         if self.guidance != 1 and self.action_dropout == 0:
             raise ValueError(f"guidance {self.guidance} needs a model trained with action_dropout > 0 "
                              "(it has no 'no action' step to guide from); use guidance 1")
@@ -125,6 +141,7 @@ class LatentState:
         recent: (B, C, 3, H, W) float, the frames a re-anchor will encode: the context, replaced
             by the last C imagined frames as a re-anchor approaches.
         since_anchor: actions imagined since the state was encoded from frames.
+        pending: (B, P, A) actions of a chunk not yet complete (P < N, `actions_per_frame`), or None.
     """
 
     z: torch.Tensor
@@ -133,11 +150,13 @@ class LatentState:
     background: torch.Tensor
     recent: torch.Tensor
     since_anchor: int = 0
+    pending: torch.Tensor | None = None
 
     def select(self, index: torch.Tensor | slice) -> LatentState:
         """The states of some batch elements (e.g. to branch or drop rollouts)."""
         tensors = (self.z, self.skip_fine, self.skip_coarse, self.background, self.recent)
-        return LatentState(*(t[index] for t in tensors), since_anchor=self.since_anchor)
+        return LatentState(*(t[index] for t in tensors), since_anchor=self.since_anchor,
+                           pending=None if self.pending is None else self.pending[index])
 
 
 def pixel_shuffle_2x(x: torch.Tensor) -> torch.Tensor:
@@ -184,6 +203,15 @@ class EmbeddedWorldModel(ConfiguredWorldModel):
         self.embed_action = nn.Sequential(
             nn.Linear(config.action_dim, config.action_width), nn.SiLU(), nn.Linear(config.action_width, config.action_width)
         )
+        # A chunk's action embeddings, in order, mixed into one condition. It starts as their mean, so
+        # a model fine-tuned from one of single actions starts from its embedding of the chunk's average.
+        self.mix_chunk = None
+        if config.actions_per_frame > 1:
+            n, width = config.actions_per_frame, config.action_width
+            self.mix_chunk = nn.Linear(n * width, width)
+            with torch.no_grad():
+                self.mix_chunk.weight.copy_(torch.eye(width).repeat(1, n) / n)
+                self.mix_chunk.bias.zero_()
         self.blocks = nn.ModuleList(ActionBlock(z, config.action_width) for _ in range(config.blocks))
         # Only grounded models have it. Its last layer starts at zero, so a grounded fine-tune of an
         # ungrounded model starts exactly where that model was.
@@ -224,6 +252,11 @@ class EmbeddedWorldModel(ConfiguredWorldModel):
         """S, the state every frame is rendered at (0: not grounded)."""
         return self.config.state_dim
 
+    @property
+    def actions_per_frame(self) -> int:
+        """N, the actions of one imagined frame (1: a frame per action)."""
+        return self.config.actions_per_frame
+
     @torch.inference_mode()
     def step(
         self, state: LatentState, actions: torch.Tensor, generator: torch.Generator | None = None,
@@ -249,22 +282,39 @@ class EmbeddedWorldModel(ConfiguredWorldModel):
     def imagine(self, state: LatentState, actions: torch.Tensor,
                 states: torch.Tensor | None = None) -> tuple[LatentState, torch.Tensor]:
         """Applies (B, K, A) actions, each frame rendered at the (B, K, S) `states` of a grounded
-        model; returns the new state and (B, K, 3, H, W) float frames."""
-        embedded = self.embed_action(self.scale_actions(actions))  # (B, K, action_width)
+        model; returns the new state and (B, K, 3, H, W) float frames.
+
+        With N = `actions_per_frame` > 1 the actions join those waiting in the state, every full
+        chunk of N takes one latent step and one frame, and each action's frame is the last imagined
+        one by then (the previous chunk's until its own chunk completes)."""
+        n, context = self.config.actions_per_frame, state.recent.shape[1]
+        queued = actions if state.pending is None else torch.cat([state.pending, actions], dim=1)  # (B, P + K, A)
+        embedded = self.embed_action(self.scale_actions(queued))  # (B, P + K, action_width)
         grounding = None if self.embed_state is None else self.embed_state((states - self.state_mean) / self.state_std)
-        frames = []
-        for k in range(actions.shape[1]):
-            if state.since_anchor == self.config.reanchor_every:
+        frames = []  # one per queued action
+        chunks = queued.shape[1] // n
+        for c in range(chunks):
+            if self.config.reanchor_every and state.since_anchor >= self.config.reanchor_every:
                 state = self.encode(state.recent)  # imagined frames become the new context
-            z = self._latent_step(state.z, embedded[:, k], None if grounding is None else grounding[:, k])
+            z = self._latent_step(state.z, self._chunk_condition(embedded[:, c * n : (c + 1) * n]),
+                                  None if grounding is None else grounding[:, c])
             frame = self._decode(z, state)  # (B, 3, H, W)
+            shown = [frame] if n == 1 else [state.recent[:, -1].to(frame.dtype)] * (n - 1) + [frame]
             recent = state.recent
-            if self.config.reanchor_every and state.since_anchor >= self.config.reanchor_every - len(recent[0]):
-                # Only the last C frames before a re-anchor are ever read: keep just those.
-                recent = torch.cat([recent[:, 1:], frame[:, None].to(recent.dtype)], dim=1)
-            state = dataclasses.replace(state, z=z, recent=recent, since_anchor=state.since_anchor + 1)
-            frames.append(frame)
-        return state, torch.stack(frames, dim=1)
+            # Held frames are the last one (n > 1); otherwise only the last C frames before a
+            # re-anchor are ever read: keep just those.
+            if n > 1 or (self.config.reanchor_every and state.since_anchor >= self.config.reanchor_every - context):
+                recent = torch.cat([recent, torch.stack(shown, dim=1).to(recent.dtype)], dim=1)[:, -context:]
+            state = dataclasses.replace(state, z=z, recent=recent, since_anchor=state.since_anchor + n)
+            frames.extend(shown)
+        waiting = queued[:, chunks * n :]
+        frames.extend([state.recent[:, -1].to(embedded.dtype)] * waiting.shape[1])
+        state = dataclasses.replace(state, pending=waiting if waiting.shape[1] else None)
+        return state, torch.stack(frames[-actions.shape[1] :], dim=1)
+
+    def _chunk_condition(self, embedded: torch.Tensor) -> torch.Tensor:
+        """(B, N, action_width) embeddings of one chunk's actions -> (B, action_width), its condition."""
+        return embedded[:, 0] if self.mix_chunk is None else self.mix_chunk(embedded.flatten(1))
 
     def _latent_step(self, z: torch.Tensor, action: torch.Tensor, grounding: torch.Tensor | None = None) -> torch.Tensor:
         """(B, Z, h, w) latent, (B, action_width) action embedding and, for a grounded model, the

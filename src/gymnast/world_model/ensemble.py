@@ -31,7 +31,8 @@ import torch
 from torch import nn
 
 from gymnast.utils.atomic import write_json
-from gymnast.world_model.base import ENSEMBLE_FILE, WorldModel, check_context, grounded_state_dim, load_world_model
+from gymnast.world_model.base import (ENSEMBLE_FILE, WorldModel, actions_per_frame, check_context, grounded_state_dim,
+                                      load_world_model)
 from gymnast.world_model.views import model_cameras, model_views
 
 
@@ -78,7 +79,8 @@ class EnsembleWorldModel(nn.Module):
             raise ValueError(f"an ensemble needs at least two members, got {len(members)}")
         for name, values in (("image_size", [m.image_size for m in members]), ("action_dim", [m.action_dim for m in members]),
                              ("cameras", [model_cameras(m) for m in members]),
-                             ("state_dim", [grounded_state_dim(m) for m in members])):
+                             ("state_dim", [grounded_state_dim(m) for m in members]),
+                             ("actions_per_frame", [actions_per_frame(m) for m in members])):
             if len(set(values)) > 1:
                 raise ValueError(f"the members' {name} differ: {values}")
         self.members = nn.ModuleList(members)
@@ -106,6 +108,10 @@ class EnsembleWorldModel(nn.Module):
     @property
     def state_dim(self) -> int:
         return grounded_state_dim(self.members[0])
+
+    @property
+    def actions_per_frame(self) -> int:
+        return actions_per_frame(self.members[0])
 
     @property
     def action_range(self) -> tuple[tuple[float, ...], tuple[float, ...]]:

@@ -44,7 +44,7 @@ from gymnast.utils.atomic import write_json
 from gymnast.utils.checkpoint import resolve_checkpoint
 from gymnast.utils.device import resolve_device
 from gymnast.utils.images import split_views
-from gymnast.world_model.base import grounded_state_dim, load_world_model, rollout
+from gymnast.world_model.base import actions_per_frame, every_nth_frame, grounded_state_dim, load_world_model, rollout
 from gymnast.world_model.controllability import ControllabilityConfig, check_controllability
 from gymnast.world_model.data import split_episodes
 from gymnast.world_model.ensemble import EnsembleWorldModel, is_ensemble, member_paths
@@ -84,6 +84,10 @@ class WorldModelEvalConfig:
     robot_state: Path | None = None
     """For a grounded world model: the state model (or ensemble) run whose imagined states it renders
     at, from each rollout's real start (what practice gives it); default: the recorded states."""
+    measure_every: int | None = None
+    """Measure the frames after actions N, 2N, ... of each rollout; None: the frames the model imagines
+    (all of them, or each chunk's last for a model of one frame per chunk, `actions_per_frame`). Set
+    it to compare a model of one frame per action with one of N on the same frames."""
 
 
 def evaluate_world_model(wm: Path, data: Path, out: Path, config: WorldModelEvalConfig = WorldModelEvalConfig(),
@@ -125,12 +129,14 @@ def evaluate_world_model(wm: Path, data: Path, out: Path, config: WorldModelEval
             real = frames[start + 1 :]
             if ensemble:
                 rows["disagreement"].append(imagination.disagreement[0].numpy())
+            # A model of one frame per chunk is measured on the frames it imagines, not their repeats.
+            repeated = ~every_nth_frame(len(real), config.measure_every or actions_per_frame(model)).numpy()
             for name, values in _measure_against_copy(imagined, real, context[0], perceptual).items():
-                rows[name].append(values)
+                rows[name].append(np.where(repeated, np.nan, values))
             squares = [split_views(x[None], len(cameras)) if cameras else None for x in (imagined, real, context[0])]
             for v, camera in enumerate(cameras):
                 for name, values in _measure_against_copy(*(x[v] for x in squares), perceptual).items():
-                    camera_rows[camera][name].append(values)
+                    camera_rows[camera][name].append(np.where(repeated, np.nan, values))
             tasks.append(episode.info.task)
             full_rollout.append(start == 0)
             name = f"{episode.info.task}_{episode.info.behaviour}_{episode.info.seed}"

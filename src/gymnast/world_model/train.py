@@ -43,7 +43,7 @@ from gymnast.utils.distributed import Parallel, data_parallel
 from gymnast.utils.metrics import MetricsLog
 from gymnast.utils.optim import gradient_step, warmup_cosine
 from gymnast.utils.settings import from_json, saved_settings
-from gymnast.world_model.base import WorldModel, grounded_state_dim, rollout
+from gymnast.world_model.base import WorldModel, grounded_state_dim, imagined_frame_mask, rollout
 from gymnast.world_model.data import ClipBatch, EpisodeBank, split_episodes
 from gymnast.world_model.views import with_cameras
 from gymnast.world_model.embedded import EmbeddedWorldModel, EmbeddedWorldModelConfig
@@ -212,6 +212,9 @@ def _train(data: Path, out: Path, config: WorldModelTrainConfig, datasets: list[
     if config.grounded and config.backend != "embedded":
         raise ValueError(f"train-wm --grounded renders at recorded states with the embedded backend; the {config.backend} "
                          "backend is not grounded")
+    if config.model.actions_per_frame != 1 and config.backend != "embedded":
+        raise ValueError(f"train-wm --actions-per-frame imagines one frame per chunk with the embedded backend; the "
+                         f"{config.backend} backend imagines one per action")
     bank, heldout, counts = load_banks(datasets, config.heldout_fraction, progress and parallel.is_main)
     if config.grounded:  # a resumed run keeps the normalisation its weights were trained with
         mean, std = _saved_pair(resolve_checkpoint(out), "state_mean", "state_std") if resume else bank.state_stats()
@@ -224,7 +227,9 @@ def _train(data: Path, out: Path, config: WorldModelTrainConfig, datasets: list[
     optimizer = torch.optim.AdamW(model.parameters(), lr=config.lr, weight_decay=0.0)
     schedule = torch.optim.lr_scheduler.LambdaLR(optimizer, warmup_cosine(config.warmup_steps, config.steps))
     sampler = torch.Generator().manual_seed(config.seed)
-    validation = heldout.sample(_VALIDATION_CLIPS, context, config.future, torch.Generator().manual_seed(1)) if heldout else None
+    # the final clip length, in whole chunks for a model of one frame per chunk
+    validation = heldout.sample(_VALIDATION_CLIPS, context, future_at(config.steps, config),
+                               torch.Generator().manual_seed(1)) if heldout else None
     resolved = {"train": _settings(config), "model": with_cameras(model, dataset.cameras).spec(), "data": str(data),
                 "action_stats": stats.to_dict(), "datasets": counts,
                 "train_episodes": sum(c["train_episodes"] for c in counts),
@@ -336,7 +341,10 @@ def load_banks(datasets: Sequence[EpisodeDataset], heldout_fraction: float,
 _WEIGHT_FREE = ("bf16", "reanchor_every", "sample_steps", "context_noise", "guidance", "cameras")
 # Training settings a fine-tune may change; the weights they add (the embedded backend's "no action"
 # embedding, with action dropout; its state embedding, grounded) start fresh.
-_TRAINING_ONLY = ("action_dropout", "state_dim", "state_mean", "state_std")
+# So may the actions per frame: a model of one frame per chunk starts from one of a frame per action,
+# its chunk mixer fresh.
+_TRAINING_ONLY = ("action_dropout", "state_dim", "state_mean", "state_std", "actions_per_frame")
+_FRESH = ("no_action", "embed_state.", "mix_chunk.")  # the weights those settings add
 
 
 def build_model(config: WorldModelTrainConfig) -> EmbeddedWorldModel | FlowWorldModel:
@@ -365,8 +373,11 @@ def build_model(config: WorldModelTrainConfig) -> EmbeddedWorldModel | FlowWorld
     if differ:
         fields = ", ".join(f"{k} ({source.get(k)!r} there, {wanted.get(k)!r} here)" for k in differ)
         raise ValueError(f"--init {config.init}: its model differs from this run's in {fields}")
-    missing, unexpected = model.load_state_dict(load_file(checkpoint / "model.safetensors"), strict=False)
-    if unexpected or {name for name in missing if name != "no_action" and not name.startswith("embed_state.")}:
+    weights = load_file(checkpoint / "model.safetensors")
+    if source.get("actions_per_frame", 1) != model.config.actions_per_frame:  # a chunk mixer of another length
+        weights = {name: value for name, value in weights.items() if not name.startswith("mix_chunk.")}
+    missing, unexpected = model.load_state_dict(weights, strict=False)
+    if unexpected or {name for name in missing if not name.startswith(_FRESH)}:
         raise ValueError(f"--init {config.init}: its weights do not fit this model "
                          f"(missing here: {sorted(unexpected)}; missing there: {sorted(missing)})")
     logger.info("starting from the weights of %s", checkpoint)
@@ -379,24 +390,27 @@ def _as_field(value: Any) -> Any:
 
 
 def future_at(step: int, config: WorldModelTrainConfig) -> int:
-    """Clip length F at `step`: from 4 up to `config.future` over the first `warmup_future` of training."""
+    """Clip length F at `step`: from 4 up to `config.future` over the first `warmup_future` of training,
+    rounded up to whole chunks for a model of one frame per chunk (`actions_per_frame`)."""
     ramp = config.warmup_future * config.steps
-    if step >= ramp:
-        return config.future
-    return max(min(4, config.future), round(4 + (config.future - 4) * step / ramp))
+    future = config.future if step >= ramp else max(min(4, config.future), round(4 + (config.future - 4) * step / ramp))
+    chunk = getattr(architecture(config), "actions_per_frame", 1)
+    return -(-future // chunk) * chunk
 
 
 def clip_loss(model: EmbeddedWorldModel, clips: ClipBatch, state_noise: float = 0.0,
               moving_weight: float = 0.0) -> tuple[torch.Tensor, dict[str, float]]:
     """`frame_loss` of the F frames imagined open-loop from the context (a grounded model's at the
-    recorded states, `state_noise` spreads off); (loss, metrics)."""
-    target = to_unit_float(clips.future)  # (B, F, 3, H, W)
+    recorded states, `state_noise` spreads off; one of a frame per chunk on the chunks' last frames,
+    the others repeating an earlier one); (loss, metrics)."""
+    imagined_at = imagined_frame_mask(model, clips.future.shape[1])
+    target = to_unit_float(clips.future)[:, imagined_at]  # (B, F', 3, H, W)
     states = None
     if model.state_dim:
         states = clips.states + state_noise * torch.randn_like(clips.states) * model.state_std
     with model.autocast():
         _, imagined = model.imagine(model.encode(to_unit_float(clips.context)), clips.actions, states)
-    return frame_loss(imagined.float(), target, to_unit_float(clips.context[:, -1:]), moving_weight)
+    return frame_loss(imagined[:, imagined_at].float(), target, to_unit_float(clips.context[:, -1:]), moving_weight)
 
 
 def frame_loss(imagined: torch.Tensor, target: torch.Tensor, reference: torch.Tensor,
@@ -427,16 +441,19 @@ def frame_loss(imagined: torch.Tensor, target: torch.Tensor, reference: torch.Te
 
 @torch.no_grad()
 def validate(model: WorldModel, clips: ClipBatch) -> dict[str, float]:
-    """PSNR of held-out clips imagined open-loop: at the first and the last future frame, and overall.
+    """PSNR of held-out clips imagined open-loop: at the first and the last imagined frame, and overall
+    (a model of one frame per chunk at the chunks' last frames).
 
     A generative model samples with a fixed seed, so the figures do not depend on what ran before.
     """
     model.eval()
     states = clips.states if grounded_state_dim(model) else None
     imagined = to_unit_float(rollout(model, clips.context, clips.actions, torch.Generator().manual_seed(0), states).frames)
-    values = psnr(imagined, to_unit_float(clips.future))  # (B, F)
-    return {"wm/val_psnr": values.mean().item(), "wm/val_psnr_h1": values[:, 0].mean().item(),
-            f"wm/val_psnr_h{values.shape[1]}": values[:, -1].mean().item()}
+    imagined_at = imagined_frame_mask(model, clips.future.shape[1])
+    values = psnr(imagined[:, imagined_at], to_unit_float(clips.future)[:, imagined_at])  # (B, F')
+    first, last = (int(i) + 1 for i in torch.nonzero(imagined_at)[[0, -1], 0])
+    return {"wm/val_psnr": values.mean().item(), f"wm/val_psnr_h{first}": values[:, 0].mean().item(),
+            f"wm/val_psnr_h{last}": values[:, -1].mean().item()}
 
 
 @torch.no_grad()

@@ -30,7 +30,8 @@ import torch
 from torch import nn
 
 from gymnast.utils.images import join_views, split_views
-from gymnast.world_model.base import WorldModel, check_actions, check_context, check_states, grounded_state_dim
+from gymnast.world_model.base import (WorldModel, actions_per_frame, check_actions, check_context, check_states,
+                                      grounded_state_dim)
 
 
 class MultiViewWorldModel(nn.Module):
@@ -72,6 +73,10 @@ class MultiViewWorldModel(nn.Module):
     @property
     def state_dim(self) -> int:
         return grounded_state_dim(self.model)
+
+    @property
+    def actions_per_frame(self) -> int:
+        return actions_per_frame(self.model)
 
     @property
     def action_range(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
