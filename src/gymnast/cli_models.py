@@ -49,6 +49,7 @@ def train_wm(
     device: str | None = None,
     steps: int | None = None,
     seed: int | None = None,
+    future: int | None = None,
     moving_weight: float | None = None,
     action_dropout: float | None = None,
     actions_per_frame: int | None = None,
@@ -74,6 +75,8 @@ def train_wm(
         device: auto (CUDA when torch sees a GPU, else the CPU), cpu, cuda or cuda:N.
         steps: override the preset's optimizer steps.
         seed: override the seed.
+        future: actions per training clip, imagined open-loop and backpropagated through (the preset's: 32
+            for the embedded backend; 1 trains on one-step predictions alone).
         moving_weight: extra loss weight of moving pixels, normalised (0 = plain mean squared error).
         action_dropout: share of training steps whose action is hidden, so that the model can be
             imagined with action guidance (`guidance` in its config.json; docs/world_model.md).
@@ -100,7 +103,8 @@ def train_wm(
 
     config, inputs = resolve(
         "train-wm", out, resume, wm_preset(preset, backend or "embedded"), inputs={"data": data}, required=("data",),
-        overrides={"backend": backend, "device": device, "steps": steps, "seed": seed, "moving_weight": moving_weight,
+        overrides={"backend": backend, "device": device, "steps": steps, "seed": seed, "future": future,
+                   "moving_weight": moving_weight,
                    f"{'flow' if backend == 'flow' else 'model'}.action_dropout": action_dropout,
                    "model.actions_per_frame": actions_per_frame,
                    "grounded": grounded, "state_noise": state_noise, "init": init, "extra_data": extra_data or None, "camera": camera, "cameras": cameras or None, "fit": fit,

@@ -115,3 +115,6 @@ def test_clip_length_grows_from_four_frames_to_the_full_horizon():
     lengths = [future_at(step, config) for step in range(100)]
     assert lengths[0] == 4 and lengths[49] < 32 and lengths[50:] == [32] * 50
     assert lengths == sorted(lengths)
+    # Clips shorter than four frames (one-step training, --future 1) are that short from the start.
+    one_step = dataclasses.replace(config, future=1)
+    assert {future_at(step, one_step) for step in range(100)} == {1}

@@ -390,10 +390,11 @@ def _as_field(value: Any) -> Any:
 
 
 def future_at(step: int, config: WorldModelTrainConfig) -> int:
-    """Clip length F at `step`: from 4 up to `config.future` over the first `warmup_future` of training,
-    rounded up to whole chunks for a model of one frame per chunk (`actions_per_frame`)."""
-    ramp = config.warmup_future * config.steps
-    future = config.future if step >= ramp else max(min(4, config.future), round(4 + (config.future - 4) * step / ramp))
+    """Clip length F at `step`: from 4 (or `config.future` if shorter) up to `config.future` over the
+    first `warmup_future` of training, rounded up to whole chunks for a model of one frame per chunk
+    (`actions_per_frame`)."""
+    ramp, first = config.warmup_future * config.steps, min(4, config.future)
+    future = config.future if step >= ramp else round(first + (config.future - first) * step / ramp)
     chunk = getattr(architecture(config), "actions_per_frame", 1)
     return -(-future // chunk) * chunk
 
