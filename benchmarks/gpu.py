@@ -20,6 +20,10 @@ models use it):
   actions with the committed judge's reward, policy update included (the median of the timed steps);
   ``rl_segment_step``: the same number of rollouts as short segments, 20 actions from uniformly drawn
   real keyframes, with the committed state-model ensemble's reward (segment practice, docs/rl.md);
+- ``chunk_model``: the same imagination (actions per second: the model imagines one frame per 5
+  actions and repeats it), training step and judge RL step for the committed frame-per-chunk model
+  (results/world_model/chunks/wm, `train-wm --actions-per-frame 5`), measured in the same run as
+  the committed model's figures above so that the two compare;
 - with ``--profile``: the profiler's table of two more judge steps (the ops that take the most host and
   device time), written beside ``--out`` as ``<out>.profile.txt``.
 
@@ -64,8 +68,9 @@ ROOT = Path(__file__).resolve().parents[1]
 RESULTS = Path(__file__).parent / "results" / "gpu.json"
 WORLD_MODEL, JUDGE = ROOT / "results/world_model/wm", ROOT / "results/judge/video_judge"
 STATE_ENSEMBLE = ROOT / "results/world_model/state_v5"
+CHUNK_MODEL = ROOT / "results/world_model/chunks/wm"
 SEVERAL_CAMERAS = {"two_cameras": ("front", "gripper"), "three_cameras": ("front", "gripper", "hand")}
-SKIPPABLE = ("imagine", "wm", "policy", "rl")
+SKIPPABLE = ("imagine", "wm", "policy", "rl", "chunk")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -138,12 +143,14 @@ def model_fps(model, batch: int, device: torch.device, repeats: int, chunk: int 
 
 
 def wm_train_step_s(config: EmbeddedWorldModelConfig, sizes: Sizes, device: torch.device) -> float:
-    """Seconds of one train-wm optimizer step at `sizes.wm_batch` clips of `sizes.wm_future` frames."""
+    """Seconds of one train-wm optimizer step at `sizes.wm_batch` clips of `sizes.wm_future` frames
+    (rounded up to whole chunks for a model of one frame per chunk, as train-wm does)."""
     torch.manual_seed(0)
     model = EmbeddedWorldModel(config).to(device).train()
     optimizer = torch.optim.AdamW(model.parameters(), lr=1e-4)
     schedule = torch.optim.lr_scheduler.LambdaLR(optimizer, lambda step: 1.0)
-    b, c, f, size = sizes.wm_batch, config.context_frames, sizes.wm_future, config.image_size
+    b, c, size = sizes.wm_batch, config.context_frames, config.image_size
+    f = -(-sizes.wm_future // config.actions_per_frame) * config.actions_per_frame
     clips = ClipBatch(torch.randint(0, 256, (b, c, size, size, 3), dtype=torch.uint8, device=device),
                       torch.rand(b, f, config.action_dim, device=device) * 2 - 1,
                       torch.randint(0, 256, (b, f, size, size, 3), dtype=torch.uint8, device=device),
@@ -179,10 +186,28 @@ def policy_obs_per_s(config: VLAConfig, sizes: Sizes, device: torch.device) -> d
     return {"train": round(b / timed(update, device, sizes.repeats)), "sample": round(b / timed(sample, device, sizes.repeats))}
 
 
-def rl_step(data: Path, sizes: Sizes, device: torch.device, tasks: str) -> dict:
+def rl_step(data: Path, sizes: Sizes, device: torch.device, tasks: str, wm: Path = WORLD_MODEL) -> dict:
     """The timings of one imagined RL step with the judge's reward (benchmarks/rl_step.py's measurement)."""
-    return time_setting("imagined", f"judge:{JUDGE}", data, sizes.rl_steps, tasks, starts_per_step=sizes.rl_starts,
+    return time_setting("imagined", f"judge:{JUDGE}", data, sizes.rl_steps, tasks, wm=wm, starts_per_step=sizes.rl_starts,
                         group_size=sizes.rl_group, horizon=sizes.rl_horizon, device=str(device))
+
+
+def chunk_model_figures(data: Path, sizes: Sizes, device: torch.device, tasks: str, skip: set[str]) -> dict:
+    """The committed frame-per-chunk model's imagination, training step and judge RL step (each
+    part unless `skip` names its measurement)."""
+    model = load_world_model(CHUNK_MODEL).to(device).eval()
+    figures: dict = {"actions_per_frame": model.config.actions_per_frame}
+    if "imagine" not in skip:
+        figures |= {f"imagined_actions_per_s_b{b}": round(imagined_env_fps(model, b, sizes.imagine_steps))
+                    for b in sizes.imagine_batches}
+        figures |= {f"model_actions_per_s_b{b}": round(model_fps(model, b, device, sizes.repeats))
+                    for b in sizes.imagine_batches}
+    if "wm" not in skip:
+        figures["wm_train_step_s"] = round(wm_train_step_s(model.config, sizes, device), 4)
+    if "rl" not in skip:
+        figures["rl_step"] = rl_step(data, sizes, device, tasks, wm=CHUNK_MODEL)
+        figures["rl_step_s"] = round(figures["rl_step"]["step_s"], 3)
+    return figures
 
 
 def rl_segment_step(data: Path, sizes: Sizes, device: torch.device, tasks: str) -> dict:
@@ -261,6 +286,8 @@ def main() -> None:
                    "rl_segment_step": rl_segment_step(args.data, sizes, device, args.tasks)}
         if args.profile:
             profile_rl_step(args.data, sizes, device, args.tasks, args.out.with_suffix(".profile.txt"))
+    if "chunk" not in skip:
+        result["chunk_model"] = chunk_model_figures(args.data, sizes, device, args.tasks, skip)
     if skip:
         result["not_measured"] = sorted(skip)
     result |= {

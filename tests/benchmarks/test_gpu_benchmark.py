@@ -48,6 +48,9 @@ def test_every_measurement_runs_at_toy_sizes_on_the_cpu(tmp_path, starts):
         assert set(speeds) == setups and min(speeds.values()) > 0
     assert result["rl_step"]["rollouts_per_step"] == 4 and result["rl_step_s"] > 0
     assert result["rl_segment_step"]["horizon"] == 5 and result["rl_segment_step"]["step_s"] > 0
+    chunk = result["chunk_model"]  # the frame-per-chunk model, beside the committed one
+    assert chunk["actions_per_frame"] == 5 and chunk["imagined_actions_per_s_b4"] > 0 and chunk["model_actions_per_s_b8"] > 0
+    assert chunk["wm_train_step_s"] > 0 and chunk["rl_step"]["rollouts_per_step"] == 4
 
 
 def test_without_a_gpu_it_measures_nothing_and_says_why(tmp_path):
