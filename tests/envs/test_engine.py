@@ -54,3 +54,44 @@ def test_a_vector_env_and_a_single_episode_reach_the_same_outcome_from_the_same_
         assert np.array_equal(frames[: single.steps + 1], np.stack(single.frames))
         assert results[-1].success[i] == single.success
         assert sum(r.executed[i] for r in results) == single.steps
+
+
+def test_an_episode_that_records_no_frames_renders_only_those_its_actor_reads(env):
+    """Inside a chunk nobody looks at the frames: left unrendered (the costliest part of a step), the
+    episode is the same and the actor reads the same frames."""
+    rng = np.random.default_rng(1)
+    plan = rng.uniform(-1, 1, (ENV.horizon, 4)).astype(np.float32)
+
+    def chunked_actor(read: list):
+        def act(_, obs):
+            read.append(obs["image"])
+            done = 4 * (len(read) - 1)  # chunks of 4 actions played so far
+            return plan[done: done + 4]
+        return act
+
+    watched, bare = [], []
+    recorded = play_episode(env, chunked_actor(watched), seed=7, record=("frames",))
+    unrecorded = play_episode(env, chunked_actor(bare), seed=7)
+    assert np.array_equal(np.stack(recorded.actions), np.stack(unrecorded.actions))
+    assert recorded.success == unrecorded.success and recorded.steps == unrecorded.steps
+    assert len(bare) == len(watched) and all(np.array_equal(a, b) for a, b in zip(bare, watched))
+    assert unrecorded.obs["image"] is not None  # the episode's end is rendered
+    _, *_ = env.reset(seed=7)
+    obs, *_ = env.step(plan[0], observe=False)
+    assert obs["image"] is None and obs["images"] is None and obs["state"].shape == (4,)
+
+
+def test_a_vector_env_asked_for_no_frames_inside_chunks_plays_the_same_episodes():
+    rng = np.random.default_rng(2)
+    plan = rng.uniform(-1, 1, (2, ENV.horizon, 4)).astype(np.float32)
+    results = {}
+    for every_frame in (True, False):
+        chunks = iter(np.split(plan, 5, axis=1))
+        with SimVectorEnv(2, chunk_size=4, config=ENV) as vector:
+            results[every_frame] = list(run_batch(vector, lambda images, instructions, states: next(chunks),
+                                                  {"tasks": ["reach-v3"] * 2, "seeds": [1, 2], "every_frame": every_frame}))
+    for full, bare in zip(results[True], results[False]):
+        # What the policy reads (each chunk's last frame), the rewards and the outcomes are the same.
+        assert np.array_equal(full.observation, bare.observation) and np.array_equal(full.executed, bare.executed)
+        assert np.array_equal(full.rewards, bare.rewards, equal_nan=True) and np.array_equal(full.success, bare.success)
+        assert np.array_equal(bare.frames, np.repeat(full.frames[:, -1:], 4, axis=1))  # the last frame, repeated

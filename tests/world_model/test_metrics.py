@@ -171,6 +171,10 @@ def test_summarize_horizons_on_ragged_rollouts():
     assert out["full"] == pytest.approx((sum(range(40)) + sum(range(40, 60))) / 60)
     short = summarize_horizons(values[:, :10])
     assert short["h32"] is None and short["avg32"] is None and short["h8"] == pytest.approx(27.0)
+    # Every 5th step measured (a model of one frame per chunk of 5): each horizon at the next measured step.
+    chunks = summarize_horizons(values, measured_every=5)
+    assert chunks["h1"] == pytest.approx(24.0) and chunks["h8"] == pytest.approx(29.0)  # steps 5 and 10
+    assert chunks["h32"] == pytest.approx(34.0)  # step 35, row 0 only
 
 
 def test_distances_to_shared_references_equal_the_pairwise_ones():

@@ -141,14 +141,21 @@ def start_episode(env: MetaWorldEnv, seed: int, instruction: str | None = None,
     return run
 
 
-def play_chunk(run: EpisodeRun, chunk: np.ndarray) -> list[tuple[dict[str, np.ndarray], float]]:
+def play_chunk(run: EpisodeRun, chunk: np.ndarray, every_frame: bool = True) -> list[tuple[dict[str, np.ndarray], float]]:
     """Executes (K, A) actions open-loop, without looking at the new frames, until the chunk or the
-    episode ends; returns (observation, reward) of each action executed (none once it has ended)."""
+    episode ends; returns (observation, reward) of each action executed (none once it has ended).
+
+    Unless `every_frame` or the run records frames, only the frame the actor reads next (the
+    chunk's last, or the episode's end) is rendered: rendering is most of a step's cost, and the
+    others' observations have no images (`MetaWorldEnv.step`'s ``observe``)."""
     steps = []
-    for action in chunk:
+    every_frame = every_frame or "frames" in run.record
+    for j, action in enumerate(chunk):
         if run.done:
             break
-        obs, reward, run.terminated, run.truncated, info = run.env.step(action)
+        observe = every_frame or j == len(chunk) - 1
+        step = run.env.step(action) if observe else run.env.step(action, observe=False)
+        obs, reward, run.terminated, run.truncated, info = step
         run.steps += 1
         run.success |= bool(info["success"])
         run.actions.append(action)
@@ -170,7 +177,7 @@ def play_episode(env: MetaWorldEnv, actor: Actor, seed: int, record: Collection[
         chunk = np.asarray(actor(env, run.obs))  # (K, A)
         if chunk.ndim != 2 or len(chunk) == 0:
             raise ValueError(f"an actor must return a (K, A) chunk with K >= 1, got shape {chunk.shape}")
-        play_chunk(run, chunk)
+        play_chunk(run, chunk, every_frame=False)  # the actor reads each chunk's last frame alone
     return run
 
 

@@ -158,7 +158,10 @@ class MetaWorldEnv(gym.Env):
         self._steps = 0
         return self._observe(), self._info(success=False) | {"prefix_steps": len(prefix)}
 
-    def step(self, action):
+    def step(self, action, observe: bool = True):
+        """Gymnasium's step. With ``observe=False`` (the rollout engine's steps inside an open-loop
+        chunk whose frames nobody records) the cameras are not rendered, the costliest part of a
+        step: the observation's ``image`` and ``images`` are None, unless the step ends the episode."""
         if self._episode_seed is None:
             raise RuntimeError("call reset() before step()")
         action = np.asarray(action, dtype=np.float32)
@@ -170,7 +173,8 @@ class MetaWorldEnv(gym.Env):
         success = bool(mw_info["success"])
         terminated = success and self.config.terminate_on_success
         truncated = not terminated and self._steps >= self.config.horizon
-        return self._observe(), float(reward), terminated, truncated, self._info(success)
+        obs = self._observe() if observe or terminated or truncated else self._unobserved()
+        return obs, float(reward), terminated, truncated, self._info(success)
 
     def render(self) -> np.ndarray:
         if self._frame is None:
@@ -270,6 +274,10 @@ class MetaWorldEnv(gym.Env):
             images[name] = renderer.render(self._mw.data, markers)
         self._frame = tile_views([images[name] for name in self.config.cameras])
         return {"image": self._frame, "images": images, "state": self._env_state[:STATE_DIM].astype(np.float32)}
+
+    def _unobserved(self) -> dict[str, Any]:
+        """`_observe`'s observation without rendering: the robot's state, no images."""
+        return {"image": None, "images": None, "state": self._env_state[:STATE_DIM].astype(np.float32)}
 
     def _info(self, success: bool) -> dict[str, Any]:
         return {

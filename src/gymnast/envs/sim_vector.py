@@ -59,11 +59,12 @@ class _Episodes:
         self._args = {"config": config, "gap": gap, "instruction_split": instruction_split}
         self._envs: dict[tuple[str, int], MetaWorldEnv] = {}
         self._episodes: list[EpisodeRun] = []
+        self._every_frame = True
 
     def reset(self, tasks: list[str], seeds: list[int], instructions: list[str | None],
-              prefixes: list[np.ndarray | None] | None = None) -> dict[str, np.ndarray]:
+              prefixes: list[np.ndarray | None] | None = None, every_frame: bool = True) -> dict[str, np.ndarray]:
         counts: Counter[str] = Counter()
-        self._episodes = []
+        self._episodes, self._every_frame = [], every_frame
         for task, seed, instruction, prefix in zip(tasks, seeds, instructions, prefixes or [None] * len(tasks)):
             key = (task, counts[task])
             counts[task] += 1
@@ -88,10 +89,14 @@ class _Episodes:
         rewards = np.full((b, k), np.nan)
         executed = np.zeros(b, np.int64)
         for i, episode in enumerate(self._episodes):
-            for j, (obs, reward) in enumerate(play_chunk(episode, actions[i])):
-                frames[i, j], rewards[i, j] = obs["image"], reward
-                executed[i] += 1
-            frames[i, executed[i] :] = episode.obs["image"]  # an ended episode shows its final frame
+            played = play_chunk(episode, actions[i], self._every_frame)
+            executed[i] = len(played)
+            rewards[i, : len(played)] = [reward for _, reward in played]
+            # After an episode's end its final frame; without every_frame, unrendered, the chunk's last.
+            frames[i] = episode.obs["image"]
+            if self._every_frame:
+                for j, (obs, _) in enumerate(played):
+                    frames[i, j] = obs["image"]
         return {"frames": frames, "state": self._states(), "rewards": rewards, "executed": executed, **self._status()}
 
     def _states(self) -> np.ndarray:
@@ -176,7 +181,9 @@ class SimVectorEnv(VectorEnv):
                 each episode's own), prefixes optional (default: start at the first frame; else
                 each episode starts at the keyframe its prefix reaches from the scene, restored
                 exactly by replaying it). Other keys are ignored, so one dict can describe a real
-                start for this env and the imagined one.
+                start for this env and the imagined one. ``"every_frame": False`` renders only
+                each chunk's last frame (what the policy reads; an evaluation needs no more): the
+                chunk's other ``frames`` repeat it.
 
         Raises:
             ValueError: naming the field that is missing or has the wrong length or type.
@@ -195,7 +202,8 @@ class SimVectorEnv(VectorEnv):
         if options.get("prefixes") is not None:
             prefixes = self._field(options, "prefixes", "(T0, A) action arrays", lambda p: np.ndim(p) == 2)
         seeds = [int(s) for s in seeds]
-        result = self._call("reset", [(tasks[s], seeds[s], instructions[s], prefixes[s]) for s in self._slices])
+        every_frame = bool(options.get("every_frame", True))
+        result = self._call("reset", [(tasks[s], seeds[s], instructions[s], prefixes[s], every_frame) for s in self._slices])
         result["task"] = np.array(tasks, dtype=object)
         result["seed"] = np.array(seeds, np.int64)
         self._info = result

@@ -137,7 +137,9 @@ def _world_model_fidelity(wm: Path, data: Path, out: Path, progress: bool, devic
     settings = WorldModelEvalConfig(videos=2, controllability=ControllabilityConfig(scenes=4), device=device)
     report = evaluate_world_model(wm, data, out / "world_model_eval.json", settings, progress)
     control = report.get("controllability") or {}
-    return {**{key: report[key] for key in FIDELITY_KEYS if key in report},
+    # A model of one frame per chunk is measured on the frames it imagines (eval-wm): each horizon at the next one.
+    per_frame = (report.get("model") or {}).get("actions_per_frame", 1)
+    return {**{key: report[key] for key in FIDELITY_KEYS if key in report}, "actions_per_frame": per_frame,
             "controllability": {key: control.get(key) for key in ("matched_psnr", "mismatched_psnr", "identification_accuracy")}}
 
 

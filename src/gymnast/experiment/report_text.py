@@ -257,11 +257,15 @@ def _fidelity(model: dict | None) -> list[str]:
         return []
     if "skipped" in model:
         return [f"**The world model**: fidelity not measured ({model['skipped']}).", ""]
-    control = model.get("controllability") or {}
+    control, per_frame = model.get("controllability") or {}, model.get("actions_per_frame", 1)
+    # A model of one frame per chunk of N actions is measured at the first frame it imagines at or after each step.
+    first, eighth, last = (-(-h // per_frame) * per_frame for h in (1, 8, 32))
     lines = [(f"**The world model** on {model.get('episodes')} held-out episodes, open loop: PSNR {_num(model.get('psnr_h1'))} dB "
-              f"one step ahead, {_num(model.get('psnr_h8'))} at 8 and {_num(model.get('psnr_h32'))} at 32 steps "
-              f"(repeating the last real frame: {_num(model.get('copy_last_psnr_h32'))} at 32); on the pixels that move, "
-              f"{_num(model.get('moving_psnr_h32'))} dB at 32 steps (repeating: {_num(model.get('copy_last_moving_psnr_h32'))}).")]
+              f"{'one step' if first == 1 else f'{first} steps'} ahead, {_num(model.get('psnr_h8'))} at {eighth} and "
+              f"{_num(model.get('psnr_h32'))} at {last} steps (repeating the last real frame: "
+              f"{_num(model.get('copy_last_psnr_h32'))} at {last}); on the pixels that move, "
+              f"{_num(model.get('moving_psnr_h32'))} dB at {last} steps (repeating: {_num(model.get('copy_last_moving_psnr_h32'))})"
+              + (f"; it imagines one frame per {per_frame} actions." if per_frame > 1 else "."))]
     if control.get("matched_psnr") is not None:
         lines.append(f"Controllability: its rollout matches the real rollout of the same actions at {_num(control['matched_psnr'])} dB "
                      f"and of other actions at {_num(control['mismatched_psnr'])} dB; it picks the right real rollout "

@@ -76,7 +76,8 @@ def _evaluate_in_env(envs: EnvFactory, kind: EnvKind, policy, reward: Reward, st
         batch = list(starts[first: first + env.num_envs])
         real = len(batch)
         batch += [batch[0]] * (env.num_envs - real)  # the env has a fixed size; extra rollouts are dropped
-        rollouts = collect_rollouts(env, policy, batch, 0.0, torch.Generator())
+        # Where the env reports success (a simulator), no frame inside a chunk is read: none rendered.
+        rollouts = collect_rollouts(env, policy, batch, 0.0, torch.Generator(), every_frame=not kind.reports_success)
         scores = score_groups(reward, rollouts, 1) if rollouts.success is None else torch.zeros(len(batch))
         outcomes.append(verdicts(rollouts, scores, reward)[:real])
         interactions += int(rollouts.lengths[:real].sum())

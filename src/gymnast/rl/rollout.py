@@ -97,6 +97,7 @@ def collect_rollouts(
     seed: int = 0,
     calls: int | None = None,
     timer: dict[str, float] | None = None,
+    every_frame: bool = True,
 ) -> Rollouts:
     """Runs one rollout per start until every one has ended (success or horizon).
 
@@ -110,6 +111,9 @@ def collect_rollouts(
         calls: pad to this many policy calls S when every rollout ended sooner (a simulator's
             successes), so rollouts of one env always have the same shape.
         timer: if given, ``policy_s`` (time spent sampling actions) is added to it.
+        every_frame: False when nothing reads the frames inside a chunk (an evaluation that counts
+            successes): a simulator renders each chunk's last frame alone and repeats it in
+            ``frames`` (rendering is most of a simulator step's cost).
     """
     if env.num_envs != len(starts):
         raise ValueError(f"the env runs {env.num_envs} rollouts but {len(starts)} starts were given")
@@ -125,7 +129,7 @@ def collect_rollouts(
         return samples[-1].actions.numpy()
 
     seen, states, masks, frames, actions, rewards, disagreement, success = [], [], [], [], [], [], [], None
-    for result in run_batch(env, act, start_options(starts), seed):
+    for result in run_batch(env, act, start_options(starts) | {"every_frame": every_frame}, seed):
         image, new = torch.from_numpy(result.observation), torch.from_numpy(result.frames)  # new: (R, k, H, W, 3)
         if not frames:
             frames.append(image[:, None])  # (R, 1, H, W, 3) the start frame

@@ -87,7 +87,8 @@ class WorldModelEvalConfig:
     measure_every: int | None = None
     """Measure the frames after actions N, 2N, ... of each rollout; None: the frames the model imagines
     (all of them, or each chunk's last for a model of one frame per chunk, `actions_per_frame`). Set
-    it to compare a model of one frame per action with one of N on the same frames."""
+    it to compare a model of one frame per action with one of N on the same frames. The horizons
+    (h1, h8, h32) are then each the first measured frame at or after it (after actions 5, 10, 35 for N = 5)."""
 
 
 def evaluate_world_model(wm: Path, data: Path, out: Path, config: WorldModelEvalConfig = WorldModelEvalConfig(),
@@ -98,6 +99,8 @@ def evaluate_world_model(wm: Path, data: Path, out: Path, config: WorldModelEval
     model = model.to(resolve_device(config.device))
     fraction = heldout_fraction(Path(wm))
     ensemble = isinstance(model, EnsembleWorldModel)
+    # A model of one frame per chunk is measured on the frames it imagines, not their repeats.
+    measured_every = config.measure_every or actions_per_frame(model)
     cameras = model_cameras(model)
     dataset = EpisodeDataset(data, config.camera, cameras or None, keys=config.keys)
     if model_image_size(dataset.camera_shape, model.image_size) != model.image_size:
@@ -129,14 +132,13 @@ def evaluate_world_model(wm: Path, data: Path, out: Path, config: WorldModelEval
             real = frames[start + 1 :]
             if ensemble:
                 rows["disagreement"].append(imagination.disagreement[0].numpy())
-            # A model of one frame per chunk is measured on the frames it imagines, not their repeats.
-            repeated = ~every_nth_frame(len(real), config.measure_every or actions_per_frame(model)).numpy()
-            for name, values in _measure_against_copy(imagined, real, context[0], perceptual).items():
-                rows[name].append(np.where(repeated, np.nan, values))
+            measured = every_nth_frame(len(real), measured_every)
+            for name, values in _measure_against_copy(imagined, real, context[0], perceptual, measured).items():
+                rows[name].append(values)
             squares = [split_views(x[None], len(cameras)) if cameras else None for x in (imagined, real, context[0])]
             for v, camera in enumerate(cameras):
-                for name, values in _measure_against_copy(*(x[v] for x in squares), perceptual).items():
-                    camera_rows[camera][name].append(np.where(repeated, np.nan, values))
+                for name, values in _measure_against_copy(*(x[v] for x in squares), perceptual, measured).items():
+                    camera_rows[camera][name].append(values)
             tasks.append(episode.info.task)
             full_rollout.append(start == 0)
             name = f"{episode.info.task}_{episode.info.behaviour}_{episode.info.seed}"
@@ -147,13 +149,15 @@ def evaluate_world_model(wm: Path, data: Path, out: Path, config: WorldModelEval
                 panels = side_by_side(real[:120:3].numpy(), imagined[:120:3].numpy())
                 write_gif(video_dir / f"{name}.gif", panels, fps=dataset.fps // 9, scale=1)
     table = {name: _pad(values) for name, values in rows.items()}  # name -> (N, T_max) with NaN
-    report = {**_summary(table, np.array(full_rollout)), **(disagreement_error(table) if ensemble else {}), "per_task": {}}
+    report = {**_summary(table, np.array(full_rollout), measured_every), **(disagreement_error(table) if ensemble else {}), "per_task": {}}
     if cameras:  # the figures above are over the views side by side; these are each view's own
-        report["per_camera"] = {camera: _summary({k: _pad(v) for k, v in by_measure.items()}, np.array(full_rollout))
+        report["per_camera"] = {camera: _summary({k: _pad(v) for k, v in by_measure.items()}, np.array(full_rollout),
+                                                 measured_every)
                                 for camera, by_measure in camera_rows.items()}
     for task in sorted(set(tasks)):
         chosen = np.array([t == task for t in tasks])
-        report["per_task"][task] = _summary({k: v[chosen] for k, v in table.items()}, np.array(full_rollout)[chosen])
+        report["per_task"][task] = _summary({k: v[chosen] for k, v in table.items()}, np.array(full_rollout)[chosen],
+                                            measured_every)
     report["controllability"] = check_controllability(model, dataset, heldout, config.controllability, progress=progress,
                                                       grounding=grounding)
     if grounding is not None:
@@ -234,11 +238,19 @@ def _ranks(x: np.ndarray) -> np.ndarray:
 
 
 def _measure_against_copy(imagined: torch.Tensor, real: torch.Tensor, context: torch.Tensor,
-                          perceptual: PerceptualDistance) -> dict:
+                          perceptual: PerceptualDistance, measured: torch.Tensor) -> dict:
     """`_measure` of the imagined frames, and (as ``copy_last_<measure>``) of repeating the last
-    (C, H, W, 3) context frame, the trivial predictor the model must beat."""
+    (C, H, W, 3) context frame, the trivial predictor the model must beat: (T,) arrays, NaN at the
+    frames not `measured` (T,) bool (the repeats of a model of one frame per chunk, never computed)."""
+    spread = {f"{prefix}{name}": np.full(len(measured), np.nan) for prefix in ("", "copy_last_") for name in MEASURES}
+    if not measured.any():  # a rollout from near an episode's end, shorter than one chunk
+        return spread
+    imagined, real = imagined[measured], real[measured]
     copy = _measure(context[-1:].expand_as(real), real, context, perceptual)
-    return _measure(imagined, real, context, perceptual) | {f"copy_last_{name}": values for name, values in copy.items()}
+    values = _measure(imagined, real, context, perceptual) | {f"copy_last_{name}": v for name, v in copy.items()}
+    for name, row in values.items():
+        spread[name][measured.numpy()] = row
+    return spread
 
 
 def _measure(imagined: torch.Tensor, real: torch.Tensor, context: torch.Tensor, perceptual: PerceptualDistance) -> dict:
@@ -256,11 +268,12 @@ def _pad(rows: list[np.ndarray]) -> np.ndarray:
     return table
 
 
-def _summary(table: dict[str, np.ndarray], full_rollout: np.ndarray) -> dict:
-    """Flat `<measure>_<horizon>` figures (e.g. psnr_h32, copy_last_moving_psnr_h32)."""
+def _summary(table: dict[str, np.ndarray], full_rollout: np.ndarray, measured_every: int) -> dict:
+    """Flat `<measure>_<horizon>` figures (e.g. psnr_h32, copy_last_moving_psnr_h32); with frames
+    measured every `measured_every` actions, each horizon at the first measured frame at or after it."""
     summary = {}
     for name, values in table.items():
-        by_horizon = summarize_horizons(values)
+        by_horizon = summarize_horizons(values, measured_every=measured_every)
         by_horizon["full"] = summarize_horizons(values[full_rollout])["full"]
         summary |= {f"{name}_{h}": (None if v is None else round(float(v), 4)) for h, v in by_horizon.items()}
     return dict(sorted(summary.items()))

@@ -209,13 +209,16 @@ def pearson(x, y) -> float | None:
     return round(float(np.corrcoef(x, y)[0, 1]), 4)
 
 
-def summarize_horizons(values: torch.Tensor, horizons: tuple[int, ...] = (1, 8, 32)) -> dict[str, float | None]:
+def summarize_horizons(values: torch.Tensor, horizons: tuple[int, ...] = (1, 8, 32),
+                       measured_every: int = 1) -> dict[str, float | None]:
     """Summarises per-frame values (N, T) of ragged rollouts at a few horizons.
 
     NaN marks a rollout that had no frame at that step (an episode that ended early), so all
     means ignore NaN. With the default horizons the keys are "h1", "h8", "h32" (the value at
     1-based step h), "avg32" (mean over steps 1..32) and "full" (mean over all steps). A summary
     with no data (a horizon beyond T, or only NaN) is None rather than NaN, so it is JSON-friendly.
+    Where only every `measured_every`-th step was measured (a model of one frame per chunk), "hH"
+    is the first measured step at or after H (h1, h8, h32 at steps 5, 10, 35 for chunks of 5).
     """
     values = torch.as_tensor(values, dtype=torch.float64)
     assert values.ndim == 2, f"values must be (N, T), got {tuple(values.shape)}"
@@ -225,7 +228,8 @@ def summarize_horizons(values: torch.Tensor, horizons: tuple[int, ...] = (1, 8, 
         value = torch.nanmean(part).item() if part.numel() else math.nan
         return None if math.isnan(value) else value
 
-    summary = {f"h{h}": mean(values[:, h - 1]) if h <= t else None for h in horizons}
+    steps = {h: -(-h // measured_every) * measured_every for h in horizons}
+    summary = {f"h{h}": mean(values[:, step - 1]) if step <= t else None for h, step in steps.items()}
     longest = max(horizons)
     summary[f"avg{longest}"] = mean(values[:, :longest]) if longest <= t else None
     summary["full"] = mean(values)
