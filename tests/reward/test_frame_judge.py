@@ -47,6 +47,18 @@ def test_a_video_succeeds_where_its_most_convincing_frame_does():
         judge.frame_probabilities(videos.float(), ["x"] * 2)
 
 
+def test_a_repeated_frame_gets_the_probability_of_the_frame_it_repeats():
+    """Chunk models' videos repeat each frame (and every video its last after the end): judged once."""
+    judge = FrameJudge(JudgeConfig(width=16, image_size=16)).eval()
+    distinct = torch.randint(0, 255, (2, 4, 16, 16, 3), dtype=torch.uint8)
+    repeated = distinct.repeat_interleave(3, dim=1)  # (2, 12, ...): each frame three times
+    per_frame = judge.frame_probabilities(repeated, ["open the drawer"] * 2)
+    alone = torch.stack([judge.frame_probabilities(repeated[:, [0, t]], ["open the drawer"] * 2)[:, 1]
+                         for t in range(1, 12)], dim=1)  # each frame judged on its own
+    assert torch.allclose(per_frame[:, 1:], alone, atol=1e-3) and (per_frame[:, 0] == 0).all()
+    assert torch.equal(per_frame[:, 4], per_frame[:, 5]) and torch.equal(per_frame[:, 1], per_frame[:, 2])
+
+
 def test_frame_batches_are_half_successes_and_skip_frames_just_before_a_success():
     success = video([False] * 6 + [True] * 3)  # first success at frame 7
     failure = video([False] * 9, value=100)

@@ -92,6 +92,8 @@ def test_every_reward_declares_whether_it_is_binary_what_it_needs_and_its_metric
     assert SimSuccess.needs.simulator_success and SimDense.needs.simulator_success
     assert VerifiedReward.needs.world_model and VerifiedReward.needs.reference_actions
     assert LearnedJudge.needs == FrameJudge.needs == VLMJudge.needs == RewardNeeds()
+    # Only the simulator's own rewards leave the frames inside a chunk unread (RL need not render them).
+    assert [type(reward).__name__ for reward in _every_reward() if not reward.needs.video] == ["SimSuccess", "SimDense"]
 
 
 def test_each_reward_fits_exactly_the_envs_that_give_what_it_needs():

@@ -52,7 +52,7 @@ class RewardContext:
 
 @dataclass(frozen=True)
 class RewardNeeds:
-    """What a reward needs besides the video and the instructions."""
+    """What a reward needs besides the instructions: the video (unless ``video`` is False) and more."""
 
     world_model: bool = False
     """It is built with a world model and scores only videos that model imagined (a real video
@@ -64,6 +64,9 @@ class RewardNeeds:
     start_state: bool = False
     """It reads each rollout's recorded start state and actions (`RewardContext.start_state`,
     ``actions``): a grounded world model imagines the state on from there."""
+    video: bool = True
+    """It reads the rollouts' frames; False for a reward of the simulator's own outcome alone, so
+    that a simulator need not render the frames inside each chunk when nothing else reads them."""
 
 
 class Reward(Protocol):

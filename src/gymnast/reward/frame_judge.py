@@ -88,11 +88,19 @@ class FrameJudge(ThresholdJudge, nn.Module):
         batch, length = videos.shape[:2]
         if length < 2:
             return torch.zeros(batch, length)
-        later = videos[:, 1:].flatten(0, 1)  # (B*(T-1), H, W, 3)
-        first = videos[:, :1].expand(-1, length - 1, -1, -1, -1).flatten(0, 1)
-        text = self.encoder(instructions)[:, None].expand(-1, length - 1, -1).flatten(0, 1)
-        probabilities = torch.sigmoid(self(first, later, text).float()).cpu().view(batch, length - 1)
-        return torch.cat([torch.zeros(batch, 1), probabilities], dim=1)
+        later = videos[:, 1:]  # (B, T-1, H, W, 3)
+        # A frame equal to the one before it gets its probability, not another pass: a world model of
+        # one frame per chunk repeats each frame for the chunk's other actions, and a video repeats
+        # its last frame after the episode ends.
+        new = torch.ones(batch, length - 1, dtype=torch.bool)
+        new[:, 1:] = (later[:, 1:] != later[:, :-1]).flatten(2).any(2).cpu()
+        first = videos[:, :1].expand(-1, length - 1, -1, -1, -1)[new]
+        text = self.encoder(instructions)[:, None].expand(-1, length - 1, -1)[new]
+        judged = torch.sigmoid(self(first, later[new], text).float()).cpu()  # (N,) one per new frame
+        latest = torch.cummax(torch.where(new, torch.arange(length - 1), 0), dim=1).values  # each frame's last new one
+        probabilities = torch.zeros(batch, length - 1)
+        probabilities[new] = judged
+        return torch.cat([torch.zeros(batch, 1), probabilities.gather(1, latest)], dim=1)
 
     def probability(self, videos: torch.Tensor, instructions: Sequence[str]) -> torch.Tensor:
         """(B,) P(success) of each video: that of its most convincing frame."""

@@ -22,7 +22,7 @@ class SimSuccess:
     """`Reward`: 1.0 if the simulator reported success during the rollout, else 0.0."""
 
     binary = True
-    needs = RewardNeeds(simulator_success=True)
+    needs = RewardNeeds(simulator_success=True, video=False)
 
     def metrics(self) -> dict[str, float]:
         return {}  # counts nothing
@@ -43,7 +43,7 @@ class SimDense:
     """
 
     binary = False
-    needs = RewardNeeds(simulator_success=True)
+    needs = RewardNeeds(simulator_success=True, video=False)
 
     def metrics(self) -> dict[str, float]:
         return {}  # counts nothing

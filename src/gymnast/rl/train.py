@@ -248,9 +248,10 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
         for step in bar:
             done = step + 1
             started = time.perf_counter()
+            video_due = done % config.video_every == 0 or done == config.steps
             batch, scores, values = rl_step(envs.train(config.starts_per_step * config.group_size), policy, reward,
                                             draw_starts, config, sampler, actions, optimizer, schedule, reference,
-                                            anchor, critic)
+                                            anchor, critic, every_frame=reward.needs.video or video_due)
             interactions = int(values.pop("rollout/interactions"))
             if env.real_interactions:
                 state["real_interactions"] += interactions
@@ -265,7 +266,7 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
                 watched = watch_hacking(envs, batch, scores, verdicts(batch, scores, reward), config.watch_rollouts)
                 state["watch_real_interactions"] += int(watched.pop("eval/watch_interactions"))
                 values |= watched | {"eval/watch_real_interactions": state["watch_real_interactions"]}
-            if batch is not None and (done % config.video_every == 0 or done == config.steps):
+            if batch is not None and video_due:
                 write_group_video(out / "videos" / f"step_{done:06d}.mp4", batch, scores, config.group_size)
             log(done, values)
             bar.set_postfix(reward=f"{values.get('reward/mean', float('nan')):.2f}", step_s=f"{values['time/step_s']:.1f}")
@@ -288,7 +289,8 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
 def rl_step(env: VectorEnv, policy, reward: Reward, draw_starts: Callable[[int, torch.Generator], list[Start]],
             config: RLConfig, sampler: torch.Generator, actions: torch.Generator, optimizer: torch.optim.Optimizer,
             schedule: torch.optim.lr_scheduler.LRScheduler, reference=None, anchor: ImitationAnchor | None = None,
-            critic: CallCritic | None = None) -> tuple[Rollouts | None, torch.Tensor | None, dict[str, float]]:
+            critic: CallCritic | None = None, every_frame: bool = True
+            ) -> tuple[Rollouts | None, torch.Tensor | None, dict[str, float]]:
     """One RL step, from start states to the policy update.
 
     1. Draw B start states and roll the policy out G times from each, at the rollout temperature.
@@ -311,6 +313,8 @@ def rl_step(env: VectorEnv, policy, reward: Reward, draw_starts: Callable[[int, 
             demonstrations are drawn with `actions`.
         critic: the learned critic of ``credit`` critic (`gymnast.rl.critic`), else None; its fitting
             shuffles with `actions`.
+        every_frame: False when neither the reward nor a video reads the frames inside a chunk: a
+            simulator then renders only the frames the policy reads (`collect_rollouts`).
 
     Returns:
         (the kept rollouts or None, their (R,) scores or None, metrics), the metrics including
@@ -330,7 +334,8 @@ def rl_step(env: VectorEnv, policy, reward: Reward, draw_starts: Callable[[int, 
         timer: dict[str, float] = {}
         began = time.perf_counter()
         rollouts = collect_rollouts(env, policy, [start for start in starts for _ in range(size)], config.temperature,
-                                    actions, seed, calls=-(-config.horizon // policy.chunk_size), timer=timer)
+                                    actions, seed, calls=-(-config.horizon // policy.chunk_size), timer=timer,
+                                    every_frame=every_frame)
         values["time/rollout_s"] += time.perf_counter() - began
         values["time/policy_s"] += timer.get("policy_s", 0.0)
         began = time.perf_counter()
