@@ -188,5 +188,10 @@ def test_distances_to_shared_references_equal_the_pairwise_ones():
     shared = perceptual.against_references(pred, references, index)
     assert shared.shape == (3, 4)
     torch.testing.assert_close(shared, perceptual(pred, references[index]), atol=1e-5, rtol=1e-5)
+    # Repeated frames (a model of one frame per chunk): the same distances, the repeats computed once.
+    held_pred, held_references = pred.repeat_interleave(3, dim=1), references.repeat_interleave(3, dim=1)
+    held_references[0, 1] = references[0, 0] * 0.5  # a reference that changes where its rollouts repeat
+    torch.testing.assert_close(perceptual.against_references(held_pred, held_references, index),
+                               perceptual(held_pred, held_references[index]), atol=1e-5, rtol=1e-5)
     with pytest.raises(ValueError, match="must agree"):
         perceptual.against_references(pred, references[:, :3], index)

@@ -185,14 +185,29 @@ class PerceptualDistance(nn.Module):
         if pred.ndim != 5 or references.shape[1:] != pred.shape[1:] or index.shape != pred.shape[:1]:
             raise ValueError(f"pred (B, T, 3, H, W), references (U, T, 3, H, W) and index (B,) must agree; got "
                              f"{tuple(pred.shape)}, {tuple(references.shape)} and {tuple(index.shape)}")
-        steps = pred.shape[1]
-        flat = references.float().reshape(-1, *references.shape[2:])  # (U*T, 3, H, W)
-        known = [torch.cat(layer) for layer in zip(*(self._features(part) for part in flat.split(self.chunk_size)))]
-        rows = (index[:, None] * steps + torch.arange(steps)).reshape(-1)  # (B*T,) each image's reference row
-        x = pred.float().reshape(-1, *pred.shape[2:])
-        out = [_feature_distance(self._features(xs), [layer[part] for layer in known])
-               for xs, part in zip(x.split(self.chunk_size), rows.split(self.chunk_size))]
-        return torch.cat(out).reshape(pred.shape[:2])
+        # A frame equal to the one before it (a world model of one frame per chunk repeats each for
+        # the chunk's other actions) is not run through the network again: its features, and where
+        # the reference repeats too its distance, are those of the frame it repeats.
+        index = index.cpu()
+        new_reference = _changed(references)  # (U, T), on the host like the other masks
+        distinct = references[new_reference.to(references.device)].float()  # (N, 3, H, W)
+        known = [torch.cat(layer) for layer in zip(*(self._features(part) for part in distinct.split(self.chunk_size)))]
+        row = (torch.cumsum(new_reference.reshape(-1), 0) - 1).reshape(new_reference.shape)  # (U, T) into known
+        new = _changed(pred) | new_reference[index]  # (B, T) pairs whose distance must be computed
+        rows, x = row[index][new], pred[new.to(pred.device)].float()
+        distances = torch.cat([_feature_distance(self._features(xs), [layer[part] for layer in known])
+                               for xs, part in zip(x.split(self.chunk_size), rows.split(self.chunk_size))])
+        out = torch.zeros(new.shape, device=distances.device)
+        out[new.to(distances.device)] = distances
+        latest = torch.cummax(torch.where(new, torch.arange(new.shape[1]), 0), dim=1).values  # each pair's last computed
+        return out.gather(1, latest.to(distances.device))
+
+
+def _changed(videos: torch.Tensor) -> torch.Tensor:
+    """(N, T) bool for (N, T, ...) videos: True where a frame differs from the one before (and at t = 0)."""
+    changed = torch.ones(videos.shape[:2], dtype=torch.bool)
+    changed[:, 1:] = (videos[:, 1:] != videos[:, :-1]).flatten(2).any(2).cpu()
+    return changed
 
 
 def _feature_distance(fx: list[torch.Tensor], fy: list[torch.Tensor]) -> torch.Tensor:
