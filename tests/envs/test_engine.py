@@ -79,6 +79,11 @@ def test_an_episode_that_records_no_frames_renders_only_those_its_actor_reads(en
     _, *_ = env.reset(seed=7)
     obs, *_ = env.step(plan[0], observe=False)
     assert obs["image"] is None and obs["images"] is None and obs["state"].shape == (4,)
+    observed, *_ = env.step(plan[1])
+    unobserved_then_rendered = env.render()
+    assert unobserved_then_rendered is observed["image"]  # render() is always the scene as it is now
+    env.step(plan[2], observe=False)
+    assert not np.array_equal(env.render(), observed["image"])  # drawn on demand, not the stale frame
 
 
 def test_a_vector_env_asked_for_no_frames_inside_chunks_plays_the_same_episodes():

@@ -141,7 +141,8 @@ def start_episode(env: MetaWorldEnv, seed: int, instruction: str | None = None,
     return run
 
 
-def play_chunk(run: EpisodeRun, chunk: np.ndarray, every_frame: bool = True) -> list[tuple[dict[str, np.ndarray], float]]:
+def play_chunk(run: EpisodeRun, chunk: np.ndarray,
+               every_frame: bool = True) -> list[tuple[dict[str, np.ndarray], float]]:
     """Executes (K, A) actions open-loop, without looking at the new frames, until the chunk or the
     episode ends; returns (observation, reward) of each action executed (none once it has ended).
 

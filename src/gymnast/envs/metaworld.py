@@ -177,8 +177,10 @@ class MetaWorldEnv(gym.Env):
         return obs, float(reward), terminated, truncated, self._info(success)
 
     def render(self) -> np.ndarray:
-        if self._frame is None:
+        if self._episode_seed is None:
             raise RuntimeError("call reset() before render()")
+        if self._frame is None:  # the last step was not observed: render the scene as it is now
+            self._observe()
         return self._frame
 
     def close(self) -> None:
@@ -277,6 +279,7 @@ class MetaWorldEnv(gym.Env):
 
     def _unobserved(self) -> dict[str, Any]:
         """`_observe`'s observation without rendering: the robot's state, no images."""
+        self._frame = None  # stale now; `render` draws it when asked
         return {"image": None, "images": None, "state": self._env_state[:STATE_DIM].astype(np.float32)}
 
     def _info(self, success: bool) -> dict[str, Any]:
