@@ -92,11 +92,12 @@ class _Episodes:
             played = play_chunk(episode, actions[i], self._every_frame)
             executed[i] = len(played)
             rewards[i, : len(played)] = [reward for _, reward in played]
-            # After an episode's end its final frame; without every_frame, unrendered, the chunk's last.
-            frames[i] = episode.obs["image"]
-            if self._every_frame:
-                for j, (obs, _) in enumerate(played):
-                    frames[i, j] = obs["image"]
+            # Each step's frame, then the final one after an episode's end; without every_frame, all of
+            # them the chunk's last (the others were not rendered).
+            shown = len(played) if self._every_frame else 0
+            for j, (obs, _) in enumerate(played[:shown]):
+                frames[i, j] = obs["image"]
+            frames[i, shown:] = episode.obs["image"]
         return {"frames": frames, "state": self._states(), "rewards": rewards, "executed": executed, **self._status()}
 
     def _states(self) -> np.ndarray:

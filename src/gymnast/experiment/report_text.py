@@ -8,6 +8,7 @@ from __future__ import annotations
 from gymnast.experiment.dyna_report import dyna_table
 from gymnast.experiment.formatting import ci, pct
 from gymnast.experiment.goals import GOAL_DYNA_SHARE, GOAL_OVER_SFT
+from gymnast.world_model.metrics import measured_step
 
 
 def _ratio(value: float | None) -> str:
@@ -259,7 +260,7 @@ def _fidelity(model: dict | None) -> list[str]:
         return [f"**The world model**: fidelity not measured ({model['skipped']}).", ""]
     control, per_frame = model.get("controllability") or {}, model.get("actions_per_frame", 1)
     # A model of one frame per chunk of N actions is measured at the first frame it imagines at or after each step.
-    first, eighth, last = (-(-h // per_frame) * per_frame for h in (1, 8, 32))
+    first, eighth, last = (measured_step(h, per_frame) for h in (1, 8, 32))
     lines = [(f"**The world model** on {model.get('episodes')} held-out episodes, open loop: PSNR {_num(model.get('psnr_h1'))} dB "
               f"{'one step' if first == 1 else f'{first} steps'} ahead, {_num(model.get('psnr_h8'))} at {eighth} and "
               f"{_num(model.get('psnr_h32'))} at {last} steps (repeating the last real frame: "

@@ -27,7 +27,7 @@ from torch import nn
 
 from gymnast.policy.text import EMBEDDING_DIM, InstructionEncoder
 from gymnast.policy.vision import to_float_image
-from gymnast.utils.images import split_views
+from gymnast.utils.images import changed_frames, latest_changed, split_views
 from gymnast.reward.judge import JudgeConfig, ThresholdJudge, check_videos, labelled_loss
 from gymnast.utils.device import bf16_autocast, to_device
 
@@ -92,15 +92,13 @@ class FrameJudge(ThresholdJudge, nn.Module):
         # A frame equal to the one before it gets its probability, not another pass: a world model of
         # one frame per chunk repeats each frame for the chunk's other actions, and a video repeats
         # its last frame after the episode ends.
-        new = torch.ones(batch, length - 1, dtype=torch.bool)
-        new[:, 1:] = (later[:, 1:] != later[:, :-1]).flatten(2).any(2).cpu()
+        new = changed_frames(later)
         first = videos[:, :1].expand(-1, length - 1, -1, -1, -1)[new]
         text = self.encoder(instructions)[:, None].expand(-1, length - 1, -1)[new]
         judged = torch.sigmoid(self(first, later[new], text).float()).cpu()  # (N,) one per new frame
-        latest = torch.cummax(torch.where(new, torch.arange(length - 1), 0), dim=1).values  # each frame's last new one
         probabilities = torch.zeros(batch, length - 1)
         probabilities[new] = judged
-        return torch.cat([torch.zeros(batch, 1), probabilities.gather(1, latest)], dim=1)
+        return torch.cat([torch.zeros(batch, 1), probabilities.gather(1, latest_changed(new))], dim=1)
 
     def probability(self, videos: torch.Tensor, instructions: Sequence[str]) -> torch.Tensor:
         """(B,) P(success) of each video: that of its most convincing frame."""

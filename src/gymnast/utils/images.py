@@ -1,5 +1,8 @@
 """Frames put side by side: several cameras' views as one observation, and contact sheets (many
-frames on one labelled image, for people who would rather look than read)."""
+frames on one labelled image, for people who would rather look than read); and repeated frames
+found, so that whatever is computed per frame is computed once for a run of equal frames (a world
+model of one frame per chunk repeats each for the chunk's other actions; a video repeats its last
+frame after its episode ends)."""
 
 from __future__ import annotations
 
@@ -43,6 +46,20 @@ def split_views(images: torch.Tensor, views: int) -> torch.Tensor:
         raise ValueError(f"images {tuple(images.shape)} are not {views} views side by side")
     squares = images.reshape(*lead, height, views, width // views, channels)  # (N, ..., H, V, W, C)
     return squares.movedim(-3, 1).flatten(0, 1)
+
+
+def changed_frames(videos: torch.Tensor) -> torch.Tensor:
+    """(N, T) bool on the host for (N, T, ...) videos: True where a frame differs from the one
+    before it, and at t = 0."""
+    changed = torch.ones(videos.shape[:2], dtype=torch.bool)
+    changed[:, 1:] = (videos[:, 1:] != videos[:, :-1]).flatten(2).any(2).cpu()
+    return changed
+
+
+def latest_changed(changed: torch.Tensor) -> torch.Tensor:
+    """(N, T) int64 for (N, T) `changed_frames`: each frame's latest changed frame at or before it,
+    so that values computed on the changed frames alone reach their repeats by ``gather(1, ...)``."""
+    return torch.cummax(torch.where(changed, torch.arange(changed.shape[1]), 0), dim=1).values
 
 
 def join_views(images: torch.Tensor, views: int) -> torch.Tensor:

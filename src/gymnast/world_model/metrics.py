@@ -17,6 +17,8 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from gymnast.utils.images import changed_frames, latest_changed
+
 _IMAGENET_MEAN = (0.485, 0.456, 0.406)
 _IMAGENET_STD = (0.229, 0.224, 0.225)
 
@@ -189,25 +191,17 @@ class PerceptualDistance(nn.Module):
         # the chunk's other actions) is not run through the network again: its features, and where
         # the reference repeats too its distance, are those of the frame it repeats.
         index = index.cpu()
-        new_reference = _changed(references)  # (U, T), on the host like the other masks
+        new_reference = changed_frames(references)  # (U, T), on the host like the other masks
         distinct = references[new_reference.to(references.device)].float()  # (N, 3, H, W)
         known = [torch.cat(layer) for layer in zip(*(self._features(part) for part in distinct.split(self.chunk_size)))]
         row = (torch.cumsum(new_reference.reshape(-1), 0) - 1).reshape(new_reference.shape)  # (U, T) into known
-        new = _changed(pred) | new_reference[index]  # (B, T) pairs whose distance must be computed
+        new = changed_frames(pred) | new_reference[index]  # (B, T) pairs whose distance must be computed
         rows, x = row[index][new], pred[new.to(pred.device)].float()
         distances = torch.cat([_feature_distance(self._features(xs), [layer[part] for layer in known])
                                for xs, part in zip(x.split(self.chunk_size), rows.split(self.chunk_size))])
         out = torch.zeros(new.shape, device=distances.device)
         out[new.to(distances.device)] = distances
-        latest = torch.cummax(torch.where(new, torch.arange(new.shape[1]), 0), dim=1).values  # each pair's last computed
-        return out.gather(1, latest.to(distances.device))
-
-
-def _changed(videos: torch.Tensor) -> torch.Tensor:
-    """(N, T) bool for (N, T, ...) videos: True where a frame differs from the one before (and at t = 0)."""
-    changed = torch.ones(videos.shape[:2], dtype=torch.bool)
-    changed[:, 1:] = (videos[:, 1:] != videos[:, :-1]).flatten(2).any(2).cpu()
-    return changed
+        return out.gather(1, latest_changed(new).to(distances.device))
 
 
 def _feature_distance(fx: list[torch.Tensor], fy: list[torch.Tensor]) -> torch.Tensor:
@@ -222,6 +216,11 @@ def pearson(x, y) -> float | None:
     if len(x) < 3 or np.std(x) == 0 or np.std(y) == 0:
         return None
     return round(float(np.corrcoef(x, y)[0, 1]), 4)
+
+
+def measured_step(step: int, every: int) -> int:
+    """The first step at or after `step` (1-based) that is measured when every `every`-th is."""
+    return -(-step // every) * every
 
 
 def summarize_horizons(values: torch.Tensor, horizons: tuple[int, ...] = (1, 8, 32),
@@ -243,7 +242,7 @@ def summarize_horizons(values: torch.Tensor, horizons: tuple[int, ...] = (1, 8, 
         value = torch.nanmean(part).item() if part.numel() else math.nan
         return None if math.isnan(value) else value
 
-    steps = {h: -(-h // measured_every) * measured_every for h in horizons}
+    steps = {h: measured_step(h, measured_every) for h in horizons}
     summary = {f"h{h}": mean(values[:, step - 1]) if step <= t else None for h, step in steps.items()}
     longest = max(horizons)
     summary[f"avg{longest}"] = mean(values[:, :longest]) if longest <= t else None
