@@ -499,6 +499,7 @@ def experiment(
     sentences: Path | None = None,
     runner: str | None = None,
     device: str | None = None,
+    cameras: CameraNames | None = None,
 ) -> None:
     """The headline comparison: data, SFT, world model, judge, state model, eight arms, real-world
     evaluation and the WorldGym check, then OUT/report.md, OUT/summary.json and OUT/plots/.
@@ -518,6 +519,8 @@ def experiment(
         runner: where they run: local, ray or ray:ADDRESS (default: the preset's, local).
         device: where the models train, imagine and judge: auto (CUDA when torch sees a GPU, else the
             CPU), cpu, cuda or cuda:N; --resume may change it.
+        cameras: the views recorded and seen side by side by the policy, the world model and the
+            judges, e.g. front or front,gripper,hand (default: the preset's, front,gripper).
     """
     from gymnast.experiment.config import EXPERIMENT_PRESETS
     from gymnast.experiment.pipeline import run_experiment, saved_experiment_config
@@ -525,7 +528,8 @@ def experiment(
     from gymnast.experiment.stages import parse_reuse
 
     config, _ = resolve("experiment", out, resume, EXPERIMENT_PRESETS[preset],
-                        overrides={"workers": workers, "sentences": sentences, "runner": runner, "device": device},
+                        overrides={"workers": workers, "sentences": sentences, "runner": runner, "device": device,
+                                   "cameras": cameras},
                         inputs={}, saved=lambda: (saved_experiment_config(out), {}))
     summary = run_experiment(config, out, parse_reuse(reuse))
     print(format_table(summary))

@@ -35,3 +35,20 @@ def test_a_budget_below_one_group_is_refused_naming_the_setting():
 def test_negative_settings_are_refused():
     with pytest.raises(ValueError, match="EqualBudgetConfig.wm_steps must be at least 0"):
         EqualBudgetConfig(wm_steps=-1)
+
+
+@pytest.mark.slow
+def test_iter_sft_imitates_real_successes_seen_by_the_policys_two_cameras(two_camera_demos, tmp_path):
+    from gymnast.experiment.equal_budget import _iter_sft
+    from gymnast.policy.sft import SFT_PRESETS, train_sft
+
+    sft = dataclasses.replace(SFT_PRESETS["debug"], steps=2, checkpoint_every=2, demos_per_task=1,
+                              cameras=("front", "gripper"))
+    train_sft(two_camera_demos, tmp_path / "sft", sft, progress=False)
+    config = dataclasses.replace(EXPERIMENT_PRESETS["debug"], sft=sft)
+    config = dataclasses.replace(config, iter_sft=dataclasses.replace(config.iter_sft, steps=2))
+    # The scripted episodes stand in for recorded rollouts: every one a real success, in both views.
+    counts = _iter_sft(config, tmp_path / "sft", two_camera_demos, two_camera_demos, tmp_path / "iter_sft",
+                       progress=False)
+    assert counts["successes"] == 4 and counts["samples"] > 0
+    assert (tmp_path / "iter_sft" / "checkpoints" / "last").exists()

@@ -60,6 +60,20 @@ def test_the_summary_has_every_arm_with_its_interval_cost_and_time(experiment: P
     assert summary["real_rl_real_interactions"] == summary["arms"]["rl_real"]["real_interactions"]
 
 
+def test_every_stage_sees_the_experiments_two_cameras(experiment: Path):
+    views = ("front", "gripper")  # the presets' default
+    assert EXPERIMENT_PRESETS["debug"].cameras == views
+    assert EpisodeDataset(experiment / "data", cameras=views).cameras == views  # both recorded
+    for run in ("sft", "world_model", "judge"):  # each saved with both views
+        spec = json.dumps(json.loads((experiment / run / "config.json").read_text()))
+        assert '"front", "gripper"' in spec, run
+    # Real rollouts recorded along the way are in the policy's views, for the refitted models.
+    for rollouts in (experiment / "arms" / "dyna" / "round_1" / "rollouts", experiment / "equal_budget" / "rollouts"):
+        assert EpisodeDataset(rollouts, cameras=views).cameras == views, rollouts
+    # WorldGym's real and imagined rollouts started from the world model's two views.
+    assert json.loads((experiment / "summary.json").read_text())["worldgym"]
+
+
 def test_dyna_counts_its_rollouts_and_is_watched_every_round(experiment: Path):
     summary = json.loads((experiment / "summary.json").read_text())
     rounds = sorted((experiment / "arms" / "dyna").glob("round_[1-9]"))

@@ -33,6 +33,7 @@ from gymnast.data.collect import CollectConfig, EpisodeJob, collect
 from gymnast.data.lerobot import EpisodeDataset
 from gymnast.data.schema import policy_behaviour
 from gymnast.eval.actors import ImaginedPlanActor, PolicyActor, load_run_policy, load_run_world_model
+from gymnast.policy.load import policy_env_config
 from gymnast.utils.checkpoint import resolve_checkpoint
 
 logger = logging.getLogger(__name__)
@@ -150,9 +151,11 @@ def record_real_rollouts(run: str | Path, tasks: str, per_task: int, first_seed:
         ``episodes``, ``successes`` and ``real_interactions``: the actions taken, read back from
         the recorded dataset itself, so a resumed recording is counted whole.
     """
-    size = load_run_policy(str(Path(run).resolve())).config.image_size
+    # Recorded in every view the policy acts on, at its size: the views a world model and a judge
+    # of the same cameras refit on (Dyna, equal budgets).
+    env = policy_env_config(EnvConfig(horizon=horizon), str(Path(run).resolve()))
     config = CollectConfig(tasks=tasks, episodes_per_task=per_task, noise=(0.0,), first_seed=first_seed,
-                           workers=workers, runner=runner, env=EnvConfig(image_size=size, horizon=horizon))
+                           workers=workers, runner=runner, env=env)
     record_policy(run, config, out, temperature=temperature, progress=progress)
     dataset = EpisodeDataset(out)
     return {"episodes": len(dataset), "successes": sum(info.success for info in dataset.episodes),

@@ -264,9 +264,10 @@ def record_rollouts(k: int, policy: Path, judge: Path | None, config: DynaConfig
                                   config.runner, out, progress)
     if judge is None:
         return counts
-    dataset = EpisodeDataset(out)
+    model = load_judge(judge)
+    dataset = EpisodeDataset(out, cameras=model.config.cameras)  # the views the judge sees, side by side
     # Before fine-tuning: how often the judge passed a failure (the errors this round teaches it).
-    judge_report = evaluate_judge(load_judge(judge), load_videos(dataset, list(range(len(dataset))), None, False))
+    judge_report = evaluate_judge(model, load_videos(dataset, list(range(len(dataset))), None, False))
     return {**counts, "judge_before": judge_report}
 
 

@@ -140,9 +140,11 @@ def _iter_sft(config: ExperimentConfig, sft: Path, data: Path, rollouts: Path, o
     from gymnast.policy.load import load_policy
     from gymnast.policy.sft import load_demos
 
-    dataset = EpisodeDataset(rollouts)
+    policy = load_policy(sft)
+    # The rollouts were recorded in the views the policy acts on: read side by side, as it sees them.
+    dataset = EpisodeDataset(rollouts, cameras=policy.config.env_cameras)
     successes = [i for i, info in enumerate(dataset.episodes) if info.success]
-    samples = load_demos(dataset, successes, load_policy(sft).chunk_size) if successes else None
+    samples = load_demos(dataset, successes, policy.chunk_size) if successes else None
     if samples is None:
         logger.warning("equal budget: none of the %d recorded rollouts succeeded; Iter-SFT fine-tunes on the "
                        "demonstrations alone", len(dataset))

@@ -53,11 +53,14 @@ def imagine_successes(policy_run: Path, wm_run: Path, judge_run: Path, data: Pat
     from gymnast.reward.spec import RewardSpec
     from gymnast.rl.rollout import collect_rollouts, concat_rollouts, score_groups
     from gymnast.world_model.base import load_world_model
+    from gymnast.world_model.views import model_cameras
 
     policy, world_model = load_policy(policy_run), load_world_model(wm_run)
     judge = make_reward(RewardSpec.judge(judge_run))
     size = config.iter_sft.group_size
-    starts = [start for start in dataset_starts(data, resolve_tasks(config.tasks)) for _ in range(size)]
+    cameras = model_cameras(world_model)  # the views the world model imagines, as the policy sees them
+    starts = [start for start in dataset_starts(data, resolve_tasks(config.tasks), cameras=cameras or None)
+              for _ in range(size)]
     env = BatchedImaginedEnv(world_model, min(len(starts), config.rl.starts_per_step * size), policy.chunk_size,
                              config.rl.horizon)
     generator = torch.Generator().manual_seed(config.seed)

@@ -283,7 +283,8 @@ def _save_settings(out: Path, config: ExperimentConfig) -> None:
     path = out / "config.json"
     if path.exists():
         try:
-            saved = as_json(from_json(ExperimentConfig, _filled(json.loads(path.read_text()), as_json(config))))
+            saved = as_json(from_json(ExperimentConfig, _filled(_with_views(json.loads(path.read_text())),
+                                                                as_json(config))))
         except (TypeError, ValueError) as error:
             raise ValueError(f"{path}: not an experiment's settings this version can read ({error})") from error
         if saved != as_json(config):
@@ -303,6 +304,14 @@ def _filled(saved: dict, current: dict) -> dict:
     return filled
 
 
+def _with_views(saved: dict) -> dict:
+    """`saved` naming its cameras: settings saved before the experiment had the setting recorded the
+    views its collection did, the front camera unless it named others (not today's default)."""
+    if "cameras" in saved:
+        return saved
+    return {**saved, "cameras": saved.get("collect", {}).get("env", {}).get("cameras", list(EnvConfig().cameras))}
+
+
 def saved_experiment_config(out: Path) -> ExperimentConfig:
     """The settings the experiment in `out` was started with (DIR/config.json), for ``--resume``."""
-    return from_json(ExperimentConfig, saved_settings(out))
+    return from_json(ExperimentConfig, _with_views(saved_settings(out)))

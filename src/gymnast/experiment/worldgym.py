@@ -15,6 +15,7 @@ evaluation seeds), with the envs built once for all policies.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import time
@@ -117,11 +118,14 @@ class WorldGym:
         from gymnast.reward.select import make_reward
         from gymnast.reward.spec import RewardSpec
         from gymnast.world_model.base import load_world_model
+        from gymnast.world_model.views import replay_cameras
 
         if episodes < 1:
             raise ValueError(f"WorldGym needs at least one episode per task, got {episodes}")
-        self.tasks, self.env, self.workers, self.runner = resolve_tasks(tasks), env, workers, runner
         self.world_model = load_world_model(wm_run)
+        # The real and the imagined rollouts start from the views the world model imagines.
+        env = dataclasses.replace(env, cameras=replay_cameras(self.world_model))
+        self.tasks, self.env, self.workers, self.runner = resolve_tasks(tasks), env, workers, runner
         self.judge = make_reward(RewardSpec.judge(judge_run))
         self.starts = evaluation_starts(self.tasks, episodes, env)
         # Equal batches: 100 starts run as 4 x 25 rather than 32 + 32 + 32 + 4 padded to 32.
