@@ -228,11 +228,12 @@ def _demo() -> ExperimentConfig:
     # Sized to finish within 15 minutes on 2 CPU cores, set-up included: every stage runs, on two
     # tasks and both cameras, with models far smaller than the full ones (the numbers show the
     # pipeline, not the method). Two cameras cost most stages 1.5-2x one camera's time (10.3 -> about
-    # 16 min on an AVX2 CPU), won back by the trims marked "two cameras" below.
+    # 16 min on an AVX2 CPU), won back by the trims marked "two cameras" below (the values before them
+    # in brackets).
     return ExperimentConfig(
         tasks="drawer-open-v3,reach-v3",
         collect=CollectConfig(episodes_per_task=8),
-        sft=dataclasses.replace(SFT_PRESETS["demo"], demos_per_task=6, steps=250, checkpoint_every=125),  # two cameras: 300
+        sft=dataclasses.replace(SFT_PRESETS["demo"], demos_per_task=6, steps=250, checkpoint_every=125),  # two cameras (300)
         # One imagined frame per chunk of the policy's 5 actions (docs/world_model.md): a training
         # step 3.4x and imagination 2.1x cheaper, ranking as well as a frame per action from scratch;
         # clips of 20 future actions (4 imagined frames), not 32.
