@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import pytest
@@ -68,7 +69,9 @@ def test_the_gpu_presets_are_larger_than_the_full_ones():
     rl = RL_PRESETS["gpu"]
     assert (rl.steps, rl.starts_per_step * rl.group_size) == (400, 256)
     experiment = EXPERIMENT_PRESETS["gpu"].resolved()
-    assert experiment.world_model == WM_PRESETS["gpu"] and experiment.judge == JUDGE_PRESETS["gpu"]
+    views = experiment.cameras  # the experiment's, told to every stage
+    assert experiment.world_model == dataclasses.replace(WM_PRESETS["gpu"], cameras=views)
+    assert experiment.judge == dataclasses.replace(JUDGE_PRESETS["gpu"], cameras=views)
     assert (experiment.rl.steps, experiment.rl.starts_per_step * experiment.rl.group_size) == (400, 256)
 
 
