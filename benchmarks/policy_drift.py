@@ -25,7 +25,7 @@ import torch
 import gymnast  # noqa: F401  (sets MUJOCO_GL)
 from gymnast.config import EnvConfig
 from gymnast.envs.starts import evaluation_starts
-from gymnast.policy.load import load_policy
+from gymnast.policy.load import load_policy, policy_env_config
 from gymnast.utils.atomic import write_json
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -67,7 +67,8 @@ def main() -> None:
     parser.add_argument("--out", type=Path, required=True)
     args = parser.parse_args()
     base = load_policy(args.base).eval()
-    starts = evaluation_starts([args.task], args.episodes, EnvConfig(image_size=base.config.image_size))
+    # The views the base policy acts on (several cameras side by side), at its size.
+    starts = evaluation_starts([args.task], args.episodes, policy_env_config(EnvConfig(), args.base))
     images = torch.from_numpy(np.stack([start.frames[0] for start in starts]))
     instructions = [start.instruction for start in starts]
     report = {"base": str(args.base), "task": args.task, "episodes": args.episodes, "policies": {}}
