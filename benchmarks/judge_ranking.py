@@ -1,15 +1,16 @@
 """Can a learned judge rank the policy's own real rollouts, with one camera or several?
 
 For `--scenes` new scenes of each task, `--group` rollouts of the policy sampled at `--temperature`
-are played in the real world, whole episodes that stop at success as RL's do, with every camera the
-judges need rendered (the policy sees its own cameras, `gymnast.eval.actors.PolicyActor.seen`).
+are played in the real world for the whole horizon, on past a success as `gymnast rl-signal`'s real
+replays and imagined rollouts go (or, with `--stop-at-success`, ending at it as RL's real episodes
+do), with every camera the judges need rendered (the policy sees its own cameras, `gymnast.eval.actors.PolicyActor.seen`).
 Each judge scores the real videos through its own cameras, and its GRPO advantages within each
 group are held against those of the real success and of the real dense return
 (`gymnast.experiment.practice_signal.signal_figures`, as `gymnast rl-signal` reports its
 `real_video` readout): no world model is involved, so this is the judge's own ranking.
 
     .venv/bin/python benchmarks/judge_ranking.py --judge front=RUN --judge both=RUN \
-        [--policy results/sft/policy] [--tasks ...] [--scenes 6] [--group 8] [--out JSON]
+        [--policy results/sft/policy] [--tasks ...] [--scenes 6] [--group 8] [--stop-at-success] [--out JSON]
 
 Prints and writes --out (default benchmarks/results/judge_ranking.json).
 """
@@ -47,9 +48,9 @@ def _judge(run: str):
 
 def play_and_judge(job: tuple) -> dict:
     """One rollout of the policy in the real world, scored by every judge: (task, scene, member,
-    policy, judges {name: run}, cameras, temperature) -> its record."""
-    task, scene, member, policy, judges, cameras, temperature = job
-    env = cached_env(task, EnvConfig(cameras=cameras))
+    policy, judges {name: run}, cameras, temperature, stop at success) -> its record."""
+    task, scene, member, policy, judges, cameras, temperature, stop = job
+    env = cached_env(task, EnvConfig(cameras=cameras, terminate_on_success=stop))
     actor = PolicyActor(load_run_policy(policy), temperature=temperature, seed=zlib.crc32(f"{task}/{scene}/{member}".encode()))
     run = play_episode(env, actor, scene, record=("frames", "rewards", "successes"))
     frames = torch.from_numpy(np.stack(run.frames))  # (T+1, H, V*W, 3): the env's cameras side by side
@@ -88,6 +89,8 @@ def main() -> None:
     parser.add_argument("--scenes", type=int, default=6, help="new scenes per task")
     parser.add_argument("--group", type=int, default=8, help="rollouts per scene")
     parser.add_argument("--temperature", type=float, default=1.0)
+    parser.add_argument("--stop-at-success", action="store_true",
+                        help="end each episode at its first success (as RL's real episodes) instead of playing the horizon")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--out", type=Path, default=RESULTS)
@@ -99,7 +102,7 @@ def main() -> None:
     draw = np.random.default_rng(args.seed)
     scenes = {task: [int(s) for s in draw.choice(10_000, size=args.scenes, replace=False) + DATA_SEEDS.start + 500_000]
               for task in tasks}  # far from the data seeds the datasets were recorded on
-    jobs = [(task, scene, member, args.policy, judges, cameras, args.temperature)
+    jobs = [(task, scene, member, args.policy, judges, cameras, args.temperature, args.stop_at_success)
             for task in tasks for scene in scenes[task] for member in range(args.group)]
     started = time.perf_counter()
     records = sorted(parallel_map(play_and_judge, jobs, args.workers), key=lambda r: (tasks.index(r["task"]), r["scene"], r["member"]))

@@ -296,6 +296,7 @@ def train_judge(
     camera: str | None = None,
     cameras: CameraNames = (),
     fit: Fit | None = None,
+    threshold_tpr: float | None = None,
     device: str | None = None,
     keys: Annotated[KeyFlags, tyro.conf.arg(name="")] = KeyFlags(),
 ) -> None:
@@ -320,6 +321,8 @@ def train_judge(
             (e.g. front,gripper; with --wm, a world model of the same cameras). Default: --camera alone.
         fit: how frames that are not the model's square size are fitted: resize (squash the whole
             frame) or crop (the central square); saved with the run.
+        threshold_tpr: choose the threshold for this TPR on the validation scenes (the highest that
+            passes this share of their successes) instead of the most TPR - FPR; e.g. 0.95.
         device: auto (CUDA when torch sees a GPU, else the CPU), cpu, cuda or cuda:N; --resume may change it.
         keys: which dataset features are the actions and the states (default: LeRobot's action and
             observation.state); saved with the run.
@@ -330,7 +333,8 @@ def train_judge(
     config, inputs = resolve(
         "train-judge", out, resume, JUDGE_PRESETS[preset], inputs={"data": data, "wm": wm}, required=("data",),
         overrides={"steps": steps, "kind": kind, "extra_data": extra_data or None, "init": init, "camera": camera,
-                   "cameras": cameras or None, "fit": fit, "device": device, **key_overrides(keys)},
+                   "cameras": cameras or None, "fit": fit, "threshold_tpr": threshold_tpr, "device": device,
+                   **key_overrides(keys)},
         saved=lambda: (saved_judge_config(out), saved_inputs(out, "data", "wm")))
     report = train(inputs["data"], out, config, wm=inputs["wm"], resume=resume)
     print(json.dumps({k: v for k, v in report.items() if k.startswith(("real", "imagined"))}, indent=2))
@@ -500,6 +504,7 @@ def experiment(
     runner: str | None = None,
     device: str | None = None,
     cameras: CameraNames | None = None,
+    judge_rollouts: int | None = None,
 ) -> None:
     """The headline comparison: data, SFT, world model, judge, state model, eight arms, real-world
     evaluation and the WorldGym check, then OUT/report.md, OUT/summary.json and OUT/plots/.
@@ -521,6 +526,8 @@ def experiment(
             CPU), cpu, cuda or cuda:N; --resume may change it.
         cameras: the views recorded and seen side by side by the policy, the world model and the
             judges, e.g. front or front,gripper,hand (default: the preset's, front,gripper).
+        judge_rollouts: real rollouts per task of the SFT policy, played past any success, that the
+            judge also learns from (its near misses; counted in summary.json); default: the preset's.
     """
     from gymnast.experiment.config import EXPERIMENT_PRESETS
     from gymnast.experiment.pipeline import run_experiment, saved_experiment_config
@@ -529,7 +536,7 @@ def experiment(
 
     config, _ = resolve("experiment", out, resume, EXPERIMENT_PRESETS[preset],
                         overrides={"workers": workers, "sentences": sentences, "runner": runner, "device": device,
-                                   "cameras": cameras},
+                                   "cameras": cameras, "judge_rollouts": judge_rollouts},
                         inputs={}, saved=lambda: (saved_experiment_config(out), {}))
     summary = run_experiment(config, out, parse_reuse(reuse))
     print(format_table(summary))

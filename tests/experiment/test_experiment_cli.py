@@ -74,6 +74,20 @@ def test_every_stage_sees_the_experiments_two_cameras(experiment: Path):
     assert json.loads((experiment / "summary.json").read_text())["worldgym"]
 
 
+def test_the_judge_learns_from_the_sft_policys_own_real_rollouts(experiment: Path):
+    recorded = EpisodeDataset(experiment / "judge_rollouts", cameras=("front", "gripper"))
+    assert len(recorded) == EXPERIMENT_PRESETS["debug"].judge_rollouts == 1  # one task
+    setting = json.loads((experiment / "judge_rollouts" / "gymnast_collect.json").read_text())["env"]
+    assert setting["terminate_on_success"] is False and list(recorded.lengths) == [HORIZON]  # past any success
+    assert recorded.episodes[0].seed == 300_000  # scenes no other stage records
+    judge = json.loads((experiment / "judge" / "config.json").read_text())
+    assert [Path(path).resolve() for path in judge["train"]["extra_data"]] == [(experiment / "judge_rollouts").resolve()]
+    summary = json.loads((experiment / "summary.json").read_text())
+    assert summary["judge_rollouts"]["real_interactions"] == sum(recorded.lengths)
+    assert summary["judge_rollouts"]["episodes"] == 1
+    assert "It also learned from 1 real rollouts of the SFT policy" in (experiment / "report.md").read_text()
+
+
 def test_dyna_counts_its_rollouts_and_is_watched_every_round(experiment: Path):
     summary = json.loads((experiment / "summary.json").read_text())
     rounds = sorted((experiment / "arms" / "dyna").glob("round_[1-9]"))

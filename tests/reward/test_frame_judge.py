@@ -87,6 +87,21 @@ def test_the_threshold_separates_validation_cases():
     assert choose_threshold(Brightness(), videos[1:])["threshold"] == 0.5  # one outcome only: nothing to choose
 
 
+def test_a_threshold_for_a_true_positive_rate_is_the_highest_that_keeps_it():
+    # Last-frame brightness: successes 121, 171, 221, 255; failures 81, 161, 211; each success's
+    # cuts (halfway and 10 short) 9 and 10 above its value: 109, 110, 159, 160, 209, 210, 249, 250.
+    videos = [video([False] * 20 + [True], value=v) for v in (100, 150, 200, 240)]
+    videos += [video([False] * 21, value=v) for v in (60, 140, 190)]
+    every = choose_threshold(Brightness(), videos, tpr=1.0)
+    assert every["threshold"] == pytest.approx((110 + 121) / 2 / 255) and every["tpr"] == 1.0
+    assert every["fpr"] == round(8 / 11, 4)
+    half = choose_threshold(Brightness(), videos, tpr=0.5)  # 221 and 255 pass; 211 is the score below
+    assert half["threshold"] == pytest.approx((211 + 221) / 2 / 255)
+    assert half["tpr"] == 0.5 and half["fpr"] == round(2 / 11, 4)
+    with pytest.raises(ValueError, match="threshold_tpr"):
+        dataclasses.replace(DEBUG, threshold_tpr=0.0)
+
+
 def test_scenes_split_three_ways_without_overlap(tiny_dataset):
     dataset = EpisodeDataset(tiny_dataset)
     train, validation, heldout = split_scenes(dataset, DEBUG)
@@ -104,6 +119,17 @@ def test_the_chosen_threshold_is_saved_with_the_judge(tiny_dataset, tmp_path):
     assert saved["model"]["threshold"] == pytest.approx(report["validation_threshold"])
     video_kind = train_judge(tiny_dataset, tmp_path / "video", dataclasses.replace(DEBUG, kind="video"), progress=False)
     assert video_kind["kind"] == "video" and load_judge(tmp_path / "video").backend == "embedded-judge"
+
+
+def test_the_threshold_for_a_true_positive_rate_is_a_train_judge_flag(tiny_dataset, tmp_path):
+    from gymnast.cli import main
+
+    main(["train-judge", "--data", str(tiny_dataset), "--out", str(tmp_path / "judge"), "--preset", "debug",
+          "--threshold-tpr", "1.0"])
+    saved = json.loads((tmp_path / "judge" / "config.json").read_text())
+    report = json.loads((tmp_path / "judge" / "metrics.json").read_text())
+    assert saved["train"]["threshold_tpr"] == 1.0
+    assert report["validation_tpr"] in (1.0, None)  # None: no validation scene had both outcomes
 
 
 def test_a_checkpoint_of_an_unknown_judge_is_refused(tmp_path):

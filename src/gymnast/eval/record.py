@@ -143,9 +143,12 @@ def record_policy(
 
 
 def record_real_rollouts(run: str | Path, tasks: str, per_task: int, first_seed: int, temperature: float, horizon: int,
-                         workers: int, runner: str, out: Path, progress: bool = True) -> dict:
+                         workers: int, runner: str, out: Path, progress: bool = True,
+                         terminate_on_success: bool = True) -> dict:
     """Records `per_task` real rollouts per task of `run`'s policy (sampled at `temperature`, data
-    seeds from `first_seed`, no action noise) into `out`, and counts what they cost.
+    seeds from `first_seed`, no action noise) into `out`, and counts what they cost. Episodes end
+    at success, or with `terminate_on_success` False play on to the horizon (a judge's data: the
+    frames after a success show it too).
 
     Returns:
         ``episodes``, ``successes`` and ``real_interactions``: the actions taken, read back from
@@ -153,7 +156,7 @@ def record_real_rollouts(run: str | Path, tasks: str, per_task: int, first_seed:
     """
     # Recorded in every view the policy acts on, at its size: the views a world model and a judge
     # of the same cameras refit on (Dyna, equal budgets).
-    env = policy_env_config(EnvConfig(horizon=horizon), str(Path(run).resolve()))
+    env = policy_env_config(EnvConfig(horizon=horizon, terminate_on_success=terminate_on_success), str(Path(run).resolve()))
     config = CollectConfig(tasks=tasks, episodes_per_task=per_task, noise=(0.0,), first_seed=first_seed,
                            workers=workers, runner=runner, env=env)
     record_policy(run, config, out, temperature=temperature, progress=progress)

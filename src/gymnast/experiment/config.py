@@ -106,6 +106,11 @@ class ExperimentConfig:
     """The world model the imagined arms practise in."""
     judge: JudgeTrainConfig = field(default_factory=lambda: JUDGE_PRESETS["full"])
     """The learned judge (World-Gymnast's reward, and the WorldGym estimates)."""
+    judge_rollouts: int = 0
+    """Real rollouts per task of the SFT policy, sampled at `rl.temperature` on scenes no other stage
+    records and played to the horizon past any success, that the judge learns from besides the
+    dataset: the policy's own near misses, which scripted data does not show (0: none). Their real
+    interactions are counted in summary.json (``judge_rollouts``)."""
     state_model: StateTrainConfig = field(default_factory=lambda: StateTrainConfig(steps=2000))
     """The grounded state model, whose reward head rewards the ``rl_wm_state`` arm (docs/world_model.md)."""
     rl: RLConfig = field(default_factory=lambda: RLConfig(steps=12, starts_per_step=8, group_size=8, lr=3e-5,
@@ -158,6 +163,8 @@ class ExperimentConfig:
         for name in ("eval_episodes", "robustness_episodes", "worldgym_episodes", "signal_scenes", "workers"):
             if getattr(self, name) < 1:
                 raise ValueError(f"ExperimentConfig.{name} must be at least 1, got {getattr(self, name)}")
+        if self.judge_rollouts < 0:
+            raise ValueError(f"ExperimentConfig.judge_rollouts must be at least 0, got {self.judge_rollouts}")
         if self.sentences is not None:  # checked now, not hours later at the language check
             missing = [task for task in resolve_tasks(self.tasks) if task not in read_sentences(self.sentences)]
             if missing:
@@ -211,6 +218,7 @@ def _debug() -> ExperimentConfig:
         world_model=dataclasses.replace(WM_PRESETS["debug"], future=5, model=dataclasses.replace(
             WM_PRESETS["debug"].model, actions_per_frame=5)),
         judge=JUDGE_PRESETS["debug"],
+        judge_rollouts=1,
         state_model=StateTrainConfig(steps=20, batch_size=16, unroll=4, checkpoint_every=20),
         rl=rl,
         iter_sft=IterSFTConfig(group_size=2, steps=2),

@@ -5,7 +5,8 @@ Stages, in order, each done once (`gymnast.experiment.stages`; a rerun skips fin
 1. ``collect``: expert demonstrations and failures recorded in the real world.
 2. ``sft``: the SFT policy every arm starts from.
 3. ``world_model``, ``judge``, ``state_model``, ``world_model_eval``: the world model, the learned
-   judge (trained on real and re-imagined episodes), the grounded state model whose reward head
+   judge (trained on real and re-imagined episodes, and with ``judge_rollouts`` on the SFT
+   policy's own real rollouts, recorded first in ``judge_rollouts/``), the grounded state model whose reward head
    rewards one arm, and the world model's fidelity on held-out episodes.
    ``imagination``: the SFT policy's judged imagined rollouts against the same actions replayed
    in the real world (`gymnast.experiment.imagination`); ``signal``: whether GRPO's update in
@@ -109,15 +110,33 @@ def _models(stages: Stages, config: ExperimentConfig, out: Path, progress: bool
     wm = stages.path("world_model")
 
     def judge_stage() -> dict:
-        target = out / "judge"
-        report = train_judge(data, target, config.judge, wm=wm, resume=_has_checkpoint(target), progress=progress)
-        return {"metrics": {k: v for k, v in report.items() if k.startswith(("real", "imagined"))}}
+        target, settings, rollouts = out / "judge", config.judge, None
+        if config.judge_rollouts:
+            rollouts = _judge_rollouts(stages.path("sft"), config, out / "judge_rollouts", progress)
+            settings = dataclasses.replace(settings, extra_data=(*settings.extra_data, out / "judge_rollouts"))
+        report = train_judge(data, target, settings, wm=wm, resume=_has_checkpoint(target), progress=progress)
+        return {"metrics": {k: v for k, v in report.items() if k.startswith(("real", "imagined"))}, "rollouts": rollouts}
 
     stages.run("judge", judge_stage, out / "judge")
     stages.run("state_model", lambda: _trained(train_state_model, data, out / "state_model", config.state_model,
                                                progress), out / "state_model")
     stages.run("world_model_eval", lambda: _world_model_fidelity(wm, data, out, progress, config.device), out / "world_model_eval.json")
     return data, stages.path("sft"), wm, stages.path("judge"), stages.path("state_model")
+
+
+JUDGE_ROLLOUT_SEED = 300_000
+"""Data seed of every task's first rollout recorded for the judge: scenes no other stage records
+(Dyna's start at 100,000, the equal budgets' at 200,000)."""
+
+
+def _judge_rollouts(sft: Path, config: ExperimentConfig, out: Path, progress: bool) -> dict:
+    """The SFT policy's real rollouts that the judge learns from: sampled as RL samples them, played
+    to the horizon so that a success stays in view (resumes an interrupted recording)."""
+    from gymnast.eval.record import record_real_rollouts
+
+    return record_real_rollouts(sft, config.tasks, config.judge_rollouts, JUDGE_ROLLOUT_SEED, config.rl.temperature,
+                                config.rl.evaluation_horizon, config.workers, config.runner, out, progress,
+                                terminate_on_success=False)
 
 
 FIDELITY_KEYS = ("psnr_h1", "psnr_h8", "psnr_h32", "copy_last_psnr_h32", "moving_psnr_h32", "copy_last_moving_psnr_h32",

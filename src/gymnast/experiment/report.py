@@ -204,6 +204,7 @@ def build_summary(stages: Stages, config: ExperimentConfig) -> dict:
         "equal_budget": (equal_budget := _equal_budget(stages)),
         "equal_budget_setup": _equal_budget_setup(stages, config),
         "judge": {k: v for k, v in (judge_metrics or {}).items() if k.startswith(("real_", "imagined_"))},
+        "judge_rollouts": judge.get("rollouts"),
         "world_model": _without_bookkeeping(stages.record("world_model_eval")) if stages.done("world_model_eval") else None,
         "imagination_agreement": imagination["agreement"] if imagination else None,
         "imagination": imagination,

@@ -275,11 +275,13 @@ def _fidelity(model: dict | None) -> list[str]:
 
 
 def _evidence(summary: dict) -> list[str]:
-    judge = summary["judge"]
+    judge, rollouts = summary["judge"], summary.get("judge_rollouts")
+    learned = (f" It also learned from {rollouts['episodes']} real rollouts of the SFT policy ({rollouts['successes']} "
+               f"successful, {rollouts['real_interactions']:,} real interactions)." if rollouts else "")
     lines = [*_fidelity(summary.get("world_model")),
              ("**The judge** on held-out episodes (its own training stage): "
               f"real video TPR {_num(judge.get('real_tpr'))}, FPR {_num(judge.get('real_fpr'))}; "
-              f"imagined video TPR {_num(judge.get('imagined_tpr'))}, FPR {_num(judge.get('imagined_fpr'))}."), ""]
+              f"imagined video TPR {_num(judge.get('imagined_tpr'))}, FPR {_num(judge.get('imagined_fpr'))}.{learned}"), ""]
     for name, rows in summary["watch"].items():
         if not rows:
             continue

@@ -77,6 +77,10 @@ class JudgeTrainConfig:
     """Share of scenes held out (use the world model's, so imagined held-out videos are unseen)."""
     validation_fraction: float = 0.1
     """Share of the other scenes that choose the decision threshold instead of training."""
+    threshold_tpr: float | None = None
+    """Choose the decision threshold for this true-positive rate on the validation scenes (the
+    highest threshold that still passes this share of their successes, so the fewest false
+    successes at that rate) instead of the most TPR - FPR: an operating point such as "TPR 0.95"."""
     extra_data: tuple[Path, ...] = ()
     """More datasets besides DATA (e.g. a policy's own recorded rollouts), with the same image
     size; each is split by the same scene hashes, and every part (train, validation, held-out)
@@ -114,6 +118,8 @@ class JudgeTrainConfig:
             raise ValueError(f"JudgeTrainConfig.kind must be one of {sorted(JUDGES)}, got {self.kind!r}")
         if not 0 <= self.validation_fraction < 1:
             raise ValueError(f"JudgeTrainConfig.validation_fraction must be in [0, 1), got {self.validation_fraction}")
+        if self.threshold_tpr is not None and not 0 < self.threshold_tpr <= 1:
+            raise ValueError(f"JudgeTrainConfig.threshold_tpr must be in (0, 1], got {self.threshold_tpr}")
 
 
 JUDGE_PRESETS = {
@@ -320,7 +326,7 @@ def train_judge(data: Path, out: Path, config: JudgeTrainConfig, wm: Path | None
     judge.eval()
     threshold = {}  # a progress judge scores by degree: no threshold to choose
     if judge.binary:
-        threshold = choose_threshold(judge, videos(validation_ids, show=False))
+        threshold = choose_threshold(judge, videos(validation_ids, show=False), config.threshold_tpr)
         judge.config = dataclasses.replace(judge.config, threshold=threshold["threshold"])
     resolved["model"] = judge.spec()
     write_run_config(out, resolved)
@@ -358,10 +364,11 @@ def build_judge(config: JudgeTrainConfig) -> LearnedJudge | FrameJudge:
     return judge
 
 
-def choose_threshold(judge: Reward, videos: list[Video]) -> dict:
+def choose_threshold(judge: Reward, videos: list[Video], tpr: float | None = None) -> dict:
     """The P(success) threshold that best separates the validation cases (most TPR - FPR, real and
-    imagined together), in the middle of the range of equally good ones so that it sits in the gap
-    between scores rather than on one; 0.5 with no validation case of each label.
+    imagined together), or with `tpr`, the highest one whose TPR is at least `tpr`; in the middle
+    of the range of equally good ones (or of the gap below the chosen score) so that it sits between
+    scores rather than on one; 0.5 with no validation case of each label.
 
     Returns ``threshold``, ``tpr``, ``fpr`` and ``cases``.
     """
@@ -373,10 +380,15 @@ def choose_threshold(judge: Reward, videos: list[Video]) -> dict:
     with torch.no_grad():
         scores = torch.cat([judge.probability(frames[None], [text]) for frames, text, _, _, _ in cases]).double()
     candidates = torch.unique(scores)  # sorted; a threshold in (candidates[i-1], candidates[i]] passes the same cases
-    quality = torch.stack([(scores[truth] >= c).double().mean() - (scores[~truth] >= c).double().mean() for c in candidates])
-    best = torch.nonzero(quality == quality.max()).flatten()
-    low = candidates[best[0] - 1] if best[0] > 0 else torch.tensor(0.0, dtype=torch.float64)
-    threshold = float((low + candidates[best[-1]]) / 2)
+    passed = torch.stack([(scores[truth] >= c).double().mean() for c in candidates])
+    if tpr is None:
+        quality = passed - torch.stack([(scores[~truth] >= c).double().mean() for c in candidates])
+        best = torch.nonzero(quality == quality.max()).flatten()
+        first, last = int(best[0]), int(best[-1])
+    else:  # the share passed falls as the threshold rises: the last candidate still at the rate
+        first = last = int(torch.nonzero(passed >= tpr - 1e-9).flatten()[-1])
+    low = candidates[first - 1] if first > 0 else torch.tensor(0.0, dtype=torch.float64)
+    threshold = float((low + candidates[last]) / 2)
     return {"threshold": threshold, "tpr": _rate(scores >= threshold, truth), "fpr": _rate(scores >= threshold, ~truth),
             "cases": len(cases)}
 
