@@ -302,7 +302,7 @@ def _save_settings(out: Path, config: ExperimentConfig) -> None:
     path = out / "config.json"
     if path.exists():
         try:
-            saved = as_json(from_json(ExperimentConfig, _filled(_with_views(json.loads(path.read_text())),
+            saved = as_json(from_json(ExperimentConfig, _filled(_as_they_ran(json.loads(path.read_text())),
                                                                 as_json(config))))
         except (TypeError, ValueError) as error:
             raise ValueError(f"{path}: not an experiment's settings this version can read ({error})") from error
@@ -323,14 +323,14 @@ def _filled(saved: dict, current: dict) -> dict:
     return filled
 
 
-def _with_views(saved: dict) -> dict:
-    """`saved` naming its cameras: settings saved before the experiment had the setting recorded the
-    views its collection did, the front camera unless it named others (not today's default)."""
-    if "cameras" in saved:
-        return saved
-    return {**saved, "cameras": saved.get("collect", {}).get("env", {}).get("cameras", list(EnvConfig().cameras))}
+def _as_they_ran(saved: dict) -> dict:
+    """`saved` with the settings added since, as the experiment ran without them (not today's
+    defaults): before cameras were a setting it recorded the views its collection did, the front
+    camera unless it named others; before `judge_rollouts`, its judge learned from none."""
+    views = saved.get("collect", {}).get("env", {}).get("cameras", list(EnvConfig().cameras))
+    return {"cameras": views, "judge_rollouts": 0, **saved}
 
 
 def saved_experiment_config(out: Path) -> ExperimentConfig:
     """The settings the experiment in `out` was started with (DIR/config.json), for ``--resume``."""
-    return from_json(ExperimentConfig, _with_views(saved_settings(out)))
+    return from_json(ExperimentConfig, _as_they_ran(saved_settings(out)))
