@@ -3,7 +3,8 @@
 For `--scenes` new scenes of each task, `--group` rollouts of the policy sampled at `--temperature`
 are played in the real world for the whole horizon, on past a success as `gymnast rl-signal`'s real
 replays and imagined rollouts go (or, with `--stop-at-success`, ending at it as RL's real episodes
-do), with every camera the judges need rendered (the policy sees its own cameras, `gymnast.eval.actors.PolicyActor.seen`).
+do), with every camera the judges need rendered (the policy sees its own cameras,
+`gymnast.eval.actors.PolicyActor.seen`).
 Each judge scores the real videos through its own cameras, and its GRPO advantages within each
 group are held against those of the real success and of the real dense return
 (`gymnast.experiment.practice_signal.signal_figures`, as `gymnast rl-signal` reports its

@@ -155,7 +155,7 @@ def record_real_rollouts(run: str | Path, tasks: str, per_task: int, first_seed:
         the recorded dataset itself, so a resumed recording is counted whole.
     """
     # Recorded in every view the policy acts on, at its size: the views a world model and a judge
-    # of the same cameras refit on (Dyna, equal budgets).
+    # of the same cameras refit on (Dyna, equal budgets) or learn from (the experiment's judge).
     env = policy_env_config(EnvConfig(horizon=horizon, terminate_on_success=terminate_on_success), str(Path(run).resolve()))
     config = CollectConfig(tasks=tasks, episodes_per_task=per_task, noise=(0.0,), first_seed=first_seed,
                            workers=workers, runner=runner, env=env)

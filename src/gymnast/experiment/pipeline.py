@@ -6,8 +6,8 @@ Stages, in order, each done once (`gymnast.experiment.stages`; a rerun skips fin
 2. ``sft``: the SFT policy every arm starts from.
 3. ``world_model``, ``judge``, ``state_model``, ``world_model_eval``: the world model, the learned
    judge (trained on real and re-imagined episodes, and with ``judge_rollouts`` on the SFT
-   policy's own real rollouts, recorded first in ``judge_rollouts/``), the grounded state model whose reward head
-   rewards one arm, and the world model's fidelity on held-out episodes.
+   policy's own real rollouts, recorded first in ``judge_rollouts/``), the grounded state model
+   whose reward head rewards one arm, and the world model's fidelity on held-out episodes.
    ``imagination``: the SFT policy's judged imagined rollouts against the same actions replayed
    in the real world (`gymnast.experiment.imagination`); ``signal``: whether GRPO's update in
    imagination is the one the real outcomes would give (`gymnast.experiment.practice_signal`).
@@ -110,10 +110,10 @@ def _models(stages: Stages, config: ExperimentConfig, out: Path, progress: bool
     wm = stages.path("world_model")
 
     def judge_stage() -> dict:
-        target, settings, rollouts = out / "judge", config.judge, None
+        target, settings, rollouts, recorded = out / "judge", config.judge, None, out / "judge_rollouts"
         if config.judge_rollouts:
-            rollouts = _judge_rollouts(stages.path("sft"), config, out / "judge_rollouts", progress)
-            settings = dataclasses.replace(settings, extra_data=(*settings.extra_data, out / "judge_rollouts"))
+            rollouts = _judge_rollouts(stages.path("sft"), config, recorded, progress)
+            settings = dataclasses.replace(settings, extra_data=(*settings.extra_data, recorded))
         report = train_judge(data, target, settings, wm=wm, resume=_has_checkpoint(target), progress=progress)
         return {"metrics": {k: v for k, v in report.items() if k.startswith(("real", "imagined"))}, "rollouts": rollouts}
 
