@@ -10,8 +10,8 @@ import torch
 from gymnast.data.lerobot import EpisodeDataset
 from gymnast.reward.frame_judge import FrameJudge
 from gymnast.reward.judge import JudgeConfig
-from gymnast.reward.train_judge import (JUDGE_PRESETS, FramePool, Video, choose_threshold, judge_cases, load_judge,
-                                        split_scenes, train_judge)
+from gymnast.reward.train_judge import (HARD_CANDIDATES, JUDGE_PRESETS, FramePool, JudgeTrainConfig, Video,
+                                        choose_threshold, judge_cases, load_judge, split_scenes, train_judge)
 
 DEBUG = dataclasses.replace(JUDGE_PRESETS["debug"], heldout_fraction=0.25, validation_fraction=0.2)
 
@@ -75,6 +75,24 @@ def test_frame_batches_are_half_successes_and_skip_frames_just_before_a_success(
         FramePool([failure], ambiguous=2)
 
 
+def test_hard_negatives_are_the_ones_the_judge_rates_highest_of_random_candidates():
+    failure = video([False] * 40)  # frame t shows the value t: a scorer that reads it rates later frames higher
+    pool = FramePool([video([False] * 6 + [True] * 3), failure], ambiguous=2)
+    rated = []
+
+    def score(first, frames, texts):
+        rated.append(frames[:, 0, 0, 0].float())
+        return rated[-1]
+
+    first, frames, texts, labels = pool.sample(16, torch.Generator().manual_seed(0), hard=4, score=score)
+    assert len(rated) == 1 and len(rated[0]) == 4 * HARD_CANDIDATES and labels.sum() == 8 and not labels[8:].any()
+    hard = frames[12:, 0, 0, 0].float()
+    assert sorted(hard.tolist()) == sorted(rated[0].topk(4).values.tolist())  # the four the scorer rated highest
+    assert hard.mean() > frames[8:12, 0, 0, 0].float().mean()  # above the random negatives beside them
+    with pytest.raises(ValueError, match="hard_negatives must be in"):
+        JudgeTrainConfig(hard_negatives=1.5)
+
+
 def test_the_threshold_separates_validation_cases():
     # Successes end bright (200+), failures dark (< 60): any threshold between separates them.
     videos = [video([False] * 20 + [True], value=190), video([False] * 21, value=30), video([False] * 21, value=10)]
@@ -117,18 +135,20 @@ def test_the_chosen_threshold_is_saved_with_the_judge(tiny_dataset, tmp_path):
     assert judge.config.threshold == pytest.approx(report["validation_threshold"])
     saved = json.loads((tmp_path / "judge" / "config.json").read_text())
     assert saved["model"]["threshold"] == pytest.approx(report["validation_threshold"])
-    video_kind = train_judge(tiny_dataset, tmp_path / "video", dataclasses.replace(DEBUG, kind="video"), progress=False)
+    # The full preset mines hard negatives; the video judge, with no per-frame verdict to mine, ignores it.
+    video = dataclasses.replace(DEBUG, kind="video", hard_negatives=0.5)
+    video_kind = train_judge(tiny_dataset, tmp_path / "video", video, progress=False)
     assert video_kind["kind"] == "video" and load_judge(tmp_path / "video").backend == "embedded-judge"
 
 
-def test_the_threshold_for_a_true_positive_rate_is_a_train_judge_flag(tiny_dataset, tmp_path):
+def test_the_threshold_for_a_true_positive_rate_and_hard_negatives_are_train_judge_flags(tiny_dataset, tmp_path):
     from gymnast.cli import main
 
     main(["train-judge", "--data", str(tiny_dataset), "--out", str(tmp_path / "judge"), "--preset", "debug",
-          "--threshold-tpr", "1.0"])
+          "--threshold-tpr", "1.0", "--hard-negatives", "0.5"])
     saved = json.loads((tmp_path / "judge" / "config.json").read_text())
     report = json.loads((tmp_path / "judge" / "metrics.json").read_text())
-    assert saved["train"]["threshold_tpr"] == 1.0
+    assert saved["train"]["threshold_tpr"] == 1.0 and saved["train"]["hard_negatives"] == 0.5
     assert report["validation_tpr"] in (1.0, None)  # None: no validation scene had both outcomes
 
 

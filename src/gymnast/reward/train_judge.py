@@ -23,6 +23,7 @@ import dataclasses
 import logging
 import time
 import zlib
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -47,6 +48,9 @@ from gymnast.world_model.data import split_episodes
 
 logger = logging.getLogger(__name__)
 
+HARD_CANDIDATES = 4  # random negatives drawn per hard one kept (scored without gradients: ~1.2x the step)
+Scorer = Callable[[torch.Tensor, torch.Tensor, list[str]], torch.Tensor]
+"""(N, H, W, 3) first frames, (N, H, W, 3) frames and N instructions -> (N,) success logits."""
 NEAR_MISS_STEPS = 10  # a held-out negative: a successful episode cut this many steps before its success
 JUDGES = {"frames": FrameJudge, "video": LearnedJudge, "progress": ProgressJudge}
 """Judge kinds by name; a checkpoint names its class by `backend`."""
@@ -73,6 +77,11 @@ class JudgeTrainConfig:
     ambiguous_steps: int = 5
     """Frames (or cuts) this close before a success are not used as negatives (they barely differ
     from the success frame, so they teach the judge to doubt real successes)."""
+    hard_negatives: float = 0.0
+    """Per-frame judge: share of each batch's negative frames that are the ones the judge itself
+    scores highest among `HARD_CANDIDATES` times as many drawn at random (online hard-negative
+    mining): the near misses, which a uniform draw over mostly easy frames rarely shows it. 0: all
+    drawn at random. The video and progress judges have no verdict per frame to mine and ignore it."""
     heldout_fraction: float = 0.1
     """Share of scenes held out (use the world model's, so imagined held-out videos are unseen)."""
     validation_fraction: float = 0.1
@@ -118,6 +127,8 @@ class JudgeTrainConfig:
             raise ValueError(f"JudgeTrainConfig.kind must be one of {sorted(JUDGES)}, got {self.kind!r}")
         if not 0 <= self.validation_fraction < 1:
             raise ValueError(f"JudgeTrainConfig.validation_fraction must be in [0, 1), got {self.validation_fraction}")
+        if not 0 <= self.hard_negatives <= 1:
+            raise ValueError(f"JudgeTrainConfig.hard_negatives must be in [0, 1], got {self.hard_negatives}")
         if self.threshold_tpr is not None and not 0 < self.threshold_tpr <= 1:
             raise ValueError(f"JudgeTrainConfig.threshold_tpr must be in (0, 1], got {self.threshold_tpr}")
 
@@ -125,9 +136,12 @@ class JudgeTrainConfig:
 JUDGE_PRESETS = {
     "debug": JudgeTrainConfig(steps=4, batch_size=4, warmup_steps=1, checkpoint_every=2, log_every=1, judge=JudgeConfig(width=32)),
     "demo": JudgeTrainConfig(steps=400),
-    "full": JudgeTrainConfig(steps=2000, batch_size=64),
+    # Half the negatives mined: on the policy's rollouts, held-out TPR 0.92 -> 1.00 and FPR 0.054 ->
+    # 0.041, its ranking of them unchanged, for about 1.2x the step (results/judge/cameras/README.md).
+    "full": JudgeTrainConfig(steps=2000, batch_size=64, hard_negatives=0.5),
     # A wider judge and 4x the batch for one GPU: 10 minutes or less on an H100 (docs/gpu.md).
-    "gpu": JudgeTrainConfig(steps=8000, batch_size=256, lr=5e-4, warmup_steps=200, judge=JudgeConfig(width=256)),
+    "gpu": JudgeTrainConfig(steps=8000, batch_size=256, lr=5e-4, warmup_steps=200, hard_negatives=0.5,
+                            judge=JudgeConfig(width=256)),
 }
 
 
@@ -237,19 +251,41 @@ class FramePool:
                              f"success frames and {len(self.negatives)} others (a dataset's field 'next.success' "
                              "says which steps succeeded; without it only each episode's last step does)")
 
-    def sample(self, batch: int, generator: torch.Generator):
-        """(B, H, W, 3) first frames, (B, H, W, 3) frames, B instructions and (B,) labels; half successes."""
+    def sample(self, batch: int, generator: torch.Generator, hard: int = 0, score: Scorer | None = None):
+        """(B, H, W, 3) first frames, (B, H, W, 3) frames, B instructions and (B,) labels; half
+        successes. `hard` of the negatives are those `score` rates highest of `HARD_CANDIDATES`
+        times as many drawn at random."""
         count = batch // 2
-        pick = [self.positives[torch.randint(len(self.positives), (count,), generator=generator)],
-                self.negatives[torch.randint(len(self.negatives), (batch - count,), generator=generator)]]
+
+        def draw(pool: torch.Tensor, n: int) -> torch.Tensor:
+            return pool[torch.randint(len(pool), (n,), generator=generator)]
+
+        pick = [draw(self.positives, count), draw(self.negatives, batch - count - hard)]
+        if hard:
+            candidates = draw(self.negatives, hard * HARD_CANDIDATES)
+            pick.append(candidates[score(*self._frames(candidates)[:3]).topk(hard).indices.cpu()])
+        firsts, frames, texts, progress = self._frames(torch.cat(pick))
+        labels = torch.stack(progress) if self.progress else torch.arange(batch) < count
+        return firsts, frames, texts, labels
+
+    def _frames(self, chosen: torch.Tensor):
+        """(N, H, W, 3) first frames, (N, H, W, 3) frames, N instructions and N progress targets of
+        (N, 2) (video, frame) pairs."""
         firsts, frames, texts, progress = [], [], [], []
-        for v, t in torch.cat(pick).tolist():
+        for v, t in chosen.tolist():
             firsts.append(self.videos[v].frames[0])
             frames.append(self.videos[v].frames[t])
             texts.append(self.videos[v].instruction)
             progress.append(self.videos[v].progress[t])
-        labels = torch.stack(progress) if self.progress else torch.arange(batch) < count
-        return torch.stack(firsts), torch.stack(frames), texts, labels
+        return torch.stack(firsts), torch.stack(frames), texts, progress
+
+
+def _scorer(judge: FrameJudge) -> Scorer:
+    """The judge's current logits, without gradients (to rank candidate negatives)."""
+    def score(first: torch.Tensor, frames: torch.Tensor, texts: list[str]) -> torch.Tensor:
+        with torch.no_grad():
+            return judge(first, frames, judge.encoder(texts)).float()
+    return score
 
 
 def _sample(videos: list[Video], batch: int, whole_share: float, ambiguous: int, generator: torch.Generator):
@@ -305,11 +341,13 @@ def train_judge(data: Path, out: Path, config: JudgeTrainConfig, wm: Path | None
     metrics = MetricsLog(out, resume_step=start if resume else None)
     pool = FramePool(train_videos, config.ambiguous_steps, config.kind == "progress") if config.kind != "video" else None
     per_frame_loss = progress_loss if config.kind == "progress" else frame_loss
+    mined = config.hard_negatives if config.kind == "frames" else 0.0
+    hard, score = round((config.batch_size - config.batch_size // 2) * mined), _scorer(judge)
     judge.train()
     bar = tqdm(range(start, config.steps), initial=start, total=config.steps, desc="train-judge", disable=not progress)
     for step in bar:
         if pool is not None:
-            first, frames, texts, labels = pool.sample(config.batch_size, sampler)
+            first, frames, texts, labels = pool.sample(config.batch_size, sampler, hard, score)
             loss, values = per_frame_loss(judge, first, frames, judge.encoder(texts), labels)
         else:
             frames, texts, labels = _sample(train_videos, config.batch_size, config.whole_share, config.ambiguous_steps, sampler)
