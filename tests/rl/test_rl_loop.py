@@ -267,3 +267,27 @@ def test_per_call_advantages_move_each_call_by_its_own_sign(rl_dataset):
                   RL_PRESETS["debug"])
     after = logp()
     assert after[0] > before[0] and after[1] < before[1]
+
+
+def test_frozen_parts_of_the_policy_stay_as_they_were_while_the_rest_learns(tmp_path):
+    out = tmp_path / "run"
+    main(["rl", "--policy", str(POLICY), "--env", "sim", "--reward", "sim-dense", "--out", str(out), "--preset", "debug",
+          "--fresh-scenes", "--freeze", "vision", "--lr", "1e-3"])
+    before, after = load_policy(POLICY).state_dict(), load_policy(out).state_dict()
+    changed = {name for name in before if not torch.equal(before[name], after[name])}
+    assert changed and not any(name.startswith("vision.") for name in changed)
+    assert json.loads((out / "config.json").read_text())["rl"]["freeze"] == ["vision"]
+
+
+def test_a_part_to_freeze_that_the_policy_lacks_is_named_with_the_parts_it_has():
+    from gymnast.rl.train import learning_parameters
+
+    policy = load_policy(POLICY)
+    learning = learning_parameters(policy, ("vision",))
+    assert len(learning) < len(list(policy.parameters())) and all(parameter.requires_grad for parameter in learning)
+    assert not any(parameter.requires_grad for parameter in policy.vision.parameters())
+    with pytest.raises(ValueError, match="no parameter named 'backbone'.*its parts are .*decoder.*vision"):
+        learning_parameters(policy, ("backbone",))
+    parts = tuple({name.split(".")[0] for name, _ in policy.named_parameters()})
+    with pytest.raises(ValueError, match="nothing to learn"):
+        learning_parameters(policy, parts)

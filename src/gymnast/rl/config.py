@@ -110,6 +110,11 @@ class RLConfig:
     """... and at most this."""
     max_rounds: int = 3
     """Rollout rounds per step at most while refilling dropped groups."""
+    freeze: tuple[str, ...] = ()
+    """Parts of the policy the update leaves as they are, by parameter-name prefix (e.g. ``vision``:
+    the embedded policies' image encoder, about half of their weights; VLA-RFT trains only its
+    action head): RL then changes how the policy acts on what it sees, not how it sees. Empty: every
+    parameter learns."""
     lr: float = 1e-5
     """Peak learning rate (AdamW; linear warm-up, then constant)."""
     warmup_steps: int = 5

@@ -161,7 +161,7 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
     resolved = {"rl": dataclasses.asdict(config), "run": run_spec.to_json(), "model": policy.spec(),
                 "data": str(data) if data else None, "frames": frames}
 
-    optimizer = torch.optim.AdamW(policy.parameters(), lr=config.lr, weight_decay=0.0)
+    optimizer = torch.optim.AdamW(learning_parameters(policy, config.freeze), lr=config.lr, weight_decay=0.0)
     critic = None
     if config.credit == "critic":
         critic = CallCritic(ValueCritic.for_policy(policy), config.critic_lr, config.critic_epochs, config.gae_lambda,
@@ -507,6 +507,34 @@ def write_summary(out: Path, run_spec: RLRun, config: RLConfig, state: dict) -> 
     }
     write_json(out / "summary.json", summary)
     return summary
+
+
+def learning_parameters(policy: torch.nn.Module, freeze: tuple[str, ...]) -> list[torch.nn.Parameter]:
+    """The parameters RL updates: all but those named by a `freeze` prefix, which stop taking
+    gradients (so the backward pass skips them).
+
+    Raises:
+        ValueError: a prefix names no parameter, or nothing is left to learn.
+    """
+    named = dict(policy.named_parameters())
+
+    def under(name: str, prefix: str) -> bool:
+        return name == prefix or name.startswith(prefix.rstrip(".") + ".")
+
+    def frozen(name: str) -> bool:
+        return any(under(name, prefix) for prefix in freeze)
+
+    for prefix in freeze:
+        if not any(under(name, prefix) for name in named):
+            parts = sorted({name.split(".")[0] for name in named})
+            raise ValueError(f"RLConfig.freeze: the policy has no parameter named {prefix!r} or under it; "
+                             f"its parts are {', '.join(parts)}")
+    learning = [parameter for name, parameter in named.items() if not frozen(name)]
+    if not learning:
+        raise ValueError(f"RLConfig.freeze ({', '.join(freeze)}) leaves the policy nothing to learn")
+    for name, parameter in named.items():
+        parameter.requires_grad_(not frozen(name))
+    return learning
 
 
 def _frozen_copy(policy):
