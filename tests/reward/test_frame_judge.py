@@ -84,7 +84,7 @@ def test_hard_negatives_are_the_ones_the_judge_rates_highest_of_random_candidate
         rated.append(frames[:, 0, 0, 0].float())
         return rated[-1]
 
-    first, frames, texts, labels = pool.sample(16, torch.Generator().manual_seed(0), hard=4, score=score)
+    first, frames, texts, labels = pool.sample(16, torch.Generator().manual_seed(0), hard_share=0.5, score=score)
     assert len(rated) == 1 and len(rated[0]) == 4 * HARD_CANDIDATES and labels.sum() == 8 and not labels[8:].any()
     hard = frames[12:, 0, 0, 0].float()
     assert sorted(hard.tolist()) == sorted(rated[0].topk(4).values.tolist())  # the four the scorer rated highest

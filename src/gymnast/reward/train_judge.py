@@ -251,11 +251,12 @@ class FramePool:
                              f"success frames and {len(self.negatives)} others (a dataset's field 'next.success' "
                              "says which steps succeeded; without it only each episode's last step does)")
 
-    def sample(self, batch: int, generator: torch.Generator, hard: int = 0, score: Scorer | None = None):
+    def sample(self, batch: int, generator: torch.Generator, hard_share: float = 0.0, score: Scorer | None = None):
         """(B, H, W, 3) first frames, (B, H, W, 3) frames, B instructions and (B,) labels; half
-        successes. `hard` of the negatives are those `score` rates highest of `HARD_CANDIDATES`
-        times as many drawn at random."""
+        successes. `hard_share` of the negatives are those `score` rates highest of
+        `HARD_CANDIDATES` times as many drawn at random."""
         count = batch // 2
+        hard = round((batch - count) * hard_share)
 
         def draw(pool: torch.Tensor, n: int) -> torch.Tensor:
             return pool[torch.randint(len(pool), (n,), generator=generator)]
@@ -341,13 +342,13 @@ def train_judge(data: Path, out: Path, config: JudgeTrainConfig, wm: Path | None
     metrics = MetricsLog(out, resume_step=start if resume else None)
     pool = FramePool(train_videos, config.ambiguous_steps, config.kind == "progress") if config.kind != "video" else None
     per_frame_loss = progress_loss if config.kind == "progress" else frame_loss
-    mined = config.hard_negatives if config.kind == "frames" else 0.0
-    hard, score = round((config.batch_size - config.batch_size // 2) * mined), _scorer(judge)
+    hard_share = config.hard_negatives if config.kind == "frames" else 0.0  # the others have no verdict per frame
+    score = _scorer(judge)
     judge.train()
     bar = tqdm(range(start, config.steps), initial=start, total=config.steps, desc="train-judge", disable=not progress)
     for step in bar:
         if pool is not None:
-            first, frames, texts, labels = pool.sample(config.batch_size, sampler, hard, score)
+            first, frames, texts, labels = pool.sample(config.batch_size, sampler, hard_share, score)
             loss, values = per_frame_loss(judge, first, frames, judge.encoder(texts), labels)
         else:
             frames, texts, labels = _sample(train_videos, config.batch_size, config.whole_share, config.ambiguous_steps, sampler)

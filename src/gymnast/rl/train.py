@@ -521,20 +521,17 @@ def learning_parameters(policy: torch.nn.Module, freeze: tuple[str, ...]) -> lis
     def under(name: str, prefix: str) -> bool:
         return name == prefix or name.startswith(prefix.rstrip(".") + ".")
 
-    def frozen(name: str) -> bool:
-        return any(under(name, prefix) for prefix in freeze)
-
     for prefix in freeze:
         if not any(under(name, prefix) for name in named):
             parts = sorted({name.split(".")[0] for name in named})
             raise ValueError(f"RLConfig.freeze: the policy has no parameter named {prefix!r} or under it; "
                              f"its parts are {', '.join(parts)}")
-    learning = [parameter for name, parameter in named.items() if not frozen(name)]
-    if not learning:
+    frozen = {name for name in named if any(under(name, prefix) for prefix in freeze)}
+    if len(frozen) == len(named):
         raise ValueError(f"RLConfig.freeze ({', '.join(freeze)}) leaves the policy nothing to learn")
     for name, parameter in named.items():
-        parameter.requires_grad_(not frozen(name))
-    return learning
+        parameter.requires_grad_(name not in frozen)
+    return [parameter for name, parameter in named.items() if name not in frozen]
 
 
 def _frozen_copy(policy):
