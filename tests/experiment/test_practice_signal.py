@@ -7,11 +7,12 @@ import json
 import math
 from pathlib import Path
 
+import numpy as np
 import pytest
 import torch
 
 from gymnast.cli import main
-from gymnast.experiment.practice_signal import SignalConfig, dense_return, read_out, signal_figures
+from gymnast.experiment.practice_signal import SignalConfig, dense_return, read_out, signal_figures, start_episodes
 from gymnast.reward.select import make_reward
 from gymnast.reward.spec import RewardSpec
 
@@ -203,3 +204,14 @@ def test_the_signal_of_an_rl_run_is_measured_on_the_practice_it_does(tmp_path, c
     with pytest.raises(SystemExit):
         main(["rl-signal", "--out", str(tmp_path / "signal"), "--wm", "runs/wm"])
     assert "rl-signal needs --policy, --reward (or --like RUN" in capsys.readouterr().err
+
+
+def test_starts_take_every_held_out_episode_once_before_lending_trained_ones_and_repeat_last():
+    draw = np.random.default_rng(0)
+    few = start_episodes([1, 2, 3], [10, 11], 2, draw)
+    assert len(few) == 2 and len(set(few)) == 2 and set(few) <= {1, 2, 3}
+    lent = start_episodes([1, 2], [10, 11, 12], 4, draw)
+    assert {1, 2} <= set(lent) and len(set(lent)) == 4 and len(set(lent) & {10, 11, 12}) == 2
+    short = start_episodes([1], [10], 5, draw)
+    assert len(short) == 5 and set(short) == {1, 10}
+    assert start_episodes([], [7, 8], 2, draw) in ([7, 8], [8, 7])

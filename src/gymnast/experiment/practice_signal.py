@@ -264,8 +264,9 @@ def heldout_keyframes(data: Path, tasks: Sequence[str], config: SignalConfig, im
     """`config.starts_per_task` keyframes of each task from the episodes of `data`'s held-out scenes
     (`config.heldout_fraction`, the world models' split: they never trained on them) recorded in the real world, drawn by
     `config.keyframes` from `config.seed`; the frames fitted to `image_size` as the models were
-    trained, the views of several `cameras` side by side (default: the dataset's first). A task without a held-out episode lends its other episodes (with a warning): a
-    dataset too small to hold scenes out measures the models on what they trained on.
+    trained, the views of several `cameras` side by side (default: the dataset's first). A task with
+    fewer held-out episodes than starts lends its other episodes (with a warning; `start_episodes`):
+    a dataset too small to hold scenes out measures the models on what they trained on.
 
     Raises:
         ValueError: a task has no real episode in `data` (that fits the sampling).
@@ -282,18 +283,31 @@ def heldout_keyframes(data: Path, tasks: Sequence[str], config: SignalConfig, im
     for task in tasks:
         episodes = [i for i, info in enumerate(dataset.episodes) if info.task == task and info.env_variant == "real"
                     and not (config.keyframes == "failures" and info.success)]
-        heldout = [i for i in episodes if not config.heldout_fraction or is_heldout(dataset.episodes[i],
-                                                                                    config.heldout_fraction)]
         if not episodes:
             raise ValueError(f"{data} has no real episode of {task} to take {config.keyframes} keyframes from")
-        if not heldout:
-            logger.warning("%s: no held-out episode of %s; its keyframes come from episodes the models trained on",
-                           data, task)
-        episodes = heldout or episodes
-        chosen = draw.choice(episodes, size=config.starts_per_task, replace=len(episodes) < config.starts_per_task)
-        # One keyframe per pick: an episode picked twice gives two different keyframes.
+        heldout = [i for i in episodes if not config.heldout_fraction or is_heldout(dataset.episodes[i],
+                                                                                    config.heldout_fraction)]
+        trained = sorted(set(episodes) - set(heldout))
+        chosen = start_episodes(heldout, trained, config.starts_per_task, draw)
+        lent = sum(i in trained for i in chosen)
+        if lent:
+            logger.warning("%s: %d held-out episode(s) of %s for %d starts; %d start(s) come from episodes the "
+                           "models trained on", data, len(heldout), task, config.starts_per_task, lent)
+        # One keyframe per pick: an episode picked twice gives two keyframes (the same one for `first`).
         starts += [dataset_keyframes(dataset, [int(i)], keyframes, seed=config.seed + n)[0] for n, i in enumerate(chosen)]
     return starts
+
+
+def start_episodes(heldout: Sequence[int], trained: Sequence[int], count: int, draw: np.random.Generator) -> list[int]:
+    """`count` episodes to take starts from, each at most once while there are enough: the held-out
+    ones first, then (too few held out) episodes the models trained on, and only when the task has
+    fewer than `count` episodes in all, repeats. Groups from one scene are not independent, so a
+    repeated scene would narrow the intervals without adding evidence."""
+    chosen = [int(i) for i in draw.permutation(np.asarray(heldout, dtype=np.int64))[:count]]
+    chosen += [int(i) for i in draw.permutation(np.asarray(trained, dtype=np.int64))[: count - len(chosen)]]
+    if len(chosen) < count:
+        chosen += [int(i) for i in draw.choice(chosen, size=count - len(chosen))]
+    return chosen
 
 
 def read_out(reward: Reward, frames: torch.Tensor, instructions: Sequence[str], horizons: Sequence[int],
