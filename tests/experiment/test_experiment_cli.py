@@ -12,6 +12,7 @@ import pytest
 
 from gymnast.cli import main
 from gymnast.data.lerobot import EpisodeDataset
+from gymnast.envs.tasks import resolve_tasks
 from gymnast.experiment.arms import ARM_NAMES
 from gymnast.experiment.config import EXPERIMENT_PRESETS
 
@@ -205,6 +206,19 @@ def test_the_report_and_plots_are_written(experiment: Path):
     for plot in ("per_task", "learning_curves", "worldgym"):
         assert (experiment / "plots" / f"{plot}.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
         assert f"plots/{plot}.png" in report
+
+
+def test_the_sft_regime_is_a_setting_saved_and_reported(experiment: Path, capsys):
+    per_task = EXPERIMENT_PRESETS["debug"].sft.demos_per_task
+    tasks = len(resolve_tasks(EXPERIMENT_PRESETS["debug"].tasks))
+    summary = json.loads((experiment / "summary.json").read_text())
+    assert summary["sft_demonstrations"] == {"per_task": per_task, "episodes": per_task * tasks}
+    assert f"behaviour-cloned on {per_task} expert demonstrations per task" in (experiment / "report.md").read_text()
+    # --demos-per-task sets the SFT stage's count: a resumed run refuses another one, naming both.
+    with pytest.raises(SystemExit):
+        main(["experiment", "--out", str(experiment), "--resume", "--demos-per-task", str(per_task + 1)])
+    err = capsys.readouterr().err
+    assert f"--demos-per-task {per_task + 1} disagrees" in err and f"sft.demos_per_task={per_task}" in err
 
 
 def test_a_rerun_skips_every_finished_stage_and_prints_the_table(experiment: Path, capsys):

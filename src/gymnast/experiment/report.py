@@ -211,6 +211,7 @@ def build_summary(stages: Stages, config: ExperimentConfig) -> dict:
         "signal": signal,
         "signal_weak": signal_weak,
         "dataset": {"episodes": len(dataset), "real_interactions": int(sum(dataset.lengths)), "path": str(dataset.root)},
+        "sft_demonstrations": _sft_demonstrations(stages.path("sft")),
         "rl_steps": config.rl.steps,
         "rollouts_per_step": config.rl.starts_per_step * config.rl.group_size,
         "eval_episodes_per_task": config.eval_episodes,
@@ -219,6 +220,16 @@ def build_summary(stages: Stages, config: ExperimentConfig) -> dict:
     }
     summary["goals"] = experiment_goals(arms, weak, worldgym["pearson"], summary["watch_false_success"], equal_budget)
     return summary
+
+
+def _sft_demonstrations(run: Path) -> dict | None:
+    """How many expert demonstrations the SFT policy learned from, as its run saved them (a reused
+    run's own: the regime is the policy's, not the preset's); None for a policy that saved none
+    (a LeRobot checkpoint)."""
+    saved = _read_json(run / "config.json") or {}
+    if "demos" not in saved:
+        return None
+    return {"per_task": saved["sft"]["demos_per_task"], "episodes": len(saved["demos"])}
 
 
 def _without_bookkeeping(record: dict) -> dict:

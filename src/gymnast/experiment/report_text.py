@@ -315,12 +315,22 @@ def _dyna_section(summary: dict, plots: dict[str, str]) -> list[str]:
     return [*lines, f"![Dyna against RL in the real world]({plots['dyna']})", ""]
 
 
+def _sft_regime(summary: dict) -> str:
+    """How many demonstrations the SFT policy imitated (absent in older summaries and for policies
+    that saved none)."""
+    demos = summary.get("sft_demonstrations")
+    if not demos:
+        return ""
+    return (f" (behaviour-cloned on {demos['per_task']} expert demonstrations per task, {demos['episodes']} in all, "
+            "while the world model and the judge learn from the whole dataset)")
+
+
 def report_markdown(summary: dict, plots: dict[str, str]) -> str:
     """The report, from summary.json's content and the plots' paths (relative to the report)."""
     dataset = summary["dataset"]
     lines = [
         "# Headline experiment: practising in a learned world model vs. SFT and a software simulator", "",
-        (f"Tasks: {summary['tasks']}. Every arm starts from the same SFT policy; the RL arms take "
+        (f"Tasks: {summary['tasks']}. Every arm starts from the same SFT policy{_sft_regime(summary)}; the RL arms take "
         f"{summary['rl_steps']} RL steps of {summary['rollouts_per_step']} rollouts each. Every policy is measured in the "
         f"real world on {summary['eval_episodes_per_task']} evaluation seeds per task (never recorded in any dataset), "
         "greedy, with 95% Wilson intervals."), "",
