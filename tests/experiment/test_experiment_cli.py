@@ -114,6 +114,17 @@ def test_dyna_counts_its_rollouts_and_is_watched_every_round(experiment: Path):
     assert (experiment / "plots" / "dyna.png").read_bytes()[:4] == b"\x89PNG"
 
 
+def test_the_rl_arms_are_also_set_side_by_side_at_equal_wall_clock(experiment: Path):
+    summary = json.loads((experiment / "summary.json").read_text())
+    timing = summary["equal_wall_clock"]
+    assert timing["reference"]["arm"] == "rl_real" and timing["reference"]["steps"] == summary["rl_steps"]
+    assert set(timing["arms"]) == {"rl_sim", "rl_wm_judge", "rl_wm_verified", "rl_wm_state"}  # Dyna's rounds aside
+    for name, row in timing["arms"].items():
+        assert row["steps"] == summary["rl_steps"] and row["train_s"] > 0, name
+        assert 0 <= row["reference_steps_in_that_time"] <= summary["rl_steps"], name
+    assert "## At equal wall-clock" in (experiment / "report.md").read_text()
+
+
 def test_one_small_real_budget_is_spent_three_ways_and_every_interaction_is_counted(experiment: Path):
     summary = json.loads((experiment / "summary.json").read_text())
     budget, setup = summary["equal_budget"], summary["equal_budget_setup"]

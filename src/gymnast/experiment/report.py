@@ -12,6 +12,7 @@ from pathlib import Path
 
 from gymnast.experiment.arms import ARMS, PERTURBATIONS, ROBUSTNESS_ARMS, WM_ARMS, arm
 from gymnast.experiment.config import ExperimentConfig
+from gymnast.experiment.equal_time import equal_wall_clock
 from gymnast.experiment.goals import experiment_goals
 from gymnast.experiment.stages import Stages
 from gymnast.utils.atomic import write_bytes, write_json
@@ -194,7 +195,10 @@ def build_summary(stages: Stages, config: ExperimentConfig) -> dict:
         "robustness": robustness,
         "language": language,
         "language_sentences": str(config.sentences) if config.sentences is not None else None,
-        "curves": _curves(stages),
+        "curves": (curves := _curves(stages)),
+        "equal_wall_clock": equal_wall_clock({spec.name: stages.path(f"arm_{spec.name}") for spec in ARMS
+                                              if spec.is_rl and not spec.dyna and stages.done(f"arm_{spec.name}")},
+                                             curves.get("rl_real", [])),
         "watch": (watch := _watch(stages)),
         "watch_false_success": {name: rows[-1].get("false_success") if rows else None for name, rows in watch.items()},
         "weak_tasks": (weak := _weak_tasks(arms, config)),

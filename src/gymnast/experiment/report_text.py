@@ -56,6 +56,31 @@ def verdict_lines(summary: dict) -> list[str]:
     ]
 
 
+def _equal_time_section(summary: dict) -> list[str]:
+    """The RL arms at equal wall-clock (`gymnast.experiment.equal_time`): the steps each had time
+    for, and RL in the real world's success by the time each other arm had finished."""
+    timing = summary.get("equal_wall_clock")  # None in experiments from before the readout
+    if not timing or not timing["arms"]:
+        return []
+    reference = timing["reference"]
+    real_title = summary["arms"][reference["arm"]]["title"].split(" (")[0]
+    lines = ["## At equal wall-clock", "",
+             (f"Every RL arm took {summary['rl_steps']} steps; their minutes differ. {real_title} trained its "
+              f"{reference['steps']} steps in {reference['train_s'] / 60:.1f} min (training only: rollouts and updates, "
+              "without the evaluations and the watch). Beside each other arm: how far it had got in that arm's "
+              "time, with its last evaluation by then, and how many of that arm's steps its own time would have "
+              "paid for (a projection at the arm's mean step time, not a run)."), "",
+             f"| arm | steps | training | {real_title}'s steps in that time | its success by then | steps {real_title}'s time pays for |",
+             "|---|---|---|---|---|---|"]
+    for name, row in timing["arms"].items():
+        at_time = row["reference_at_that_time"]
+        success = "-" if at_time is None else f"{pct(at_time['success'])} {ci(at_time)} (step {at_time['step']})"
+        lines.append(f"| {summary['arms'][name]['title']} | {row['steps']} | {row['train_s'] / 60:.1f} min | "
+                     f"{row['reference_steps_in_that_time']} of {reference['steps']} | {success} | "
+                     f"{row['steps_in_reference_time']} |")
+    return [*lines, ""]
+
+
 def _grounded_verdict(arms: dict) -> list[str]:
     grounded, sft = arms.get("rl_wm_state"), arms["sft"]  # None in experiments from before the arm
     if grounded is None:
@@ -341,6 +366,7 @@ def report_markdown(summary: dict, plots: dict[str, str]) -> str:
         f"![per-task success]({plots['per_task']})", "",
         f"![learning curves]({plots['curves']})", "",
         "## Per task", "", *_per_task_table(summary), "",
+        *_equal_time_section(summary),
         *_dyna_section(summary, plots),
         *_equal_budget_section(summary),
         "## Robustness and language", "", *_robustness_tables(summary), "",
