@@ -9,7 +9,7 @@ def _run(root: Path, name: str, step_seconds: list[float], repeat: int | None = 
     run.mkdir()
     lines = [{"step": 0, "eval/own_success": 0.2}]  # an evaluation line carries no step time
     lines += [{"step": i + 1, "time/step_s": seconds} for i, seconds in enumerate(step_seconds)]
-    if repeat is not None:  # a resumed run logs the step it was killed in again
+    if repeat is not None:  # a resumed run logs the steps after its last checkpoint again
         lines.append({"step": repeat, "time/step_s": step_seconds[repeat - 1]})
     (run / "metrics.jsonl").write_text("".join(json.dumps(line) + "\n" for line in lines))
     return run

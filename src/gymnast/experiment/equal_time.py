@@ -19,7 +19,8 @@ REFERENCE = "rl_real"
 
 def training_seconds(run: Path) -> list[float]:
     """Seconds of training up to the end of each step (entry i: steps 1..i+1), from the run's
-    metrics.jsonl; a step logged twice (a resumed run repeats the step it was killed in) counts once."""
+    metrics.jsonl; a step logged twice (a resumed run repeats the steps after its last checkpoint)
+    counts once, with its last time."""
     per_step: dict[int, float] = {}
     for line in (run / "metrics.jsonl").read_text().splitlines():
         values = json.loads(line)
