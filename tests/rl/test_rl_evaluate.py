@@ -60,3 +60,15 @@ def test_a_shared_evaluation_runs_once_and_gives_exactly_the_figures_of_running_
     assert built == [True, True, False]  # the repeated one ran no episode
     with shared_evaluations():
         assert evaluate(built) == fresh and built[-1]  # a new block runs it again
+
+
+def test_the_evaluation_env_before_training_is_closed_when_training_starts():
+    envs = EnvFactory(REAL, 5, CONFIG, "none", workers=1, batch=2)
+    try:
+        before = envs.get(REAL, envs.batch)  # the first evaluation's env, at its own batch
+        trained = envs.train(3)
+        # Its simulator processes would otherwise sit idle, holding their scenes, for the whole run.
+        assert before.workers is None and before.closed
+        assert envs.get(REAL, envs.batch) is trained and trained.num_envs == 3
+    finally:
+        envs.close()

@@ -45,7 +45,15 @@ class EnvFactory:
         self._envs: dict[tuple[str, int], VectorEnv] = {}
 
     def train(self, num_envs: int) -> VectorEnv:
-        """The run's own env with `num_envs` rollouts (evaluations then run in batches of that size)."""
+        """The run's own env with `num_envs` rollouts (evaluations then run in batches of that size).
+
+        The run's own kind of env at the earlier evaluation batch is closed: evaluations now use the
+        training env, and a simulator's idle workers would hold gigabytes of scenes for the whole run
+        (two cameras on MT10: about 5 GB each)."""
+        if self.batch != num_envs:
+            stale = self._envs.pop((self.kind.name, self.batch), None)
+            if stale is not None:
+                stale.close()
         self.batch = num_envs
         return self.get(self.kind, num_envs)
 
