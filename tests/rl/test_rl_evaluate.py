@@ -11,7 +11,7 @@ from gymnast.envs.kinds import REAL
 from gymnast.policy.load import load_policy
 from gymnast.envs.starts import evaluation_starts
 from gymnast.reward.sim import SimSuccess
-from gymnast.rl.evaluate import evaluate_in_env, policy_fingerprint, shared_evaluations, watch_hacking
+from gymnast.rl.evaluate import evaluate_in_env, policy_fingerprint, shared_evaluations, taking_turns, watch_hacking
 from gymnast.rl.rollout import collect_rollouts, dataset_starts
 
 CONFIG = EnvConfig(image_size=96, horizon=60)
@@ -72,3 +72,10 @@ def test_the_evaluation_env_before_training_is_closed_when_training_starts():
         assert envs.get(REAL, envs.batch) is trained and trained.num_envs == 3
     finally:
         envs.close()
+
+
+def test_evaluation_batches_take_turns_over_the_tasks_as_training_batches_do():
+    starts = evaluation_starts(["reach-v3", "drawer-close-v3"], 3, CONFIG)
+    ordered = taking_turns(starts[:3] + starts[3:4])  # three reach, one drawer-close
+    assert [start.task for start in ordered] == ["reach-v3", "drawer-close-v3", "reach-v3", "reach-v3"]
+    assert sorted(start.seed for start in taking_turns(starts)) == sorted(start.seed for start in starts)

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
+import itertools
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 
@@ -70,6 +71,7 @@ def _evaluate_in_env(envs: EnvFactory, kind: EnvKind, policy, reward: Reward, st
                      progress: bool) -> dict[str, float]:
     """`evaluate_in_env`'s figures, without the prefix."""
     env = envs.get(kind, envs.batch)
+    starts = taking_turns(starts)
     outcomes, interactions = [], 0
     bar = tqdm(total=len(starts), desc=f"evaluate {kind}", unit="ep", disable=not progress, leave=False)
     for first in range(0, len(starts), env.num_envs):
@@ -94,6 +96,18 @@ def _evaluate_in_env(envs: EnvFactory, kind: EnvKind, policy, reward: Reward, st
             mine = success[[i for i, start in enumerate(starts) if start.task == task]]
             values[f"success/{task}"] = torch.nanmean(mine).item()
     return values
+
+
+def taking_turns(starts: Sequence[Start]) -> list[Start]:
+    """`starts` reordered so that their tasks take turns (first of each task, then second...), as
+    training batches draw them (`gymnast.envs.starts.StartSampler`): a simulator process then runs
+    an evaluation batch on the scenes its training batches built, instead of building (and, two
+    cameras at 55 MB a scene, holding) as many again for runs of one task."""
+    by_task: dict[str, list[Start]] = {}
+    for start in starts:
+        by_task.setdefault(start.task, []).append(start)
+    turns = itertools.zip_longest(*by_task.values())
+    return [start for turn in turns for start in turn if start is not None]
 
 
 class _Remembered:
