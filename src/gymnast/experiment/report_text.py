@@ -56,6 +56,11 @@ def verdict_lines(summary: dict) -> list[str]:
     ]
 
 
+def _short_title(summary: dict, name: str) -> str:
+    """An arm's title without its parenthesis, for the report's sentences."""
+    return summary["arms"][name]["title"].split(" (")[0]
+
+
 def _equal_time_section(summary: dict) -> list[str]:
     """The RL arms at equal wall-clock (`gymnast.experiment.equal_time`): the steps each had time
     for, and RL in the real world's success by the time each other arm had finished."""
@@ -63,7 +68,7 @@ def _equal_time_section(summary: dict) -> list[str]:
     if not timing or not timing["arms"]:
         return []
     reference = timing["reference"]
-    real_title = summary["arms"][reference["arm"]]["title"].split(" (")[0]
+    real_title = _short_title(summary, reference["arm"])
     lines = ["## At equal wall-clock", "",
              (f"Every RL arm took {summary['rl_steps']} steps; their minutes differ. {real_title} trained its "
               f"{reference['steps']} steps in {reference['train_s'] / 60:.1f} min (training only: rollouts and updates, "
@@ -95,7 +100,7 @@ def _weak_tasks_verdict(summary: dict) -> list[str]:
         return []
     pooled = weak["arms"]
     ahead = pooled["rl_wm_judge"]["success"] >= GOAL_OVER_SFT * pooled["sft"]["success"]
-    rows = ", ".join(f"{summary['arms'][name]['title'].split(' (')[0]} {pct(row['success'])}" for name, row in pooled.items())
+    rows = ", ".join(f"{_short_title(summary, name)} {pct(row['success'])}" for name, row in pooled.items())
     return [(f"- On the weak tasks ({', '.join(task.removesuffix('-v3') for task in weak['tasks'])}; "
              f"{pooled['sft']['episodes']} episodes per arm): {rows}. World-model RL (judge) at least 2x SFT with separate "
              f"intervals: **{goal_in_words(summary['goals']['wm_rl_2x_sft_on_weak_tasks'], ahead)}**.")]
@@ -158,7 +163,7 @@ def _watch_verdict(summary: dict) -> list[str]:
     judged = {name: value for name, value in summary.get("watch_false_success", {}).items() if value is not None}
     if not judged:
         return []
-    rows = ", ".join(f"{summary['arms'][name]['title'].split(' (')[0]} {pct(value)}" for name, value in judged.items())
+    rows = ", ".join(f"{_short_title(summary, name)} {pct(value)}" for name, value in judged.items())
     held = all(summary["goals"]["watch_false_success_at_most_10pct"][name] for name in judged)
     return [(f"- Reward-hacking watch at the end of training, judged successes that failed when replayed for real: {rows}. "
              f"Goal of at most 10%: **{'met' if held else 'not met'}**.")]
