@@ -11,9 +11,9 @@ from gymnast.experiment.equal_budget import budget_for
 
 
 def test_real_grpo_takes_as_many_full_batches_as_the_budget_holds():
-    full = EXPERIMENT_PRESETS["full"]  # MT10, 8 starts x 8 rollouts a step, 32 rollouts a task
+    full = EXPERIMENT_PRESETS["full"]  # MT10, 20 starts x 8 rollouts a step, 32 rollouts a task
     budget = budget_for(full.equal_budget, full)
-    assert (budget.rollouts, budget.grpo_starts, budget.grpo_steps) == (320, 8, 5)
+    assert (budget.rollouts, budget.grpo_starts, budget.grpo_steps) == (320, 20, 2)
     odd = budget_for(EqualBudgetConfig(rollouts_per_task=7), full)  # 70 rollouts: one batch of 64, never more
     assert (odd.rollouts, odd.grpo_starts, odd.grpo_steps) == (70, 8, 1)
 

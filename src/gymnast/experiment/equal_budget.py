@@ -6,7 +6,7 @@ which use of the *same* small number of real rollouts improves the SFT policy mo
 comparison: 128 real rollouts; world-model practice 47.1%, GRPO on the same rollouts 33.2%):
 
 - ``real_grpo``: GRPO in the real world, its rollouts as many as the budget's, in as many steps of
-  the RL arms' batch as they fill (fresh scenes, dense reward, no refills);
+  the RL arms' batch as they fill (fresh scenes, the real-world arm's success reward, no refills);
 - ``imagined``: the budget's rollouts of the SFT policy recorded in the real world; the world
   model and the judge refitted on them (as a Dyna round does); then practice in imagination for
   the RL arms' steps, rewarded by the refitted judge (WMPO's and World-Gymnast's recipe);
@@ -93,6 +93,7 @@ def _record(sft: Path, config: ExperimentConfig, out: Path, progress: bool) -> d
 def _real_grpo(config: ExperimentConfig, budget: Budget, sft: Path, data: Path, out: Path, progress: bool) -> dict:
     """GRPO in the real world on as many rollouts as the budget holds, in the RL arms' batches."""
     from gymnast.envs.kinds import REAL
+    from gymnast.experiment.arms import arm
     from gymnast.reward.spec import RewardSpec
     from gymnast.rl.config import RLRun
     from gymnast.rl.train import train_rl
@@ -100,7 +101,7 @@ def _real_grpo(config: ExperimentConfig, budget: Budget, sft: Path, data: Path, 
     # No refills of dropped groups: each would spend rollouts outside the budget.
     settings = dataclasses.replace(config.rl, steps=budget.grpo_steps, starts_per_step=budget.grpo_starts,
                                    max_rounds=1, fresh_scenes=True, watch_every=0, eval_every=budget.grpo_steps)
-    run = RLRun(str(sft), REAL, RewardSpec("sim-dense"), data=str(data))
+    run = RLRun(str(sft), REAL, RewardSpec(arm("rl_real").reward), data=str(data))
     summary = train_rl(run, out, settings, resume=(out / "checkpoints" / "last").exists(), progress=progress)
     summary.pop("curve")
     return summary
