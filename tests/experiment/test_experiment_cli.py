@@ -12,7 +12,7 @@ import pytest
 
 from gymnast.cli import main
 from gymnast.data.lerobot import EpisodeDataset
-from gymnast.envs.tasks import resolve_tasks
+from gymnast.envs.tasks import eval_seed, resolve_tasks
 from gymnast.experiment.arms import ARM_NAMES
 from gymnast.experiment.config import EXPERIMENT_PRESETS
 
@@ -152,6 +152,24 @@ def test_one_small_real_budget_is_spent_three_ways_and_every_interaction_is_coun
     assert summary["goals"]["imagined_beats_real_grpo_at_equal_budget"] in (True, False)
     report = (experiment / "report.md").read_text()
     assert "## Equal real budgets" in report and "Practice in imagination above GRPO on the same real budget" in report
+
+
+def test_the_sft_policy_practises_on_a_new_scene_in_imagination_and_is_measured_there_for_real(experiment: Path):
+    summary = json.loads((experiment / "summary.json").read_text())
+    practice = summary["new_scenes"]
+    (scene,) = practice["scenes"]  # debug: one new scene of reach
+    assert (scene["task"], scene["seed"]) == ("reach-v3", eval_seed(0))
+    run = experiment / "new_scenes" / f"reach-v3_{eval_seed(0)}"
+    settings = json.loads((run / "config.json").read_text())
+    assert settings["rl"]["scenes"] == f"reach-v3:{eval_seed(0)}" and settings["run"]["env"] == "imagined"
+    assert settings["run"]["reward"] == f"judge:{experiment / 'judge'}" and settings["run"]["policy"] == str(experiment / "sft")
+    assert settings["rl"]["freeze"] == ["vision"] and settings["rl"]["kl_coef"] == 0.1  # the shared recipe
+    # practice takes no real interaction; the evaluations before and after and the watch measure, counted apart
+    assert practice["totals"]["real_interactions"] == scene["real_interactions"] == 0
+    assert scene["eval_real_interactions"] > 0 and scene["reset_frames"] > 0
+    assert scene["real_before"] in (True, False) and scene["real_after"] in (True, False)
+    assert practice["totals"]["real_after"]["success"] == float(scene["real_after"])
+    assert "## Test-time practice on new scenes" in (experiment / "report.md").read_text()
 
 
 def test_robustness_language_and_worldgym_are_measured(experiment: Path):

@@ -83,6 +83,28 @@ class EqualBudgetConfig:
             raise ValueError("EqualBudgetConfig.wm_steps and judge_steps must be at least 1 when rollouts_per_task is set")
 
 
+@dataclass(frozen=True)
+class NewScenesConfig:
+    """Test-time practice on new scenes (`gymnast.experiment.new_scenes`): the SFT policy practises
+    in imagination from one new scene's first frame, rewarded by the judge, then acts on that scene
+    in the real world; the shared `rl` recipe, on one scene at a time."""
+
+    scenes_per_task: int = 2
+    """New scenes (the first evaluation seeds) of each weak task, or of every task where the
+    experiment has none of the weak ones (0: not run)."""
+    steps: int = 8
+    """RL steps on each scene."""
+    starts_per_step: int = 4
+    """GRPO groups a step, all from the one scene (each of ``rl.group_size`` rollouts)."""
+
+    def __post_init__(self) -> None:
+        if self.scenes_per_task < 0:
+            raise ValueError(f"NewScenesConfig.scenes_per_task must be at least 0, got {self.scenes_per_task}")
+        for name in ("steps", "starts_per_step"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"NewScenesConfig.{name} must be at least 1, got {getattr(self, name)}")
+
+
 WEAK_TASKS = "reach-v3,push-v3,pick-place-v3,peg-insert-side-v3"
 """MT10's tasks where the SFT policy is weakest (10-24% real success, results/sft/)."""
 
@@ -129,6 +151,8 @@ class ExperimentConfig:
     """The Dyna arm (its RL settings are the shared `rl`)."""
     equal_budget: EqualBudgetConfig = field(default_factory=EqualBudgetConfig)
     """The equal-real-budget comparison (its RL settings are the shared `rl`)."""
+    new_scenes: NewScenesConfig = field(default_factory=NewScenesConfig)
+    """Test-time practice on new scenes of the weak tasks."""
     weak_tasks: str = WEAK_TASKS
     """Tasks whose pooled success summary.json reports per arm (``weak_tasks``), the ones RL should
     help most; those of them not in `tasks` are left out."""
@@ -197,6 +221,12 @@ class ExperimentConfig:
         weak = set(resolve_tasks(self.weak_tasks)) if self.weak_tasks else set()
         return [task for task in resolve_tasks(self.tasks) if task in weak]
 
+    @property
+    def new_scene_tasks(self) -> list[str]:
+        """The tasks whose new scenes test-time practice visits: the weak ones, or every task where
+        the experiment has none of them."""
+        return self.weak_task_list or resolve_tasks(self.tasks)
+
     def resolved(self) -> ExperimentConfig:
         """Every stage told the experiment's tasks, cameras, workers, runner, device and seed (one place
         to set them)."""
@@ -231,6 +261,7 @@ def _debug() -> ExperimentConfig:
         iter_sft=IterSFTConfig(group_size=2, steps=2),
         dyna=DynaArmConfig(rounds=2, rollouts_per_task=1, wm_steps=2, judge_steps=2),
         equal_budget=EqualBudgetConfig(rollouts_per_task=2, wm_steps=2, judge_steps=2),
+        new_scenes=NewScenesConfig(scenes_per_task=1, steps=1, starts_per_step=1),
         eval_episodes=2,
         robustness_episodes=1,
         worldgym_episodes=1,
@@ -268,6 +299,8 @@ def _demo() -> ExperimentConfig:
         iter_sft=IterSFTConfig(group_size=2, steps=50),
         dyna=DynaArmConfig(rounds=2, rollouts_per_task=2, wm_steps=10, judge_steps=10),
         equal_budget=EqualBudgetConfig(rollouts_per_task=2, wm_steps=10, judge_steps=10),
+        # Practice on new scenes is left out: about a minute a scene would overrun the 15 minutes.
+        new_scenes=NewScenesConfig(scenes_per_task=0),
         eval_episodes=6,
         robustness_episodes=1,
         worldgym_episodes=1,
@@ -291,6 +324,7 @@ def _gpu() -> ExperimentConfig:
         dyna=DynaArmConfig(rounds=4, rollouts_per_task=16, wm_steps=1000, judge_steps=500),
         # WMPO's budget: 128 real rollouts per task.
         equal_budget=EqualBudgetConfig(rollouts_per_task=128, wm_steps=1000, judge_steps=500),
+        new_scenes=NewScenesConfig(scenes_per_task=5, steps=16, starts_per_step=8),
         workers=16,
     )
 

@@ -75,6 +75,9 @@ def _run_experiment(config: ExperimentConfig, out: Path, reuse: dict[str, Path] 
         from gymnast.experiment.equal_budget import train_equal_budget
 
         equal_budget = train_equal_budget(stages, config, out / "equal_budget", sft, wm, judge, data, progress)
+    if config.new_scenes.scenes_per_task:
+        stages.run("new_scenes", lambda: _new_scenes(sft, wm, judge, config, out / "new_scenes", progress),
+                   out / "new_scenes")
     # The real world as the dataset saw it (a reused dataset may have its own image size).
     env = EnvConfig(image_size=EpisodeDataset(data).image_shape[0], horizon=config.rl.evaluation_horizon)
     # The arms are trained: their evaluations share one set of simulator processes.
@@ -122,6 +125,20 @@ def _models(stages: Stages, config: ExperimentConfig, out: Path, progress: bool
                                                progress), out / "state_model")
     stages.run("world_model_eval", lambda: _world_model_fidelity(wm, data, out, progress, config.device), out / "world_model_eval.json")
     return data, stages.path("sft"), wm, stages.path("judge"), stages.path("state_model")
+
+
+def _new_scenes(sft: Path, wm: Path, judge: Path, config: ExperimentConfig, out: Path, progress: bool) -> dict:
+    """Test-time practice: the SFT policy practises in imagination on each new scene, judged, and is
+    measured there in the real world before and after (`gymnast.experiment.new_scenes`)."""
+    from gymnast.envs.kinds import IMAGINED
+    from gymnast.experiment.new_scenes import practice_settings, practise, scenes_for, totals
+    from gymnast.rl.config import RLRun
+
+    settings = config.new_scenes
+    run = RLRun(str(sft), IMAGINED, RewardSpec.judge(str(judge)), wm=str(wm))
+    rows = practise(run, practice_settings(config.rl, settings.steps, settings.starts_per_step),
+                    scenes_for(config.new_scene_tasks, settings.scenes_per_task), out, progress)
+    return {"scenes": rows, "totals": totals(rows)}
 
 
 JUDGE_ROLLOUT_SEED = 300_000

@@ -207,6 +207,8 @@ def build_summary(stages: Stages, config: ExperimentConfig) -> dict:
         "dyna": _dyna_against_real_rl(stages, config),
         "equal_budget": (equal_budget := _equal_budget(stages)),
         "equal_budget_setup": _equal_budget_setup(stages, config),
+        # Test-time practice on new scenes (None where the preset leaves it out, or the experiment predates it).
+        "new_scenes": _without_bookkeeping(stages.record("new_scenes")) if stages.done("new_scenes") else None,
         "judge": {k: v for k, v in (judge_metrics or {}).items() if k.startswith(("real_", "imagined_"))},
         "judge_rollouts": judge.get("rollouts"),
         "world_model": _without_bookkeeping(stages.record("world_model_eval")) if stages.done("world_model_eval") else None,

@@ -8,6 +8,7 @@ from __future__ import annotations
 from gymnast.experiment.dyna_report import dyna_table
 from gymnast.experiment.formatting import ci, pct
 from gymnast.experiment.goals import GOAL_DYNA_SHARE, GOAL_OVER_SFT
+from gymnast.experiment.new_scenes import table as practice_table
 from gymnast.world_model.metrics import measured_step
 
 
@@ -345,6 +346,17 @@ def _dyna_section(summary: dict, plots: dict[str, str]) -> list[str]:
     return [*lines, f"![Dyna against RL in the real world]({plots['dyna']})", ""]
 
 
+def _new_scenes_section(summary: dict) -> list[str]:
+    """Test-time practice: each new scene's real success before and after practising on it in imagination."""
+    practice = summary.get("new_scenes")  # None where the preset leaves it out
+    if not practice:
+        return []
+    return ["## Test-time practice on new scenes", "",
+            ("The SFT policy practised in imagination from each new scene's first frame (an evaluation seed, in no "
+             "dataset), rewarded by the judge, then acted on that scene in the real world."), "",
+            *practice_table(practice["scenes"], practice["totals"])]
+
+
 def _sft_regime(summary: dict) -> str:
     """How many demonstrations the SFT policy imitated (absent in older summaries and for policies
     that saved none)."""
@@ -374,6 +386,7 @@ def report_markdown(summary: dict, plots: dict[str, str]) -> str:
         *_equal_time_section(summary),
         *_dyna_section(summary, plots),
         *_equal_budget_section(summary),
+        *_new_scenes_section(summary),
         "## Robustness and language", "", *_robustness_tables(summary), "",
         "## WorldGym: does the world model rank policies like the real world?", "", *_worldgym_table(summary), "",
         f"![WorldGym]({plots['worldgym']})", "",
@@ -388,5 +401,6 @@ def report_markdown(summary: dict, plots: dict[str, str]) -> str:
         "- `signal/`: GRPO groups in imagination against the real outcomes of the same actions (signal.json, signal.md).",
         "- `arms/<arm>/`: each arm's run (metrics.jsonl, TensorBoard, rollout videos with their rewards, summary.json).",
         "- `equal_budget/`: the recorded rollouts and the runs of the equal-budget comparison.",
+        "- `new_scenes/`: one test-time practice run per new scene (metrics.jsonl, summary.json, video).",
     ]
     return "\n".join(lines) + "\n"
