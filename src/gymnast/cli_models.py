@@ -509,6 +509,7 @@ def experiment(
     cameras: CameraNames | None = None,
     judge_rollouts: int | None = None,
     demos_per_task: int | None = None,
+    freeze: tuple[str, ...] | None = None,
 ) -> None:
     """The headline comparison: data, SFT, world model, judge, state model, eight arms, real-world
     evaluation and the WorldGym check, then OUT/report.md, OUT/summary.json and OUT/plots/.
@@ -535,6 +536,9 @@ def experiment(
         demos_per_task: expert demonstrations per task the SFT policy learns from (default: the
             preset's, 10); the world model and the judge still learn from the whole dataset. 2 is
             the data-scarce regime (results/sft/scarce: SFT at 15-40% on MT10).
+        freeze: parts of the policy the RL arms leave as SFT made them, by parameter-name prefix
+            (default: the preset's, vision: the embedded policies' image encoder; a LeRobot
+            policy's are its own, e.g. model.backbone; none: `--freeze` alone).
     """
     from gymnast.experiment.config import EXPERIMENT_PRESETS
     from gymnast.experiment.pipeline import run_experiment, saved_experiment_config
@@ -544,7 +548,7 @@ def experiment(
     config, _ = resolve("experiment", out, resume, EXPERIMENT_PRESETS[preset],
                         overrides={"workers": workers, "sentences": sentences, "runner": runner, "device": device,
                                    "cameras": cameras, "judge_rollouts": judge_rollouts,
-                                   "sft.demos_per_task": demos_per_task},
+                                   "sft.demos_per_task": demos_per_task, "rl.freeze": freeze},
                         inputs={}, saved=lambda: (saved_experiment_config(out), {}))
     summary = run_experiment(config, out, parse_reuse(reuse))
     print(format_table(summary))

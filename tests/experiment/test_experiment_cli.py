@@ -284,6 +284,18 @@ def test_resume_continues_with_the_saved_settings_whatever_the_preset(experiment
     assert "WorldGym Pearson r" in capsys.readouterr().out
 
 
+def test_parts_to_freeze_that_the_policy_lacks_are_refused_before_the_world_model_trains(experiment: Path,
+                                                                                         tmp_path: Path, capsys):
+    out = tmp_path / "exp"
+    with pytest.raises(SystemExit):
+        main(["experiment", "--preset", "debug", "--out", str(out), "--workers", "1", "--reuse",
+              f"collect={experiment / 'data'}", "--reuse", f"sft={experiment / 'sft'}", "--freeze", "backbone"])
+    err = capsys.readouterr().err
+    assert f"{experiment / 'sft'}: RLConfig.freeze: the policy has no parameter named 'backbone'" in err
+    assert "vision" in err and "--freeze" in err  # its parts listed, and the way out
+    assert not (out / "world_model").exists()
+
+
 def test_other_settings_in_the_same_directory_are_refused(experiment: Path, capsys):
     with pytest.raises(SystemExit):
         main(["experiment", "--preset", "demo", "--out", str(experiment)])

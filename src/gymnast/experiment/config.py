@@ -320,7 +320,8 @@ def _gpu() -> ExperimentConfig:
         world_model=WM_PRESETS["gpu"],
         judge=JUDGE_PRESETS["gpu"],
         judge_rollouts=128,
-        rl=dataclasses.replace(RL_PRESETS["gpu"], eval_episodes=10),
+        # The full preset's recipe (success reward, dynamic sampling, frozen encoder, KL anchor) at that budget.
+        rl=dataclasses.replace(RL_PRESETS["gpu"], eval_episodes=10, max_rounds=2, kl_coef=0.1, freeze=("vision",)),
         dyna=DynaArmConfig(rounds=4, rollouts_per_task=16, wm_steps=1000, judge_steps=500),
         # WMPO's budget: 128 real rollouts per task.
         equal_budget=EqualBudgetConfig(rollouts_per_task=128, wm_steps=1000, judge_steps=500),

@@ -108,6 +108,7 @@ def _models(stages: Stages, config: ExperimentConfig, out: Path, progress: bool
     stages.run("collect", lambda: {"success": collect(config.collect, out / "data", progress)}, out / "data")
     data = stages.path("collect")
     stages.run("sft", lambda: _trained(train_sft, data, out / "sft", config.sft, progress), out / "sft")
+    _check_freeze(stages.path("sft"), config.rl.freeze)
     stages.run("world_model", lambda: _trained(train_world_model, data, out / "world_model", config.world_model, progress),
                out / "world_model")
     wm = stages.path("world_model")
@@ -125,6 +126,21 @@ def _models(stages: Stages, config: ExperimentConfig, out: Path, progress: bool
                                                progress), out / "state_model")
     stages.run("world_model_eval", lambda: _world_model_fidelity(wm, data, out, progress, config.device), out / "world_model_eval.json")
     return data, stages.path("sft"), wm, stages.path("judge"), stages.path("state_model")
+
+
+def _check_freeze(sft: Path, freeze: tuple[str, ...]) -> None:
+    """The parts the RL arms freeze are the SFT policy's (a LeRobot policy names its own): said
+    before the world model and the judge train, not hours later at the first arm."""
+    if not freeze:
+        return
+    from gymnast.policy.load import load_policy
+    from gymnast.rl.train import learning_parameters
+
+    try:
+        learning_parameters(load_policy(sft), freeze)
+    except ValueError as error:
+        raise ValueError(f"{sft}: {error}; give the experiment the parts to freeze with --freeze (none: --freeze "
+                         "alone)") from error
 
 
 def _new_scenes(sft: Path, wm: Path, judge: Path, config: ExperimentConfig, out: Path, progress: bool) -> dict:
