@@ -44,6 +44,7 @@ from gymnast.envs.instructions import SPLITS
 from gymnast.envs.metaworld import ACTION_DIM, CONTROL_FPS, STATE_DIM, MetaWorldEnv
 from gymnast.envs.tasks import check_task
 from gymnast.envs.workers import Workers, parse_runner
+from gymnast.utils.memory import release_freed_memory
 
 
 class _Episodes:
@@ -52,7 +53,8 @@ class _Episodes:
     Environments are cached per (task, n), n counting the slice's earlier episodes of that task,
     because building a Meta-World scene costs far more than resetting one. When resets draw ever
     new mixes of tasks the cache would keep growing (an environment holds tens of MB), so past
-    twice the slice's size the environments the current reset does not use are closed.
+    twice the slice's size the environments the current reset does not use are closed, and their
+    memory is given back to the operating system (`gymnast.utils.memory`).
     """
 
     def __init__(self, config: EnvConfig, gap: str, instruction_split: str) -> None:
@@ -75,6 +77,7 @@ class _Episodes:
             used = {id(e.env) for e in self._episodes}
             for key in [key for key, env in self._envs.items() if id(env) not in used]:
                 self._envs.pop(key).close()
+            release_freed_memory()  # else the closed scenes stay in the process's resident memory
         frames = np.stack([e.obs["image"] for e in self._episodes])  # (b, H, W, 3)
         instructions = np.array([e.instruction for e in self._episodes], dtype=object)
         prefix_steps = np.array([e.prefix_steps for e in self._episodes], np.int64)
@@ -113,6 +116,7 @@ class _Episodes:
         for env in self._envs.values():
             env.close()
         self._envs.clear()
+        release_freed_memory()
 
 
 class SimVectorEnv(VectorEnv):
