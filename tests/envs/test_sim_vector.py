@@ -209,9 +209,6 @@ def test_inside_a_shared_block_closed_envs_pass_their_workers_to_the_next_env_of
                 for a, b in zip(one, two):
                     for key in a if isinstance(a, dict) else [None]:
                         np.testing.assert_array_equal(a if key is None else a[key], b if key is None else b[key])
-        with SimVectorEnv(3, chunk_size=K, config=EnvConfig(image_size=32, horizon=20), workers=2) as other:
-            assert not set(other.workers.pids()) & set(pids)  # other settings: other processes
-            kept = other.workers
         with SimVectorEnv(3, chunk_size=K, config=SMALL, workers=2) as failing:
             assert failing.workers.pids() == pids
             os.kill(pids[1], signal.SIGKILL)
@@ -220,6 +217,12 @@ def test_inside_a_shared_block_closed_envs_pass_their_workers_to_the_next_env_of
         with SimVectorEnv(3, chunk_size=K, config=SMALL, workers=2) as fresh:  # the failed workers were not kept
             assert not set(fresh.workers.pids()) & set(pids)
             run(fresh, options, chunks[:1])
+            idle, idle_pids = fresh.workers, fresh.workers.pids()
+        with SimVectorEnv(3, chunk_size=K, config=EnvConfig(image_size=32, horizon=20), workers=2) as other:
+            assert not set(other.workers.pids()) & set(idle_pids)  # other settings: other processes
+            kept = other.workers
+        with pytest.raises(RuntimeError, match="closed"):  # ... whose memory the idle ones gave up first
+            idle.call_each("close", [(), ()])
     with pytest.raises(RuntimeError, match="closed"):  # the block's end stopped the processes it kept
         kept.call_each("close", [(), ()])
 

@@ -282,7 +282,8 @@ def _is_seed(value: Any) -> bool:
 
 MAX_IDLE_POOLS = 3
 """Idle pools a `shared_simulator_processes` block keeps, the most recently closed: each process
-holds its scenes (hundreds of MB), and an experiment's envs come in a handful of settings."""
+holds its scenes (hundreds of MB to GBs with two cameras), and an experiment's envs come in a
+handful of settings. A pool of new settings stops them all first (`_SharedPools.lease`)."""
 
 
 class _SharedPools:
@@ -293,10 +294,13 @@ class _SharedPools:
         self._idle: list[tuple[tuple, Workers]] = []  # oldest first
 
     def lease(self, key: tuple) -> Workers | None:
-        """An idle pool of these settings, now the caller's alone; None outside a block or when none waits."""
+        """An idle pool of these settings, now the caller's alone; None outside a block or when none
+        waits, and then the idle pools are stopped: the new pool's scenes need the memory theirs
+        hold (an experiment ran out of 24 GB with three two-camera pools idle beside two working)."""
         for index in range(len(self._idle) - 1, -1, -1):
             if self._idle[index][0] == key:
                 return self._idle.pop(index)[1]
+        self.close()
         return None
 
     def keep(self, key: tuple, workers: Workers) -> bool:
