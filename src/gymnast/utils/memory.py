@@ -2,9 +2,9 @@
 
 A long-lived simulator process builds and closes Meta-World scenes by the hundred. Closing a scene
 frees its memory to the C heap, but the heap keeps the pages, fragmented, so the process's
-resident memory only ever grows: measured here, three rounds of 24 two-camera scenes built and
-closed left a process at 2.1 GB, 0.5 GB after `release_freed_memory`. In an experiment two such
-workers grew to 7 GB each and the machine ran out of memory.
+resident memory only ever grows until they are released (tests/utils/test_memory.py shows the
+mechanism). In an experiment two such workers grew to several GB each and the machine ran out of
+memory.
 """
 
 from __future__ import annotations
