@@ -198,8 +198,10 @@ def test_inside_a_shared_block_closed_envs_pass_their_workers_to_the_next_env_of
     expected = run(env, options, chunks)
     with shared_simulator_processes():
         with SimVectorEnv(3, chunk_size=K, config=SMALL, workers=2) as first:
-            pids = first.workers.pids()
+            pids, kept = first.workers.pids(), first.workers
             run(first, options, random_chunks(1, 3, seed=1))
+            assert kept.call_each("scenes", [(), ()]) == [1, 2]
+        assert kept.call_each("scenes", [(), ()]) == [0, 0]  # idle, the processes hold no scenes
         with SimVectorEnv(3, chunk_size=K, config=SMALL, workers=2) as second:
             assert second.workers.pids() == pids  # the same processes, no new start
             with SimVectorEnv(3, chunk_size=K, config=SMALL, workers=2) as third:  # open beside it: its own

@@ -7,7 +7,7 @@ from rl_helpers import POLICY
 
 from gymnast.config import EnvConfig
 from gymnast.envs.factory import EnvFactory
-from gymnast.envs.kinds import REAL
+from gymnast.envs.kinds import REAL, SIM
 from gymnast.policy.load import load_policy
 from gymnast.envs.starts import evaluation_starts
 from gymnast.reward.sim import SimSuccess
@@ -62,14 +62,19 @@ def test_a_shared_evaluation_runs_once_and_gives_exactly_the_figures_of_running_
         assert evaluate(built) == fresh and built[-1]  # a new block runs it again
 
 
-def test_the_evaluation_env_before_training_is_closed_when_training_starts():
-    envs = EnvFactory(REAL, 5, CONFIG, "none", workers=1, batch=2)
+def test_every_env_but_the_training_one_is_closed_between_uses():
+    envs = EnvFactory(SIM, 5, CONFIG, "mild", workers=1, batch=2)
     try:
-        before = envs.get(REAL, envs.batch)  # the first evaluation's env, at its own batch
+        before = envs.get(SIM, envs.batch)  # the first evaluation's env, at its own batch
+        real = envs.get(REAL, envs.batch)  # and the real world's evaluation beside it
         trained = envs.train(3)
-        # Its simulator processes would otherwise sit idle, holding their scenes, for the whole run.
-        assert before.workers is None and before.closed
-        assert envs.get(REAL, envs.batch) is trained and trained.num_envs == 3
+        # Their simulator processes would otherwise sit idle, holding their scenes, for the whole run.
+        assert before.closed and real.closed and not trained.closed
+        assert envs.get(SIM, envs.batch) is trained and trained.num_envs == 3
+        watched = envs.get(REAL, 4)  # the watch's replays
+        envs.close_others()
+        assert watched.closed and not trained.closed
+        assert envs.train(3) is trained
     finally:
         envs.close()
 

@@ -4,8 +4,10 @@ Legend: B rollouts stepped together, K actions per chunk, A action dimensions.
 
 Both kinds follow one contract (see `gymnast.envs.sim_vector`): one step is a (B, K, A) action
 chunk, its frames in ``infos["frames"]``, no autoreset. A run needs its own env at the training
-batch size and, for evaluation and the reward-hacking watch, others (the real world among them);
-each is built once, since a simulator's worker processes are costly to start.
+batch size and, for evaluation and the reward-hacking watch, others (the real world among them).
+The training env lives through the run; the others are closed after each use (`close_others`),
+since a simulator's scenes take gigabytes, and their worker processes, costly to start, wait for
+the next use inside a `gymnast.envs.sim_vector.shared_simulator_processes` block.
 """
 
 from __future__ import annotations
@@ -43,19 +45,25 @@ class EnvFactory:
         self.world_model, self.stop_above, self.runner, self.robot_state = world_model, stop_above, runner, robot_state
         self.batch = batch
         self._envs: dict[tuple[str, int], VectorEnv] = {}
+        self._training: tuple[str, int] | None = None  # the key of `train`'s env
 
     def train(self, num_envs: int) -> VectorEnv:
-        """The run's own env with `num_envs` rollouts (evaluations then run in batches of that size).
-
-        The run's own kind of env at the earlier evaluation batch is closed: evaluations now use the
-        training env, and a simulator's idle workers would hold gigabytes of scenes for the whole run
-        (two cameras on MT10: about 5 GB each)."""
-        if self.batch != num_envs:
-            stale = self._envs.pop((self.kind.name, self.batch), None)
-            if stale is not None:
-                stale.close()
-        self.batch = num_envs
+        """The run's own env with `num_envs` rollouts (evaluations then run in batches of that size);
+        every other env is closed first (`close_others`)."""
+        self.batch, self._training = num_envs, (self.kind.name, num_envs)
+        self.close_others()
         return self.get(self.kind, num_envs)
+
+    def close_others(self) -> None:
+        """Closes every env but the training one (every env before `train`).
+
+        Evaluations and the reward-hacking watch use the others once in many steps, and a
+        simulator's workers would hold their scenes in between: gigabytes with two cameras (an
+        experiment ran out of 24 GB with the real world's evaluation env open through a simulator
+        arm). Inside a `shared_simulator_processes` block the workers wait, without their scenes,
+        for the next use."""
+        for key in [key for key in self._envs if key != self._training]:
+            self._envs.pop(key).close()
 
     def get(self, kind: EnvKind, num_envs: int) -> VectorEnv:
         key = (kind.name, num_envs)

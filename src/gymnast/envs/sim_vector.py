@@ -112,10 +112,16 @@ class _Episodes:
                  "truncated": ("truncated", bool)}
         return {name: np.array([getattr(e, field) for e in self._episodes], dtype) for name, (field, dtype) in names.items()}
 
+    def scenes(self) -> int:
+        """How many scenes this slice keeps built."""
+        return len(self._envs)
+
     def close(self) -> None:
+        """Closes every scene and gives their memory back; a later `reset` builds them again."""
         for env in self._envs.values():
             env.close()
         self._envs.clear()
+        self._episodes = []
         release_freed_memory()
 
 
@@ -281,9 +287,10 @@ def _is_seed(value: Any) -> bool:
 
 
 MAX_IDLE_POOLS = 3
-"""Idle pools a `shared_simulator_processes` block keeps, the most recently closed: each process
-holds its scenes (hundreds of MB to GBs with two cameras), and an experiment's envs come in a
-handful of settings. A pool of new settings stops them all first (`_SharedPools.lease`)."""
+"""Idle pools a `shared_simulator_processes` block keeps, the most recently closed: an experiment's
+envs come in a handful of settings. An idle process has closed its scenes but still holds its
+interpreter, MuJoCo and torch (about half a GB), so a pool of new settings stops them all first
+(`_SharedPools.lease`)."""
 
 
 class _SharedPools:
@@ -295,8 +302,9 @@ class _SharedPools:
 
     def lease(self, key: tuple) -> Workers | None:
         """An idle pool of these settings, now the caller's alone; None outside a block or when none
-        waits, and then the idle pools are stopped: the new pool's scenes need the memory theirs
-        hold (an experiment ran out of 24 GB with three two-camera pools idle beside two working)."""
+        waits, and then the idle pools are stopped: each of their processes holds half a GB even
+        without its scenes (an experiment ran out of 24 GB with three two-camera pools idle beside
+        two working, when idle pools still kept their scenes)."""
         for index in range(len(self._idle) - 1, -1, -1):
             if self._idle[index][0] == key:
                 return self._idle.pop(index)[1]
@@ -305,8 +313,16 @@ class _SharedPools:
 
     def keep(self, key: tuple, workers: Workers) -> bool:
         """Keeps `workers` for the next env of these settings (stopping the oldest idle pool past
-        `MAX_IDLE_POOLS`); False outside a block, where the caller stops them."""
+        `MAX_IDLE_POOLS`); False outside a block, where the caller stops them.
+
+        A kept pool first closes its scenes: an idle pool costs its processes only, not the
+        gigabytes of scenes they built (two cameras on MT10: about 4 GB a process), which the next
+        env builds again in a fraction of a second each."""
         if not self.active:
+            return False
+        try:
+            workers.call_each("close", [()] * len(workers.pids()))
+        except RuntimeError:  # a worker died since its last call: not worth keeping
             return False
         self._idle.append((key, workers))
         while len(self._idle) > MAX_IDLE_POOLS:

@@ -219,6 +219,7 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
             state["eval_real_interactions"] += own
         values["eval/real_interactions"] = state["eval_real_interactions"]
         values = {key: value for key, value in values.items() if np.isfinite(value)}  # JSON has no NaN
+        eval_envs.close_others()  # until the next evaluation, steps in the training env only
         state["curve"].append({"step": step, **values})
         log(step, values)
 
@@ -264,6 +265,7 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
             # The watch replays actions in the real world: with real interactions there is nothing to check.
             if batch is not None and config.watch_every and done % config.watch_every == 0 and not env.real_interactions:
                 watched = watch_hacking(envs, batch, scores, verdicts(batch, scores, reward), config.watch_rollouts)
+                envs.close_others()  # the watch's real-world replays
                 state["watch_real_interactions"] += int(watched.pop("eval/watch_interactions"))
                 values |= watched | {"eval/watch_real_interactions": state["watch_real_interactions"]}
             if batch is not None and video_due:
