@@ -36,6 +36,21 @@ def test_a_reused_stage_points_at_the_given_directory_without_running(tmp_path):
     assert record["reused"] is True and stages.path("world_model") == elsewhere
 
 
+def test_a_stage_reused_from_another_experiment_carries_what_that_experiment_measured(tmp_path):
+    rollouts = {"episodes": 400, "successes": 274, "real_interactions": 60000}
+    (tmp_path / "first" / "judge").mkdir(parents=True)
+    Stages(tmp_path / "first").run("judge", lambda: {"rollouts": rollouts}, tmp_path / "first" / "judge")
+    record = Stages(tmp_path / "second", {"judge": tmp_path / "first" / "judge"}).run(
+        "judge", lambda: pytest.fail("a reused stage must not run"))
+    # The real rollouts the judge learned from count in the experiment that reuses it.
+    assert record["reused"] is True and record["rollouts"] == rollouts
+    assert record["measured_in"] == str(tmp_path / "first") and record["measured_wall_s"] >= 0
+    # Another directory of that experiment's is not its judge stage's output: nothing is borrowed.
+    (tmp_path / "first" / "judge_copy").mkdir()
+    record = Stages(tmp_path / "third", {"judge": tmp_path / "first" / "judge_copy"}).run("judge", dict)
+    assert "rollouts" not in record and "measured_in" not in record
+
+
 def test_reuse_errors_name_the_stage_or_directory(tmp_path):
     with pytest.raises(ValueError, match="unknown stages \\['arm_rl_sim'\\]"):
         Stages(tmp_path, {"arm_rl_sim": tmp_path})

@@ -6,7 +6,9 @@ half-way has no record and runs again, and the trainers underneath continue from
 checkpoint, so an interruption costs at most one checkpoint interval.
 
 A stage can also be *reused* from elsewhere (``--reuse world_model=runs/wm``): its record then
-points at that directory and says it was not run here.
+points at that directory and says it was not run here. When another experiment ran that stage, the
+record carries what that experiment measured of it (`measured_elsewhere`): a reused judge's real
+rollouts are real interactions the experiment spent too.
 """
 
 from __future__ import annotations
@@ -70,7 +72,8 @@ class Stages:
             logger.info("stage %s: done before, skipped", name)
             return record
         if name in self.reuse:
-            record = {"stage": name, "path": str(self.reuse[name]), "reused": True, "wall_s": None}
+            record = {"stage": name, "path": str(self.reuse[name]), "reused": True, "wall_s": None,
+                      **measured_elsewhere(name, Path(self.reuse[name]))}
         else:
             logger.info("stage %s: running", name)
             began = time.perf_counter()
@@ -82,6 +85,24 @@ class Stages:
     def path(self, name: str) -> Path:
         """Where a finished (or reused) stage's output lives."""
         return Path(self.record(name)["path"])
+
+
+BOOKKEEPING = ("stage", "path", "reused", "wall_s")
+"""The fields of a stage record that say how it was done, not what it measured."""
+
+
+def measured_elsewhere(name: str, path: Path) -> dict:
+    """What the experiment whose stage `name` made `path` recorded of it (its figures, as
+    ``measured_in`` that experiment's directory and ``measured_wall_s`` the stage's time there);
+    nothing when `path` is not another experiment's stage output."""
+    source = path.parent / "stages" / f"{name}.json"
+    if not source.is_file():
+        return {}
+    record = json.loads(source.read_text())
+    if Path(record.get("path") or "").resolve() != path.resolve():  # that experiment reused another directory
+        return {}
+    figures = {key: value for key, value in record.items() if key not in BOOKKEEPING}
+    return {**figures, "measured_in": str(path.parent), "measured_wall_s": record.get("wall_s")}
 
 
 def parse_reuse(items: list[str]) -> dict[str, Path]:
