@@ -1,10 +1,12 @@
 """Giving freed memory back to the operating system.
 
-A long-lived simulator process builds and closes Meta-World scenes by the hundred. Closing a scene
-frees its memory to the C heap, but the heap keeps the pages, fragmented, so the process's
-resident memory only ever grows until they are released (tests/utils/test_memory.py shows the
+A long-lived simulator process builds and closes Meta-World scenes by the hundred. A closed scene's
+objects refer to each other, so its MuJoCo model and data wait for Python's cycle collector, and
+once freed their memory goes to the C heap, which keeps the pages, fragmented: the process's
+resident memory only ever grows until both are done (tests/utils/test_memory.py shows the
 mechanism). In an experiment two such workers grew to several GB each and the machine ran out of
-memory.
+memory; a process that had built 40 two-camera scenes held 1.4 GB after closing them with the heap
+trimmed alone, 0.44 GB with the cycles collected first.
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ from __future__ import annotations
 import ctypes
 import ctypes.util
 import functools
+import gc
 
 
 @functools.cache
@@ -26,7 +29,9 @@ def _malloc_trim():
 
 
 def release_freed_memory() -> bool:
-    """Returns the C heap's free pages to the operating system; True if it could (glibc)."""
+    """Frees unreachable reference cycles, then returns the C heap's free pages to the operating
+    system; True if it could return them (glibc)."""
+    gc.collect()
     trim = _malloc_trim()
     if trim is None:
         return False
