@@ -289,8 +289,8 @@ def _is_seed(value: Any) -> bool:
 MAX_IDLE_POOLS = 3
 """Idle pools a `shared_simulator_processes` block keeps, the most recently closed: an experiment's
 envs come in a handful of settings. An idle process has closed its scenes but still holds its
-interpreter, MuJoCo, its renderer and torch (1.3 GB in a two-camera experiment), so a pool of new
-settings stops them all first (`_SharedPools.lease`)."""
+interpreter, MuJoCo, its renderer and torch (about 0.5 GB, benchmarks/scene_memory.py), so a pool
+of new settings stops them all first (`_SharedPools.lease`)."""
 
 
 class _SharedPools:
@@ -302,7 +302,7 @@ class _SharedPools:
 
     def lease(self, key: tuple) -> Workers | None:
         """An idle pool of these settings, now the caller's alone; None outside a block or when none
-        waits, and then the idle pools are stopped: each of their processes holds a GB or more even
+        waits, and then the idle pools are stopped: each of their processes holds half a GB even
         without its scenes (an experiment ran out of 24 GB with three two-camera pools idle beside
         two working, when idle pools still kept their scenes)."""
         for index in range(len(self._idle) - 1, -1, -1):
@@ -317,7 +317,7 @@ class _SharedPools:
 
         A kept pool first closes its scenes: an idle pool costs its processes only, not the
         gigabytes of scenes they built (two cameras on MT10: about 4 GB a process), which the next
-        env builds again in a fraction of a second each."""
+        env builds again in about half a second each (benchmarks/scene_memory.py)."""
         if not self.active:
             return False
         try:

@@ -6,7 +6,7 @@ once freed their memory goes to the C heap, which keeps the pages, fragmented: t
 resident memory only ever grows until both are done (tests/utils/test_memory.py shows the
 mechanism). In an experiment two such workers grew to several GB each and the machine ran out of
 memory; a process that had built 40 two-camera scenes held 1.4 GB after closing them with the heap
-trimmed alone, 0.44 GB with the cycles collected first.
+trimmed alone, 0.5 GB with the cycles collected first (benchmarks/scene_memory.py).
 """
 
 from __future__ import annotations
