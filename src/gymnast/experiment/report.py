@@ -14,7 +14,7 @@ from gymnast.experiment.arms import ARMS, PERTURBATIONS, ROBUSTNESS_ARMS, WM_ARM
 from gymnast.experiment.config import ExperimentConfig
 from gymnast.experiment.equal_time import equal_wall_clock
 from gymnast.experiment.goals import experiment_goals
-from gymnast.experiment.stages import Stages
+from gymnast.experiment.stages import BOOKKEEPING, Stages
 from gymnast.utils.atomic import write_bytes, write_json
 
 logger = logging.getLogger(__name__)
@@ -239,7 +239,7 @@ def _sft_demonstrations(run: Path) -> dict | None:
 
 
 def _without_bookkeeping(record: dict) -> dict:
-    return {key: value for key, value in record.items() if key not in ("stage", "path", "reused", "wall_s")}
+    return {key: value for key, value in record.items() if key not in BOOKKEEPING}
 
 
 def _brief(record: dict) -> dict:
