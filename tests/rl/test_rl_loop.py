@@ -8,6 +8,7 @@ import subprocess
 import sys
 import time
 
+import numpy as np
 import pytest
 import torch
 
@@ -18,6 +19,7 @@ from gymnast.rl.rollout import collect_rollouts, dataset_starts
 from gymnast.rl.config import RL_PRESETS
 from gymnast.rl.train import update_policy
 from gymnast.utils.metrics import read_metrics
+from gymnast.utils.video import decode_video
 
 from rl_helpers import JUDGE, POLICY, WORLD_MODEL
 
@@ -44,6 +46,8 @@ def test_rl_debug_preset_runs_on_every_env(env, reward, rl_dataset, tmp_path, ca
     assert all(m["rollout/kept_groups"] >= 0 for m in metrics if "rollout/kept_groups" in m)
     assert (out / "checkpoints" / "000002" / "model.safetensors").exists()
     assert list((out / "videos").glob("*.mp4")) and list((out / "tensorboard").iterdir())
+    if reward.startswith("sim"):  # the simulator's reward reads no frame inside a chunk, nor does its video
+        _assert_each_chunk_shows_one_frame(sorted((out / "videos").glob("*.mp4"))[-1])
     assert summary["eval_real_interactions"] > 0  # every run is evaluated in the real world, counted apart
     if env == "real":
         assert summary["real_interactions"] > 0 and summary["watch_real_interactions"] == 0
@@ -52,6 +56,15 @@ def test_rl_debug_preset_runs_on_every_env(env, reward, rl_dataset, tmp_path, ca
         watched = [m for m in metrics if "eval/watch_real_success" in m]
         assert [m["step"] for m in watched] == [1, 2]
         assert all(("eval/watch_agreement" in m) == (reward != "verified") for m in watched)
+
+
+def _assert_each_chunk_shows_one_frame(video):
+    frames = decode_video(video).astype(np.float32)  # (1 + S * K, H, G * W, 3): the start frame, then each action's
+    chunk = load_policy(POLICY).chunk_size
+    change = np.abs(np.diff(frames[1:], axis=0)).mean(axis=(1, 2, 3))  # between consecutive actions' frames
+    boundary = np.arange(1, len(change) + 1) % chunk == 0  # from a chunk's last action to the next chunk's first
+    assert change[~boundary].max() < 0.5, "frames inside a chunk were rendered"
+    assert change[boundary].max() > 2 * change[~boundary].max() + 0.5, "the video never moves"
 
 
 def test_rl_with_the_vlm_judge_talks_to_a_served_judge(rl_dataset, tmp_path):

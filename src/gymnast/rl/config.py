@@ -147,7 +147,8 @@ class RLConfig:
     watch_rollouts: int = 16
     """Rollouts replayed per check."""
     video_every: int = 25
-    """Steps between rollout videos (RUN/videos/)."""
+    """Steps between rollout videos (RUN/videos/): what the reward read, each chunk's last frame alone
+    where it reads no others."""
     checkpoint_every: int = 10
     """Steps between checkpoints."""
     tensorboard: bool = True
