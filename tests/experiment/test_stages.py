@@ -1,12 +1,12 @@
 """Stage bookkeeping: a finished stage is never run twice; reuse is checked before anything runs."""
 
 import json
-import os
 import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from process_memory import resident_bytes
 
 from gymnast.experiment.stages import Stages, parse_reuse
 
@@ -73,10 +73,6 @@ def test_a_stage_finished_here_cannot_later_be_swapped_for_a_reused_one(tmp_path
         Stages(tmp_path, {"sft": other}).run("sft", dict, tmp_path / "sft")
 
 
-def _resident_bytes() -> int:
-    return int(Path("/proc/self/statm").read_text().split()[1]) * os.sysconf("SC_PAGE_SIZE")
-
-
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="malloc_trim is glibc's")
 def test_what_a_stage_freed_leaves_the_process_when_it_ends(tmp_path):
     pinned = []
@@ -84,10 +80,10 @@ def test_what_a_stage_freed_leaves_the_process_when_it_ends(tmp_path):
     def decode_and_drop() -> dict:
         frames = [np.ones(8000) for _ in range(3000)]  # 192 MB in 64 KB blocks: the heap, not mmap
         pinned.append(np.ones(8000))  # allocated last, it keeps the heap's top in use, as a live model would
-        held.append(_resident_bytes())
+        held.append(resident_bytes())
         del frames
         return {}
 
     held: list[int] = []
     Stages(tmp_path).run("judge", decode_and_drop)
-    assert _resident_bytes() < held[0] - 150e6
+    assert resident_bytes() < held[0] - 150e6

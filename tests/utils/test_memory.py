@@ -3,30 +3,25 @@
 from __future__ import annotations
 
 import gc
-import os
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
+from process_memory import resident_bytes
 
 from gymnast.utils.memory import release_freed_memory
-
-
-def _resident_bytes() -> int:
-    return int(Path("/proc/self/statm").read_text().split()[1]) * os.sysconf("SC_PAGE_SIZE")
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="malloc_trim is glibc's")
 def test_freed_heap_pages_leave_the_resident_memory_only_when_released():
     chunks = [np.ones(8000) for _ in range(3000)]  # 192 MB in 64 KB blocks: the heap, not mmap
     pinned = np.ones(8000)  # allocated last, it keeps the heap's top in use, as a live scene would
-    held = _resident_bytes()
+    held = resident_bytes()
     del chunks
-    freed = _resident_bytes()
+    freed = resident_bytes()
     assert freed > held - 50e6  # freed to the heap, still resident
     assert release_freed_memory()
-    assert _resident_bytes() < freed - 150e6
+    assert resident_bytes() < freed - 150e6
     del pinned
 
 
@@ -43,11 +38,11 @@ def test_memory_held_in_reference_cycles_is_released_too():
     try:
         scenes = [_Scene() for _ in range(80)]  # 200 MB
         pinned = np.ones(8000)
-        held = _resident_bytes()
+        held = resident_bytes()
         del scenes  # unreachable, but each scene still refers to itself
-        assert _resident_bytes() > held - 50e6
+        assert resident_bytes() > held - 50e6
         assert release_freed_memory()
-        assert _resident_bytes() < held - 150e6
+        assert resident_bytes() < held - 150e6
         del pinned
     finally:
         gc.enable()
