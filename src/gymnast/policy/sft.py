@@ -32,10 +32,9 @@ from gymnast.policy.flow_vla import FlowVLA, FlowVLAConfig
 from gymnast.policy.observation import shared_architecture
 from gymnast.policy.vla import EmbeddedVLA, VLAConfig
 from gymnast.utils.images import split_views
-from gymnast.utils.checkpoint import resolve_checkpoint, resume_training, save_training, write_run_config
+from gymnast.utils.checkpoint import begin_training, resolve_checkpoint, save_training
 from gymnast.utils.device import resolve_device
 from gymnast.utils.distributed import Parallel, data_parallel
-from gymnast.utils.metrics import MetricsLog
 from gymnast.utils.optim import gradient_step, warmup_cosine
 from gymnast.utils.settings import from_json, saved_settings
 
@@ -249,12 +248,7 @@ def _train(out: Path, config: SFTConfig, model: nn.Module, demos: DemoSet, extra
     schedule = torch.optim.lr_scheduler.LambdaLR(optimizer, warmup_cosine(config.warmup_steps, config.steps))
     sampler = torch.Generator().manual_seed(config.seed)
     resolved = {"sft": dataclasses.asdict(config), "model": model.spec(), **inputs}
-    start = resume_training(out, model, optimizer, schedule, sampler) if resume else 0
-    if resume:
-        logger.info("resumed %s at step %d", out, start)
-    if parallel.is_main:
-        write_run_config(out, resolved)
-    metrics = MetricsLog(out, resume_step=start if resume else None) if parallel.is_main else None
+    start, metrics = begin_training(out, resolved, model, optimizer, schedule, sampler, resume, parallel.is_main)
     model.train()
     bar = tqdm(range(start, config.steps), initial=start, total=config.steps, desc="sft",
                disable=not (progress and parallel.is_main))

@@ -37,9 +37,8 @@ from gymnast.reward.frame_judge import FrameJudge, frame_loss
 from gymnast.reward.progress_judge import ProgressJudge, evaluate_progress, progress_loss, progress_targets
 from gymnast.reward.judge import JudgeConfig, LearnedJudge, judge_loss, judged_frame_indices
 from gymnast.utils.atomic import write_json
-from gymnast.utils.checkpoint import load_model, resume_training, save_training, write_run_config
+from gymnast.utils.checkpoint import begin_training, load_model, save_training, write_run_config
 from gymnast.utils.device import resolve_device
-from gymnast.utils.metrics import MetricsLog
 from gymnast.utils.optim import gradient_step, warmup_cosine
 from gymnast.utils.settings import from_json, saved_settings
 from gymnast.world_model.base import load_world_model, rollout
@@ -337,9 +336,7 @@ def train_judge(data: Path, out: Path, config: JudgeTrainConfig, wm: Path | None
     settings = {**dataclasses.asdict(config), "extra_data": [str(path) for path in config.extra_data],
                 "init": None if config.init is None else str(config.init)}
     resolved = {"train": settings, "model": judge.spec(), "data": str(data), "wm": str(wm) if wm else None}
-    start = resume_training(out, judge, optimizer, schedule, sampler) if resume else 0
-    write_run_config(out, resolved)
-    metrics = MetricsLog(out, resume_step=start if resume else None)
+    start, metrics = begin_training(out, resolved, judge, optimizer, schedule, sampler, resume)
     pool = FramePool(train_videos, config.ambiguous_steps, config.kind == "progress") if config.kind != "video" else None
     per_frame_loss = progress_loss if config.kind == "progress" else frame_loss
     hard_share = config.hard_negatives if config.kind == "frames" else 0.0  # the others have no verdict per frame

@@ -11,6 +11,7 @@ atomically: a crash leaves the previous checkpoint as the newest, never a half-w
 from __future__ import annotations
 
 import json
+import logging
 import os
 import shutil
 import tempfile
@@ -22,6 +23,9 @@ from safetensors.torch import load_file, save_file
 from torch import nn
 
 from gymnast.utils.atomic import write_bytes, write_json
+from gymnast.utils.metrics import MetricsLog
+
+logger = logging.getLogger(__name__)
 
 LAST = "last"
 
@@ -121,6 +125,21 @@ def resume_training(run: Path, model: nn.Module, optimizer: torch.optim.Optimize
     schedule.load_state_dict(trainer["schedule"])
     sampler.set_state(rng["sampler"])
     return trainer["step"]
+
+
+def begin_training(run: Path, resolved: dict, model: nn.Module, optimizer: torch.optim.Optimizer,
+                   schedule: torch.optim.lr_scheduler.LRScheduler, sampler: torch.Generator, resume: bool,
+                   writes: bool = True) -> tuple[int, MetricsLog | None]:
+    """Where a trainer starts: the step to go on from (restored from the run's last checkpoint on
+    `resume`, else 0) and, on the process that `writes` the run, its metrics log, with the resolved
+    settings saved at the run's root. The other processes of a distributed run get no log."""
+    start = resume_training(run, model, optimizer, schedule, sampler) if resume else 0
+    if resume:
+        logger.info("resumed %s at step %d", run, start)
+    if not writes:
+        return start, None
+    write_run_config(run, resolved)
+    return start, MetricsLog(run, resume_step=start if resume else None)
 
 
 def load_model(run: Path, build: Callable[[dict], nn.Module]) -> nn.Module:

@@ -37,10 +37,9 @@ from tqdm import tqdm
 from gymnast.data.action_stats import ActionStats
 from gymnast.data.frames import Fit, model_image_size
 from gymnast.data.lerobot import EpisodeDataset, FeatureKeys
-from gymnast.utils.checkpoint import resolve_checkpoint, resume_training, save_training, write_run_config
+from gymnast.utils.checkpoint import begin_training, resolve_checkpoint, save_training
 from gymnast.utils.device import resolve_device, to_device
 from gymnast.utils.distributed import Parallel, data_parallel
-from gymnast.utils.metrics import MetricsLog
 from gymnast.utils.optim import gradient_step, warmup_cosine
 from gymnast.utils.settings import from_json, saved_settings
 from gymnast.world_model.base import WorldModel, grounded_state_dim, imagined_frame_mask, rollout
@@ -234,12 +233,7 @@ def _train(data: Path, out: Path, config: WorldModelTrainConfig, datasets: list[
                 "action_stats": stats.to_dict(), "datasets": counts,
                 "train_episodes": sum(c["train_episodes"] for c in counts),
                 "heldout_episodes": sum(c["heldout_episodes"] for c in counts)}
-    start = resume_training(out, model, optimizer, schedule, sampler) if resume else 0
-    if resume:
-        logger.info("resumed %s at step %d", out, start)
-    if parallel.is_main:
-        write_run_config(out, resolved)
-    metrics = MetricsLog(out, resume_step=start if resume else None) if parallel.is_main else None
+    start, metrics = begin_training(out, resolved, model, optimizer, schedule, sampler, resume, parallel.is_main)
     bar = tqdm(range(start, config.steps), initial=start, total=config.steps, desc="train-wm",
                disable=not (progress and parallel.is_main))
     started = time.perf_counter()

@@ -34,8 +34,7 @@ from gymnast.data.lerobot import EpisodeDataset, FeatureKeys
 from gymnast.data.schema import EXTERNAL
 from gymnast.policy.text import InstructionEncoder
 from gymnast.utils.atomic import write_json
-from gymnast.utils.checkpoint import resolve_checkpoint, resume_training, save_training, write_run_config
-from gymnast.utils.metrics import MetricsLog
+from gymnast.utils.checkpoint import begin_training, resolve_checkpoint, save_training
 from gymnast.utils.optim import gradient_step, warmup_cosine
 from gymnast.world_model.data import split_episodes
 from gymnast.world_model.metrics import pearson
@@ -231,11 +230,10 @@ def train_state_model(data: Path, out: Path, config: StateTrainConfig, resume: b
     optimizer = torch.optim.AdamW(model.parameters(), lr=config.lr, weight_decay=1e-4)
     schedule = torch.optim.lr_scheduler.LambdaLR(optimizer, warmup_cosine(min(200, config.steps // 10), config.steps))
     sampler = torch.Generator().manual_seed(config.seed)
-    write_run_config(out, resolved := {"train": _settings(config), "model": model.spec(), "data": str(data),
-                                       "train_episodes": len(episodes.lengths),
-                                       "heldout_episodes": sum(len(chosen) for _, chosen in heldout_sources)})
-    start = resume_training(out, model, optimizer, schedule, sampler) if resume else 0
-    metrics = MetricsLog(out, resume_step=start if resume else None)
+    resolved = {"train": _settings(config), "model": model.spec(), "data": str(data),
+                "train_episodes": len(episodes.lengths),
+                "heldout_episodes": sum(len(chosen) for _, chosen in heldout_sources)}
+    start, metrics = begin_training(out, resolved, model, optimizer, schedule, sampler, resume)
     checkpoint = None
     for step in tqdm(range(start, config.steps), initial=start, total=config.steps, desc="train-state", disable=not progress):
         model.train()
