@@ -4,11 +4,10 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import shutil
 
 import pytest
 import torch
-from safetensors.torch import load_file
+from resumed_runs import assert_resumed_as_whole, stop_after
 
 from gymnast.data.lerobot import EpisodeDataset
 from gymnast.policy.sft import SFT_PRESETS, SFTConfig, load_demos, random_shift, select_demos, train_sft
@@ -63,20 +62,10 @@ def test_resume_from_a_checkpoint_continues_exactly(family, tiny_dataset, tmp_pa
     config = dataclasses.replace(TINY, policy=family, steps=6, checkpoint_every=3, log_every=1)
     whole = tmp_path / "whole"
     train_sft(tiny_dataset, whole, config, progress=False)
-    # A run that stopped after its step-3 checkpoint: copy what it would have left on disk.
     interrupted = tmp_path / "interrupted"
-    (interrupted / "checkpoints").mkdir(parents=True)
-    shutil.copytree(whole / "checkpoints" / "000003", interrupted / "checkpoints" / "000003")
-    (interrupted / "checkpoints" / "last").write_text("000003")
-    rows = [json.loads(line) for line in (whole / "metrics.jsonl").read_text().splitlines()]
-    (interrupted / "metrics.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows[:4]))  # one line too many
+    stop_after(whole, interrupted, step=3, metric_lines=4)
     train_sft(tiny_dataset, interrupted, config, resume=True, progress=False)
-    final_whole = load_file(whole / "checkpoints" / "000006" / "model.safetensors")
-    final_resumed = load_file(interrupted / "checkpoints" / "000006" / "model.safetensors")
-    for name, tensor in final_whole.items():
-        torch.testing.assert_close(final_resumed[name], tensor, rtol=0, atol=0, msg=name)
-    strip = lambda rs: [{k: v for k, v in r.items() if not k.startswith("time/")} for r in rs]  # noqa: E731
-    assert strip(read_metrics(interrupted)) == strip(rows)
+    assert_resumed_as_whole(whole, interrupted, final_step=6)
 
 
 def test_presets_are_valid_configs():

@@ -2,11 +2,10 @@
 
 import dataclasses
 import json
-import shutil
 
 import pytest
 import torch
-from safetensors.torch import load_file
+from resumed_runs import assert_resumed_as_whole, stop_after
 
 from gymnast.cli import main
 from gymnast.utils.checkpoint import save_checkpoint
@@ -123,18 +122,9 @@ def test_training_lowers_both_losses(tiny_dataset, tmp_path):
 def test_resume_from_a_checkpoint_continues_exactly(tiny_dataset, tmp_path):
     whole, interrupted = tmp_path / "whole", tmp_path / "interrupted"
     train_world_model(tiny_dataset, whole, DEBUG, progress=False)
-    (interrupted / "checkpoints").mkdir(parents=True)
-    shutil.copytree(whole / "checkpoints" / "000002", interrupted / "checkpoints" / "000002")
-    (interrupted / "checkpoints" / "last").write_text("000002")
-    rows = read_metrics(whole)
-    (interrupted / "metrics.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows[:2]))
+    stop_after(whole, interrupted, step=2, metric_lines=2)
     train_world_model(tiny_dataset, interrupted, DEBUG, resume=True, progress=False)
-    a = load_file(whole / "checkpoints" / "000004" / "model.safetensors")
-    b = load_file(interrupted / "checkpoints" / "000004" / "model.safetensors")
-    for name, tensor in a.items():
-        torch.testing.assert_close(b[name], tensor, rtol=0, atol=0, msg=name)
-    untimed = lambda rs: [{k: v for k, v in r.items() if not k.startswith("time/")} for r in rs]  # noqa: E731
-    assert untimed(read_metrics(interrupted)) == untimed(rows)
+    assert_resumed_as_whole(whole, interrupted, final_step=4)
 
 
 def test_cli_train_wm_flow_then_eval_wm(tiny_dataset, tmp_path, capsys):
