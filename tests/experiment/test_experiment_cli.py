@@ -8,6 +8,7 @@ import shutil
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from gymnast.cli import main
@@ -263,7 +264,7 @@ def test_a_rerun_skips_every_finished_stage_and_prints_the_table(experiment: Pat
 
 def test_an_experiment_from_before_an_arm_existed_trains_only_that_arm(experiment: Path, tmp_path: Path):
     older = tmp_path / "older"
-    shutil.copytree(experiment, older)
+    copy_without_judge_rollouts(experiment, older)  # Dyna's refit of the judge reads them: recorded again
     for stage in ("arm_dyna", "eval_dyna"):  # as if Dyna had not been an arm yet
         (older / "stages" / f"{stage}.json").unlink()
     shutil.rmtree(older / "arms" / "dyna")
@@ -277,6 +278,17 @@ def test_an_experiment_from_before_an_arm_existed_trains_only_that_arm(experimen
     assert set(now) - set(records) == {"arm_dyna.json", "eval_dyna.json"}
     assert {name: now[name] for name in records} == records
     assert "dyna" in json.loads((older / "summary.json").read_text())["arms"]
+    first, again = (EpisodeDataset(run / "judge_rollouts").load(0) for run in (experiment, older))
+    assert again.info.seed == first.info.seed == 300_000
+    assert np.array_equal(again.actions, first.actions) and np.array_equal(again.env_states, first.env_states)
+
+
+def test_a_finished_experiment_copied_without_its_judge_rollouts_does_not_record_them(experiment: Path,
+                                                                                       tmp_path: Path):
+    copy = tmp_path / "copy"
+    copy_without_judge_rollouts(experiment, copy)
+    main(["experiment", "--out", str(copy), "--resume"])
+    assert not (copy / "judge_rollouts").exists()  # no stage left to run reads them
 
 
 def test_resume_continues_with_the_saved_settings_whatever_the_preset(experiment: Path, capsys):
@@ -309,3 +321,13 @@ def test_a_sentences_file_missing_a_task_is_refused_before_anything_runs(tmp_pat
         main(["experiment", "--preset", "demo", "--out", str(tmp_path / "exp"), "--sentences", str(sentences)])
     assert f"{sentences} has no sentence for" in capsys.readouterr().err
     assert not (tmp_path / "exp").exists()
+
+
+def copy_without_judge_rollouts(experiment: Path, copy: Path) -> None:
+    """`experiment` copied as a run is shared without its datasets, its judge reading the copy's
+    rollouts (as a run started with a relative --out does wherever it is copied to)."""
+    shutil.copytree(experiment, copy, ignore=lambda folder, names: ["judge_rollouts"] if Path(folder) == experiment else [])
+    config = copy / "judge" / "config.json"
+    settings = json.loads(config.read_text())
+    settings["train"]["extra_data"] = [str(copy / "judge_rollouts")]
+    config.write_text(json.dumps(settings))

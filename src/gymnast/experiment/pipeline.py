@@ -6,7 +6,8 @@ Stages, in order, each done once (`gymnast.experiment.stages`; a rerun skips fin
 2. ``sft``: the SFT policy every arm starts from.
 3. ``world_model``, ``judge``, ``state_model``, ``world_model_eval``: the world model, the learned
    judge (trained on real and re-imagined episodes, and with ``judge_rollouts`` on the SFT
-   policy's own real rollouts, recorded first in ``judge_rollouts/``), the grounded state model
+   policy's own real rollouts, recorded first in ``judge_rollouts/``, and again if they are gone when
+   a later stage refits the judge), the grounded state model
    whose reward head rewards one arm, and the world model's fidelity on held-out episodes.
    ``imagination``: the SFT policy's judged imagined rollouts against the same actions replayed
    in the real world (`gymnast.experiment.imagination`); ``signal``: whether GRPO's update in
@@ -24,6 +25,7 @@ Stages, in order, each done once (`gymnast.experiment.stages`; a rerun skips fin
 from __future__ import annotations
 
 import dataclasses
+import logging
 from pathlib import Path
 
 from gymnast.config import EnvConfig
@@ -38,6 +40,8 @@ from gymnast.rl.evaluate import shared_evaluations
 from gymnast.utils.atomic import write_json
 from gymnast.utils.device import resolve_device
 from gymnast.utils.settings import from_json, saved_settings
+
+logger = logging.getLogger(__name__)
 
 
 def run_experiment(config: ExperimentConfig, out: Path, reuse: dict[str, Path] | None = None,
@@ -122,10 +126,25 @@ def _models(stages: Stages, config: ExperimentConfig, out: Path, progress: bool
         return {"metrics": {k: v for k, v in report.items() if k.startswith(("real", "imagined"))}, "rollouts": rollouts}
 
     stages.run("judge", judge_stage, out / "judge")
+    _restore_judge_rollouts(stages, config, out / "judge_rollouts", progress)
     stages.run("state_model", lambda: _trained(train_state_model, data, out / "state_model", config.state_model,
                                                progress), out / "state_model")
     stages.run("world_model_eval", lambda: _world_model_fidelity(wm, data, out, progress, config.device), out / "world_model_eval.json")
     return data, stages.path("sft"), wm, stages.path("judge"), stages.path("state_model")
+
+
+def _restore_judge_rollouts(stages: Stages, config: ExperimentConfig, recorded: Path, progress: bool) -> None:
+    """Records the judge's real rollouts again when the judge stage recorded them, they are gone
+    (a run copied without its datasets) and a stage still to run refits the judge on its data
+    (Dyna's rounds, the equal budgets' imagined arm): the same scenes, seeds and settings."""
+    refits = (config.dyna.rounds > 1 and not stages.done("arm_dyna")) or \
+        (config.equal_budget.rollouts_per_task > 0 and not stages.done("equal_budget_imagined"))
+    record = stages.record("judge")
+    if not (refits and record.get("rollouts")) or record["reused"] or (recorded / "meta" / "info.json").is_file():
+        return
+    logger.warning("%s is missing: recording the judge's real rollouts again (%d a task), as refitting the judge "
+                   "reads them", recorded, config.judge_rollouts)
+    _judge_rollouts(stages.path("sft"), config, recorded, progress)
 
 
 def _check_freeze(sft: Path, freeze: tuple[str, ...]) -> None:
