@@ -30,6 +30,7 @@ from pathlib import Path
 
 from gymnast.config import EnvConfig
 from gymnast.data.lerobot import EpisodeDataset
+from gymnast.data.lerobot_v3 import INFO_PATH
 from gymnast.envs.parallel import kept_workers
 from gymnast.envs.sim_vector import shared_simulator_processes
 from gymnast.experiment.arms import ARMS, PERTURBATIONS, ROBUSTNESS_ARMS, arm, dyna_setup, rl_setup
@@ -140,7 +141,7 @@ def _restore_judge_rollouts(stages: Stages, config: ExperimentConfig, recorded: 
     refits = (config.dyna.rounds > 1 and not stages.done("arm_dyna")) or \
         (config.equal_budget.rollouts_per_task > 0 and not stages.done("equal_budget_imagined"))
     record = stages.record("judge")
-    if not (refits and record.get("rollouts")) or record["reused"] or (recorded / "meta" / "info.json").is_file():
+    if not (refits and record.get("rollouts")) or record["reused"] or (recorded / INFO_PATH).is_file():
         return
     logger.warning("%s is missing: recording the judge's real rollouts again (%d a task), as refitting the judge "
                    "reads them", recorded, config.judge_rollouts)
