@@ -264,7 +264,7 @@ def test_a_rerun_skips_every_finished_stage_and_prints_the_table(experiment: Pat
 
 def test_an_experiment_from_before_an_arm_existed_trains_only_that_arm(experiment: Path, tmp_path: Path):
     older = tmp_path / "older"
-    copy_without_judge_rollouts(experiment, older)  # Dyna's refit of the judge reads them: recorded again
+    copy_experiment(experiment, older, judge_rollouts=False)  # Dyna's refit of the judge reads them: recorded again
     for stage in ("arm_dyna", "eval_dyna"):  # as if Dyna had not been an arm yet
         (older / "stages" / f"{stage}.json").unlink()
     shutil.rmtree(older / "arms" / "dyna")
@@ -286,9 +286,24 @@ def test_an_experiment_from_before_an_arm_existed_trains_only_that_arm(experimen
 def test_a_finished_experiment_copied_without_its_judge_rollouts_does_not_record_them(experiment: Path,
                                                                                        tmp_path: Path):
     copy = tmp_path / "copy"
-    copy_without_judge_rollouts(experiment, copy)
+    copy_experiment(experiment, copy, judge_rollouts=False)
     main(["experiment", "--out", str(copy), "--resume"])
     assert not (copy / "judge_rollouts").exists()  # no stage left to run reads them
+
+
+def test_judge_rollouts_recorded_in_part_are_finished_before_dyna_refits_the_judge(experiment: Path, tmp_path: Path):
+    partial = tmp_path / "partial"
+    copy_experiment(experiment, partial, judge_rollouts=True)
+    for stage in ("arm_dyna", "eval_dyna"):  # Dyna still to run: it refits the judge on them
+        (partial / "stages" / f"{stage}.json").unlink()
+    shutil.rmtree(partial / "arms" / "dyna")
+    settings = json.loads((partial / "config.json").read_text())
+    settings["judge_rollouts"] = 2  # the recording holds one of the two it plans, as if it had been interrupted
+    (partial / "config.json").write_text(json.dumps(settings))
+    main(["experiment", "--out", str(partial), "--resume"])
+    recorded = EpisodeDataset(partial / "judge_rollouts", cameras=("front", "gripper"))
+    assert sorted(info.seed for info in recorded.episodes) == [300_000, 300_001]
+    assert np.array_equal(recorded.load(0).actions, EpisodeDataset(experiment / "judge_rollouts").load(0).actions)
 
 
 def test_resume_continues_with_the_saved_settings_whatever_the_preset(experiment: Path, capsys):
@@ -323,10 +338,11 @@ def test_a_sentences_file_missing_a_task_is_refused_before_anything_runs(tmp_pat
     assert not (tmp_path / "exp").exists()
 
 
-def copy_without_judge_rollouts(experiment: Path, copy: Path) -> None:
-    """`experiment` copied as a run is shared without its datasets, its judge reading the copy's
-    rollouts (as a run started with a relative --out does wherever it is copied to)."""
-    shutil.copytree(experiment, copy, ignore=lambda folder, names: ["judge_rollouts"] if Path(folder) == experiment else [])
+def copy_experiment(experiment: Path, copy: Path, judge_rollouts: bool) -> None:
+    """`experiment` copied, with or without the judge's real rollouts, its judge reading the copy's
+    (as a run started with a relative --out does wherever it is copied to)."""
+    left_out = [] if judge_rollouts else ["judge_rollouts"]
+    shutil.copytree(experiment, copy, ignore=lambda folder, names: left_out if Path(folder) == experiment else [])
     config = copy / "judge" / "config.json"
     settings = json.loads(config.read_text())
     settings["train"]["extra_data"] = [str(copy / "judge_rollouts")]

@@ -135,16 +135,18 @@ def _models(stages: Stages, config: ExperimentConfig, out: Path, progress: bool
 
 
 def _restore_judge_rollouts(stages: Stages, config: ExperimentConfig, recorded: Path, progress: bool) -> None:
-    """Records the judge's real rollouts again when the judge stage recorded them, they are gone
-    (a run copied without its datasets) and a stage still to run refits the judge on its data
-    (Dyna's rounds, the equal budgets' imagined arm): the same scenes, seeds and settings."""
+    """Makes the judge's real rollouts whole again when the judge stage recorded them and a stage
+    still to run refits the judge on its data (Dyna's rounds, the equal budgets' imagined arm):
+    recorded again when gone (a run copied without its datasets), finished when a recording again
+    was interrupted; the same scenes, seeds and settings. The recording skips the episodes there."""
     refits = (config.dyna.rounds > 1 and not stages.done("arm_dyna")) or \
         (config.equal_budget.rollouts_per_task > 0 and not stages.done("equal_budget_imagined"))
     record = stages.record("judge")
-    if not (refits and record.get("rollouts")) or record["reused"] or (recorded / INFO_PATH).is_file():
+    if not (refits and record.get("rollouts")) or record["reused"]:
         return
-    logger.warning("%s is missing: recording the judge's real rollouts again (%d a task), as refitting the judge "
-                   "reads them", recorded, config.judge_rollouts)
+    if not (recorded / INFO_PATH).is_file():
+        logger.warning("%s is missing: recording the judge's real rollouts again (%d a task), as refitting the judge "
+                       "reads them", recorded, config.judge_rollouts)
     _judge_rollouts(stages.path("sft"), config, recorded, progress)
 
 
