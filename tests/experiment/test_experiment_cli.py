@@ -306,6 +306,21 @@ def test_judge_rollouts_recorded_in_part_are_finished_before_dyna_refits_the_jud
     assert np.array_equal(recorded.load(0).actions, EpisodeDataset(experiment / "judge_rollouts").load(0).actions)
 
 
+def test_the_equal_budgets_rollouts_are_recorded_again_when_an_arm_still_to_run_reads_them(experiment: Path,
+                                                                                            tmp_path: Path):
+    copy = tmp_path / "copy"
+    shutil.copytree(experiment, copy, ignore=lambda folder, names: ["rollouts"] if Path(folder).name == "equal_budget"
+                    else [])
+    for stage in ("equal_budget_iter_sft", "eval_equal_budget_iter_sft"):  # Iter-SFT fine-tunes on their successes
+        (copy / "stages" / f"{stage}.json").unlink()
+    shutil.rmtree(copy / "equal_budget" / "iter_sft")
+    main(["experiment", "--out", str(copy), "--resume"])
+    first, again = (EpisodeDataset(run / "equal_budget" / "rollouts") for run in (experiment, copy))
+    assert [info.seed for info in again.episodes] == [info.seed for info in first.episodes]
+    assert all(np.array_equal(again.load(i).actions, first.load(i).actions) for i in range(len(first)))
+    assert (copy / "stages" / "equal_budget_iter_sft.json").is_file()
+
+
 def test_resume_continues_with_the_saved_settings_whatever_the_preset(experiment: Path, capsys):
     main(["experiment", "--out", str(experiment), "--resume"])
     assert "WorldGym Pearson r" in capsys.readouterr().out

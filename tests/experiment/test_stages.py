@@ -72,6 +72,31 @@ def test_a_stage_finished_here_cannot_later_be_swapped_for_a_reused_one(tmp_path
         Stages(tmp_path, {"sft": other}).run("sft", dict, tmp_path / "sft")
 
 
+def test_a_recording_is_made_whole_only_while_a_stage_still_to_run_reads_it(tmp_path, caplog):
+    dataset, calls = tmp_path / "rollouts", []
+
+    def restore(stages: Stages, readers=("refit",)) -> None:
+        stages.restore_dataset("judge", dataset, lambda: calls.append(stages.out.name), readers, "the rollouts")
+
+    restore(Stages(tmp_path / "new"))  # not recorded yet: the stage itself will
+    here = Stages(tmp_path / "here")
+    here.run("judge", dict, dataset)  # the stage that recorded them
+    restore(here)  # gone (a copy without its datasets): recorded again, with a warning
+    assert calls == ["here"] and "the rollouts again" in caplog.text
+    (dataset / "meta").mkdir(parents=True)
+    (dataset / "meta" / "info.json").write_text("{}")
+    caplog.clear()
+    restore(here)  # there, perhaps cut short: the recording finishes it (it skips what is there), quietly
+    assert calls == ["here", "here"] and "again" not in caplog.text
+    here.run("refit", dict)
+    restore(here)  # every reader done
+    restore(here, readers=())
+    elsewhere = Stages(tmp_path / "reusing", {"judge": tmp_path})
+    elsewhere.run("judge", pytest.fail)
+    restore(elsewhere)  # another run's recording is not this one's to make
+    assert calls == ["here", "here"]
+
+
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="malloc_trim is glibc's")
 def test_what_a_stage_freed_leaves_the_process_when_it_ends(tmp_path):
     pinned = []

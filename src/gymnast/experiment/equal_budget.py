@@ -14,7 +14,9 @@ comparison: 128 real rollouts; world-model practice 47.1%, GRPO on the same roll
   half of every batch from the demonstrations (Iter-SFT on real, not judged, successes).
 
 Every real interaction that trains is counted: the real-world GRPO run's own, and the recorded
-rollouts' actions for the other two. Evaluations measure and are counted apart.
+rollouts' actions for the other two. Evaluations measure and are counted apart. The recorded
+rollouts are recorded again (the same seeds) when a run copied without them resumes before its
+last arm has read them.
 """
 
 from __future__ import annotations
@@ -67,6 +69,8 @@ def train_equal_budget(stages: Stages, config: ExperimentConfig, out: Path, sft:
     """
     budget = budget_for(config.equal_budget, config)
     rollouts = out / "rollouts"
+    stages.restore_dataset("equal_budget_rollouts", rollouts, lambda: _record(sft, config, rollouts, progress),
+                           ["equal_budget_imagined", "equal_budget_iter_sft"], "the equal budget's real rollouts")
     stages.run("equal_budget_rollouts", lambda: _record(sft, config, rollouts, progress), rollouts)
     recorded = stages.record("equal_budget_rollouts")["real_interactions"]
     arms = {"real_grpo": out / "real_grpo", "imagined": out / "imagined" / "rl", "iter_sft": out / "iter_sft"}

@@ -6,8 +6,8 @@ Stages, in order, each done once (`gymnast.experiment.stages`; a rerun skips fin
 2. ``sft``: the SFT policy every arm starts from.
 3. ``world_model``, ``judge``, ``state_model``, ``world_model_eval``: the world model, the learned
    judge (trained on real and re-imagined episodes, and with ``judge_rollouts`` on the SFT
-   policy's own real rollouts, recorded first in ``judge_rollouts/``, and again if they are gone when
-   a later stage refits the judge), the grounded state model
+   policy's own real rollouts, recorded first in ``judge_rollouts/``, and recorded again, or finished,
+   if they are gone or cut short when a later stage refits the judge), the grounded state model
    whose reward head rewards one arm, and the world model's fidelity on held-out episodes.
    ``imagination``: the SFT policy's judged imagined rollouts against the same actions replayed
    in the real world (`gymnast.experiment.imagination`); ``signal``: whether GRPO's update in
@@ -25,12 +25,10 @@ Stages, in order, each done once (`gymnast.experiment.stages`; a rerun skips fin
 from __future__ import annotations
 
 import dataclasses
-import logging
 from pathlib import Path
 
 from gymnast.config import EnvConfig
 from gymnast.data.lerobot import EpisodeDataset
-from gymnast.data.lerobot_v3 import INFO_PATH
 from gymnast.envs.parallel import kept_workers
 from gymnast.envs.sim_vector import shared_simulator_processes
 from gymnast.experiment.arms import ARMS, PERTURBATIONS, ROBUSTNESS_ARMS, arm, dyna_setup, rl_setup
@@ -41,9 +39,6 @@ from gymnast.rl.evaluate import shared_evaluations
 from gymnast.utils.atomic import write_json
 from gymnast.utils.device import resolve_device
 from gymnast.utils.settings import from_json, saved_settings
-
-logger = logging.getLogger(__name__)
-
 
 def run_experiment(config: ExperimentConfig, out: Path, reuse: dict[str, Path] | None = None,
                    progress: bool = True) -> dict:
@@ -135,19 +130,13 @@ def _models(stages: Stages, config: ExperimentConfig, out: Path, progress: bool
 
 
 def _restore_judge_rollouts(stages: Stages, config: ExperimentConfig, recorded: Path, progress: bool) -> None:
-    """Makes the judge's real rollouts whole again when the judge stage recorded them and a stage
-    still to run refits the judge on its data (Dyna's rounds, the equal budgets' imagined arm):
-    recorded again when gone (a run copied without its datasets), finished when a recording again
-    was interrupted; the same scenes, seeds and settings. The recording skips the episodes there."""
-    refits = (config.dyna.rounds > 1 and not stages.done("arm_dyna")) or \
-        (config.equal_budget.rollouts_per_task > 0 and not stages.done("equal_budget_imagined"))
-    record = stages.record("judge")
-    if not (refits and record.get("rollouts")) or record["reused"]:
-        return
-    if not (recorded / INFO_PATH).is_file():
-        logger.warning("%s is missing: recording the judge's real rollouts again (%d a task), as refitting the judge "
-                       "reads them", recorded, config.judge_rollouts)
-    _judge_rollouts(stages.path("sft"), config, recorded, progress)
+    """The judge's real rollouts made whole (`Stages.restore_dataset`) when the judge stage recorded
+    them and a stage still to run refits the judge on them (Dyna's rounds, the equal budgets' imagined arm)."""
+    refitting = (["arm_dyna"] if config.dyna.rounds > 1 else []) + \
+        (["equal_budget_imagined"] if config.equal_budget.rollouts_per_task > 0 else [])
+    readers = refitting if stages.record("judge").get("rollouts") else []  # none recorded: nothing to restore
+    stages.restore_dataset("judge", recorded, lambda: _judge_rollouts(stages.path("sft"), config, recorded, progress),
+                           readers, "the judge's real rollouts")
 
 
 def _check_freeze(sft: Path, freeze: tuple[str, ...]) -> None:

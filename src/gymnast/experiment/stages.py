@@ -16,9 +16,10 @@ from __future__ import annotations
 import json
 import logging
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
+from gymnast.data.lerobot_v3 import INFO_PATH
 from gymnast.utils.atomic import write_json
 from gymnast.utils.memory import release_freed_memory
 
@@ -85,6 +86,18 @@ class Stages:
             release_freed_memory()
         write_json(self.record_path(name), record)
         return record
+
+    def restore_dataset(self, name: str, dataset: Path, record: Callable[[], object], readers: Sequence[str],
+                        what: str) -> None:
+        """Makes whole the real rollouts that stage `name` recorded here into `dataset` when a stage
+        still to run among `readers` reads them: `record()` again (the same scenes, seeds and
+        settings; it skips the episodes already there) records them anew in a run copied without
+        its datasets and finishes a recording that was interrupted. `what` names them in the log."""
+        if not self.done(name) or self.record(name)["reused"] or all(self.done(reader) for reader in readers):
+            return
+        if not (dataset / INFO_PATH).is_file():
+            logger.warning("%s is missing: recording %s again, as a stage still to run reads them", dataset, what)
+        record()
 
     def path(self, name: str) -> Path:
         """Where a finished (or reused) stage's output lives."""
