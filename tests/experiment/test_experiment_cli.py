@@ -309,8 +309,7 @@ def test_judge_rollouts_recorded_in_part_are_finished_before_dyna_refits_the_jud
 def test_the_equal_budgets_rollouts_are_recorded_again_when_an_arm_still_to_run_reads_them(experiment: Path,
                                                                                             tmp_path: Path):
     copy = tmp_path / "copy"
-    shutil.copytree(experiment, copy, ignore=lambda folder, names: ["rollouts"] if Path(folder).name == "equal_budget"
-                    else [])
+    copy_experiment(experiment, copy, judge_rollouts=True, left_out=("equal_budget/rollouts",))
     for stage in ("equal_budget_iter_sft", "eval_equal_budget_iter_sft"):  # Iter-SFT fine-tunes on their successes
         (copy / "stages" / f"{stage}.json").unlink()
     shutil.rmtree(copy / "equal_budget" / "iter_sft")
@@ -353,11 +352,16 @@ def test_a_sentences_file_missing_a_task_is_refused_before_anything_runs(tmp_pat
     assert not (tmp_path / "exp").exists()
 
 
-def copy_experiment(experiment: Path, copy: Path, judge_rollouts: bool) -> None:
-    """`experiment` copied, with or without the judge's real rollouts, its judge reading the copy's
-    (as a run started with a relative --out does wherever it is copied to)."""
-    left_out = [] if judge_rollouts else ["judge_rollouts"]
-    shutil.copytree(experiment, copy, ignore=lambda folder, names: left_out if Path(folder) == experiment else [])
+def copy_experiment(experiment: Path, copy: Path, judge_rollouts: bool, left_out: tuple[str, ...] = ()) -> None:
+    """`experiment` copied, with or without the judge's real rollouts and without the folders
+    `left_out` (relative to it), its judge reading the copy's rollouts (as a run started with a
+    relative --out does wherever it is copied to)."""
+    left_out = {*left_out, *([] if judge_rollouts else ["judge_rollouts"])}
+
+    def ignore(folder: str, names: list[str]) -> list[str]:
+        return [name for name in names if (Path(folder) / name).relative_to(experiment).as_posix() in left_out]
+
+    shutil.copytree(experiment, copy, ignore=ignore)
     config = copy / "judge" / "config.json"
     settings = json.loads(config.read_text())
     settings["train"]["extra_data"] = [str(copy / "judge_rollouts")]

@@ -22,6 +22,7 @@ last arm has read them.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import logging
 from dataclasses import dataclass
 from pathlib import Path
@@ -69,9 +70,10 @@ def train_equal_budget(stages: Stages, config: ExperimentConfig, out: Path, sft:
     """
     budget = budget_for(config.equal_budget, config)
     rollouts = out / "rollouts"
-    stages.restore_dataset("equal_budget_rollouts", rollouts, lambda: _record(sft, config, rollouts, progress),
-                           ["equal_budget_imagined", "equal_budget_iter_sft"], "the equal budget's real rollouts")
-    stages.run("equal_budget_rollouts", lambda: _record(sft, config, rollouts, progress), rollouts)
+    record = functools.partial(_record, sft, config, rollouts, progress)
+    stages.restore_dataset("equal_budget_rollouts", rollouts, record, ["equal_budget_imagined", "equal_budget_iter_sft"],
+                           "the equal budget's real rollouts")
+    stages.run("equal_budget_rollouts", record, rollouts)
     recorded = stages.record("equal_budget_rollouts")["real_interactions"]
     arms = {"real_grpo": out / "real_grpo", "imagined": out / "imagined" / "rl", "iter_sft": out / "iter_sft"}
     stages.run("equal_budget_real_grpo", lambda: _real_grpo(config, budget, sft, data, arms["real_grpo"], progress),

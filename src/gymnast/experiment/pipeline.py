@@ -40,6 +40,7 @@ from gymnast.utils.atomic import write_json
 from gymnast.utils.device import resolve_device
 from gymnast.utils.settings import from_json, saved_settings
 
+
 def run_experiment(config: ExperimentConfig, out: Path, reuse: dict[str, Path] | None = None,
                    progress: bool = True) -> dict:
     """Runs (or finishes) the experiment in `out`; returns summary.json's content.
