@@ -69,3 +69,22 @@ def test_imagination_beats_real_grpo_at_an_equal_budget_only_with_its_interval_a
     apart = close | {"imagined": _row(130, 200, 9000)}
     assert experiment_goals(rows, None, 0.5, {}, apart)["imagined_beats_real_grpo_at_equal_budget"] is True
     assert experiment_goals(rows, None, 0.5, {})["imagined_beats_real_grpo_at_equal_budget"] is None  # not run
+
+
+def test_an_unmet_watch_is_set_against_imaginations_false_successes_before_practice():
+    import json
+    from pathlib import Path
+
+    from gymnast.experiment.report import format_table
+
+    summary = json.loads((Path(__file__).resolve().parents[2] / "results" / "headline" / "summary.json").read_text())
+    summary["imagination"] |= {"false_success": 0.62, "episodes": 100}
+    for watched, says in ((0.57, "not from a hack practice learned"), (0.75, "practice added 13.0 points to them")):
+        summary["watch_false_success"] = {"rl_wm_judge": watched}
+        summary["goals"] = experiment_goals(summary["arms"], None, 0.5, summary["watch_false_success"])
+        text = format_table(summary)
+        assert "Before any practice, 62.0% of the SFT policy's imagined successes already failed" in text
+        assert says in text
+    summary["watch_false_success"] = {"rl_wm_judge": 0.05}  # met: nothing stands in the way
+    summary["goals"] = experiment_goals(summary["arms"], None, 0.5, summary["watch_false_success"])
+    assert "Before any practice" not in format_table(summary)

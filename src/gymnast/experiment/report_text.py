@@ -166,8 +166,23 @@ def _watch_verdict(summary: dict) -> list[str]:
         return []
     rows = ", ".join(f"{_short_title(summary, name)} {pct(value)}" for name, value in judged.items())
     held = all(summary["goals"]["watch_false_success_at_most_10pct"][name] for name in judged)
-    return [(f"- Reward-hacking watch at the end of training, judged successes that failed when replayed for real: {rows}. "
-             f"Goal of at most 10%: **{'met' if held else 'not met'}**.")]
+    line = (f"- Reward-hacking watch at the end of training, judged successes that failed when replayed for real: {rows}. "
+            f"Goal of at most 10%: **{'met' if held else 'not met'}**.")
+    return [line + ("" if held else _before_practice(summary, max(judged.values())))]
+
+
+def _before_practice(summary: dict, worst: float) -> str:
+    """What stands in the way of the watch's goal, in numbers: the same share on the SFT policy's own
+    imagined rollouts before any practice (the imagination stage). Where it was as high, the false
+    successes were the world model's and the judge's from the start, not a hack RL learned."""
+    imagination = summary.get("imagination") or {}
+    before = imagination.get("false_success")
+    if before is None:
+        return ""
+    cause = ("they come from the world model and the judge, not from a hack practice learned" if worst <= before else
+             f"practice added {100 * (worst - before):.1f} points to them")
+    return (f" Before any practice, {pct(before)} of the SFT policy's imagined successes already failed when its "
+            f"actions were replayed for real (the imagination stage, {imagination['episodes']} episodes): {cause}.")
 
 
 def goal_in_words(met: bool, ahead: bool) -> str:
