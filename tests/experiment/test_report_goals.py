@@ -3,10 +3,16 @@ leads its evaluation is too small to confirm."""
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
+
 from gymnast.eval.stats import wilson_interval
 from gymnast.experiment.arms import ARM_NAMES
 from gymnast.experiment.goals import experiment_goals
+from gymnast.experiment.report import format_table
 from gymnast.experiment.report_text import goal_in_words
+
+COMMITTED_HEADLINE = Path(__file__).resolve().parents[2] / "results" / "headline" / "summary.json"
 
 
 def _row(successes: int, episodes: int, real_interactions: int = 0) -> dict:
@@ -46,13 +52,8 @@ def test_goals_separated_by_their_intervals_are_met():
 
 
 def test_the_printed_table_says_a_lead_is_not_significant_at_this_size():
-    import json
-    from pathlib import Path
-
-    from gymnast.experiment.report import format_table
-
     # The committed headline's summary, with the demo's case: 45% against 40%, 20 episodes each.
-    summary = json.loads((Path(__file__).resolve().parents[2] / "results" / "headline" / "summary.json").read_text())
+    summary = json.loads(COMMITTED_HEADLINE.read_text())
     summary["arms"] = {name: row | _row(8, 20) for name, row in summary["arms"].items()}
     summary["arms"]["rl_wm_judge"] |= _row(9, 20)
     summary["goals"] = experiment_goals(summary["arms"], None, 0.5, summary["watch_false_success"])
@@ -72,12 +73,7 @@ def test_imagination_beats_real_grpo_at_an_equal_budget_only_with_its_interval_a
 
 
 def test_an_unmet_watch_is_set_against_imaginations_false_successes_before_practice():
-    import json
-    from pathlib import Path
-
-    from gymnast.experiment.report import format_table
-
-    summary = json.loads((Path(__file__).resolve().parents[2] / "results" / "headline" / "summary.json").read_text())
+    summary = json.loads(COMMITTED_HEADLINE.read_text())
     summary["imagination"] |= {"false_success": 0.62, "episodes": 100}
     for watched, says in ((0.57, "not from a hack practice learned"), (0.75, "practice added 13.0 points to them")):
         summary["watch_false_success"] = {"rl_wm_judge": watched}

@@ -287,7 +287,7 @@ def _demo() -> ExperimentConfig:
         tasks="drawer-open-v3,reach-v3",
         collect=CollectConfig(episodes_per_task=8),
         # Two cameras: 250 steps (300) of 32 samples (64), the demo's largest cost on a CPU without
-        # native bfloat16 (a step of 64 took 0.6 s there, SFT 2.6 of its 16.8 min); Iter-SFT's too.
+        # native bfloat16: SFT took 153 s of its 16.8 min there at 64, 88 s of 15.6 at 32; Iter-SFT's too.
         sft=dataclasses.replace(SFT_PRESETS["demo"], demos_per_task=6, steps=250, batch_size=32, checkpoint_every=125),
         # One imagined frame per chunk of the policy's 5 actions (docs/world_model.md): a training
         # step 3.4x and imagination 2.1x cheaper, ranking as well as a frame per action from scratch;
