@@ -2,6 +2,7 @@
 
 import copy
 
+import pytest
 import torch
 from rl_helpers import POLICY
 
@@ -11,7 +12,8 @@ from gymnast.envs.kinds import REAL, SIM
 from gymnast.policy.load import load_policy
 from gymnast.envs.starts import evaluation_starts
 from gymnast.reward.sim import SimSuccess
-from gymnast.rl.evaluate import evaluate_in_env, policy_fingerprint, shared_evaluations, taking_turns, watch_hacking
+from gymnast.rl.evaluate import (evaluate_in_env, evaluation_batch, policy_fingerprint, shared_evaluations, taking_turns,
+                                  watch_hacking)
 from gymnast.rl.rollout import collect_rollouts, dataset_starts
 
 CONFIG = EnvConfig(image_size=96, horizon=60)
@@ -77,6 +79,31 @@ def test_every_env_but_the_training_one_is_closed_between_uses():
         assert envs.train(3) is trained
     finally:
         envs.close()
+
+
+def test_an_evaluation_simulates_its_own_episodes_and_no_padding():
+    policy = load_policy(POLICY)
+    starts = evaluation_starts(["reach-v3", "drawer-close-v3"], 1, CONFIG)
+    envs = EnvFactory(REAL, policy.chunk_size, CONFIG, "none", workers=1, batch=8)  # a training batch of 8
+    try:
+        figures = evaluate_in_env(envs, REAL, policy, SimSuccess(), starts, prefix="eval/real")
+        # Two episodes in an env of two: none of the six padding rollouts a batch of 8 would step.
+        assert [env.num_envs for env in envs._envs.values()] == [2]
+        assert figures["eval/real_episodes"] == 2
+    finally:
+        envs.close()
+
+
+@pytest.mark.parametrize(("episodes", "batch", "size"), [(2, 8, 2), (64, 64, 64), (50, 64, 50), (100, 64, 50),
+                                                         (129, 64, 43), (1, 1, 1)])
+def test_evaluation_batches_are_the_fewest_of_equal_size(episodes, batch, size):
+    assert evaluation_batch(episodes, batch) == size
+    assert size * -(-episodes // size) - episodes < -(-episodes // batch)  # padding: under one rollout a batch
+
+
+def test_an_evaluation_without_episodes_is_refused():
+    with pytest.raises(ValueError, match="at least one"):
+        evaluation_batch(0, 8)
 
 
 def test_evaluation_batches_take_turns_over_the_tasks_as_training_batches_do():

@@ -33,8 +33,8 @@ class EnvFactory:
         world_model: what the imagined env imagines with.
         stop_above: the imagined env stops a rollout before its first frame whose ensemble
             disagreement exceeds this (`BatchedImaginedEnv`); None never stops.
-        batch: rollouts per evaluation batch (`gymnast.rl.evaluate.evaluate_in_env`) until `train`
-            sets it to the training batch. One runs a single episode at a time, in this process.
+        batch: the most rollouts per evaluation batch (`gymnast.rl.evaluate.evaluate_in_env`) until
+            `train` sets it to the training batch. One runs a single episode at a time, in this process.
         robot_state: the imagined env's robot state beside its frames (`BatchedImaginedEnv`), for
             a policy that reads one; None imagines none.
     """
@@ -48,8 +48,8 @@ class EnvFactory:
         self._training: tuple[str, int] | None = None  # the key of `train`'s env
 
     def train(self, num_envs: int) -> VectorEnv:
-        """The run's own env with `num_envs` rollouts (evaluations then run in batches of that size);
-        every other env is closed first (`close_others`)."""
+        """The run's own env with `num_envs` rollouts (evaluations then run in batches of at most
+        that size); every other env is closed first (`close_others`)."""
         self.batch, self._training = num_envs, (self.kind.name, num_envs)
         self.close_others()
         return self.get(self.kind, num_envs)

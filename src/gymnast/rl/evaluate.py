@@ -23,6 +23,7 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import itertools
+import math
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 
@@ -70,7 +71,7 @@ def evaluate_in_env(envs: EnvFactory, kind: EnvKind, policy, reward: Reward, sta
 def _evaluate_in_env(envs: EnvFactory, kind: EnvKind, policy, reward: Reward, starts: Sequence[Start],
                      progress: bool) -> dict[str, float]:
     """`evaluate_in_env`'s figures, without the prefix."""
-    env = envs.get(kind, envs.batch)
+    env = envs.get(kind, evaluation_batch(len(starts), envs.batch))
     starts = taking_turns(starts)
     outcomes, interactions = [], 0
     bar = tqdm(total=len(starts), desc=f"evaluate {kind}", unit="ep", disable=not progress, leave=False)
@@ -96,6 +97,18 @@ def _evaluate_in_env(envs: EnvFactory, kind: EnvKind, policy, reward: Reward, st
             mine = success[[i for i, start in enumerate(starts) if start.task == task]]
             values[f"success/{task}"] = torch.nanmean(mine).item()
     return values
+
+
+def evaluation_batch(episodes: int, batch: int) -> int:
+    """Rollouts per evaluation batch for `episodes` episodes in batches of at most `batch`: the
+    fewest batches, of equal size. A vector env steps all its rollouts, so the padding of a last,
+    partial batch would be simulated (or imagined) in full and thrown away: two evaluation
+    episodes in a training batch of 8 would run four times as many, 50 in a batch of 64 over a
+    quarter more (`evaluation_batch(50, 64)` is 50, `evaluation_batch(100, 64)` 50)."""
+    if episodes < 1 or batch < 1:
+        raise ValueError(f"an evaluation needs an episode and a batch of at least one, got {episodes} and {batch}")
+    batches = math.ceil(episodes / batch)
+    return math.ceil(episodes / batches)
 
 
 def taking_turns(starts: Sequence[Start]) -> list[Start]:
@@ -124,7 +137,8 @@ class _Remembered:
         if not self.active or kind.imagined or not isinstance(policy, torch.nn.Module):
             return None
         scenes = tuple((s.task, s.seed, s.instruction, s.prefix.tobytes()) for s in starts)
-        return (kind.name, envs.config, envs.gap, envs.chunk_size, envs.batch, scenes, policy_fingerprint(policy))
+        return (kind.name, envs.config, envs.gap, envs.chunk_size, evaluation_batch(len(starts), envs.batch), scenes,
+                policy_fingerprint(policy))
 
 
 _remembered = _Remembered()
