@@ -39,6 +39,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from gymnast.config import EnvConfig
+from gymnast.envs.parallel import kept_workers
 from gymnast.envs.workers import parse_runner
 from gymnast.experiment.stages import Stages
 from gymnast.rl.config import RL_PRESETS, RLConfig
@@ -195,14 +196,17 @@ def run_dyna(config: DynaConfig, inputs: DynaInputs, out: Path, progress: bool =
     write_run_config(out, resolved)
     began = time.perf_counter()
     stages = Stages(out)
-    rounds = [stages.run("round_0_eval", lambda: _evaluate(inputs.policy, config, out / "round_0" / "eval.json"))]
-    policy, wm, reward, recorded = inputs.policy, inputs.wm, inputs.reward_model, []
-    for k in range(1, config.rounds + 1):
-        policy, wm, reward, row = run_round(k, config, inputs, policy, wm, reward, recorded, out, progress)
-        rounds.append(row)
-        logger.info("dyna round %d: real success %.1f%% [%.1f, %.1f]; its rollouts took %d real actions", k,
-                    100 * row["success"], 100 * row["ci_low"], 100 * row["ci_high"],
-                    row.get("rollouts", {}).get("real_interactions", 0))
+    # The rounds' evaluations and recordings share one set of simulator processes instead of
+    # starting one each (seconds of imports every time); each reads a policy run already finished.
+    with kept_workers(config.workers, config.runner):
+        rounds = [stages.run("round_0_eval", lambda: _evaluate(inputs.policy, config, out / "round_0" / "eval.json"))]
+        policy, wm, reward, recorded = inputs.policy, inputs.wm, inputs.reward_model, []
+        for k in range(1, config.rounds + 1):
+            policy, wm, reward, row = run_round(k, config, inputs, policy, wm, reward, recorded, out, progress)
+            rounds.append(row)
+            logger.info("dyna round %d: real success %.1f%% [%.1f, %.1f]; its rollouts took %d real actions", k,
+                        100 * row["success"], 100 * row["ci_low"], 100 * row["ci_high"],
+                        row.get("rollouts", {}).get("real_interactions", 0))
     real_rl = stages.run("real_rl", lambda: run_real_rl(config, inputs, out / "real_rl", progress),
                          out / "real_rl") if config.real_rl else None
     summary = summarise(config, rounds, real_rl)
