@@ -134,6 +134,35 @@ def test_the_writer_refuses_an_episode_without_its_cameras_and_names_them(tmp_pa
         writer.add(make_episode(4, seed=0))
 
 
+def assert_start_of(dataset: EpisodeDataset, i: int) -> None:
+    """`first_frame` and `columns` of episode i are what `load` gives, to the bit."""
+    episode, columns = dataset.load(i), dataset.columns(i)
+    np.testing.assert_array_equal(dataset.first_frame(i), episode.observed_frames[0])
+    for field in ("states", "env_states", "actions", "rewards", "successes", "full_states"):
+        np.testing.assert_array_equal(getattr(columns, field), getattr(episode, field))
+    assert columns.info == episode.info
+
+
+@pytest.mark.parametrize("fit", [None, "resize", "crop"])
+def test_a_first_frame_and_the_columns_are_the_loaded_episodes_without_decoding_it(tmp_path, fit):
+    root = two_camera_writer_dataset(tmp_path)
+    for cameras in (("front", "gripper"), ("gripper", "front"), ("front",)):
+        dataset = EpisodeDataset(root, cameras=cameras)
+        dataset = dataset.fitted(32, fit) if fit else dataset
+        for i in range(len(dataset)):  # the second episode starts inside the video file: a seek
+            assert_start_of(dataset, i)
+        assert dataset.first_frame(1).shape == (dataset.image_shape[0], len(cameras) * dataset.image_shape[1], 3)
+
+
+@pytest.mark.parametrize("version", ["v2.1", "v3.0"])
+def test_another_robots_first_frames_are_its_loaded_ones(tmp_path, version):
+    root = write_robot_dataset(tmp_path, version=version, episodes=3, steps=5, height=24, width=32,
+                               cameras=("front", "wrist"), short_video=True)
+    dataset = EpisodeDataset(root, cameras=("wrist", "front"))
+    for i in range(3):
+        assert_start_of(dataset, i)
+
+
 def test_a_view_with_fewer_frames_names_the_camera_the_episode_and_the_file(tmp_path):
     root = two_camera_writer_dataset(tmp_path)
     table = pq.read_table(root / META)
@@ -153,6 +182,9 @@ def test_a_view_of_another_size_names_the_camera_the_episode_and_the_file(tmp_pa
     with pytest.raises(DatasetError, match=r"camera 'gripper' of episode 0 has frames \(7, 32, 32, 3\) .* "
                                            r"camera 'front' has \(7, 48, 48, 3\)"):
         EpisodeDataset(root, cameras=("front", "gripper")).load(0)
+    with pytest.raises(DatasetError, match=r"camera 'gripper' of episode 0 has frames \(1, 32, 32, 3\) .* "
+                                           r"camera 'front' has \(1, 48, 48, 3\)"):
+        EpisodeDataset(root, cameras=("front", "gripper")).first_frame(0)
 
 
 def test_a_missing_view_names_the_camera_the_episode_and_the_file(tmp_path):

@@ -173,6 +173,7 @@ def test_images_stored_in_the_rows_are_read_when_there_is_no_video(tmp_path):
     shutil.rmtree(tmp_path / "videos")
 
     np.testing.assert_array_equal(EpisodeDataset(tmp_path).load(0).frames, frames)  # PNG is lossless
+    np.testing.assert_array_equal(EpisodeDataset(tmp_path).first_frame(0), frames[0])  # from the first row alone
 
 
 

@@ -37,6 +37,7 @@ from gymnast.data.lerobot_format import (
     EpisodeRef,
     FeatureKeys,
     assemble_episode,
+    episode_columns,
     column_vector,
     decode_images,
     episode_info,
@@ -45,7 +46,8 @@ from gymnast.data.lerobot_format import (
     read_parquet,
 )
 from gymnast.data.lerobot_writer import LeRobotWriter
-from gymnast.data.schema import Episode, EpisodeInfo
+from gymnast.data.schema import Episode, EpisodeColumns, EpisodeInfo
+from gymnast.utils.images import tile_views
 from gymnast.utils.video import decode_video
 
 __all__ = ["SUPPORTED_VERSIONS", "DatasetError", "EpisodeDataset", "FeatureKeys", "LeRobotWriter"]
@@ -165,11 +167,7 @@ class EpisodeDataset:
                 type (the message names the file and field), or a camera's frames differ in count
                 or size from the primary's (it names the camera, the episode and the file).
         """
-        if not 0 <= i < len(self._refs):
-            raise IndexError(f"episode {i} is out of range: {self.root} has {len(self._refs)} episodes")
-        ref = self._refs[i]
-        rows = self._rows(ref)
-        refs = {self.camera_key: ref} | {name: view_refs[i] for name, view_refs in self._view_refs.items()}
+        ref, rows, refs = self._episode(i)
         views = {name: _decode_frames(refs[name], rows, key) for name, key in self._camera_features.items()}
         _check_views(views, refs)
         # Matched to the rows per camera (they have one count, so alike), then fitted.
@@ -177,6 +175,41 @@ class EpisodeDataset:
         if self._fit is not None:
             views = {name: fit_frames(frames, *self._fit) for name, frames in views.items()}
         return assemble_episode(ref, rows, views[self.camera_key], views, self.keys)
+
+    def columns(self, i: int) -> EpisodeColumns:
+        """Episode ``i``'s states, actions, rewards, successes and facts, as `load` gives them,
+        without decoding a frame.
+
+        Raises:
+            IndexError, FileNotFoundError, DatasetError: as `load`, for its data file.
+        """
+        ref, rows, _ = self._episode(i)
+        return episode_columns(ref, rows, self.keys)
+
+    def first_frame(self, i: int) -> np.ndarray:
+        """(H, V*W, 3) uint8 episode ``i``'s first frame of every camera read, fitted and side by
+        side as in `load(i).observed_frames[0]`, decoding that frame alone: a start state needs
+        no more, and a long episode's video costs seconds to decode whole.
+
+        Raises:
+            IndexError, FileNotFoundError, DatasetError: as `load` (a camera's first frame of
+                another size than the primary's names the camera, the episode and the file).
+        """
+        _, rows, refs = self._episode(i)
+        views = {name: _decode_first_frame(refs[name], rows, key, self.fps)
+                 for name, key in self._camera_features.items()}
+        _check_views(views, refs)
+        if self._fit is not None:
+            views = {name: fit_frames(frames, *self._fit) for name, frames in views.items()}
+        return tile_views([frames[0] for frames in views.values()])
+
+    def _episode(self, i: int) -> tuple[EpisodeRef, pa.Table, dict[str, EpisodeRef]]:
+        """Episode ``i``'s reference, its data rows and every camera's reference by name."""
+        if not 0 <= i < len(self._refs):
+            raise IndexError(f"episode {i} is out of range: {self.root} has {len(self._refs)} episodes")
+        ref = self._refs[i]
+        refs = {self.camera_key: ref} | {name: view_refs[i] for name, view_refs in self._view_refs.items()}
+        return ref, self._rows(ref), refs
 
     def _camera_refs(self, features: dict, camera: str | None, info_path: Path) -> tuple[str, list[EpisodeRef]]:
         """The camera feature to read and its episodes: the one asked for, or the first with frames.
@@ -264,6 +297,17 @@ def _decode_frames(ref: EpisodeRef, rows: pa.Table, key: str) -> np.ndarray:
         # One frame of tolerance, as LeRobot's timestamp matching has; `match_frames_to_rows`
         # pairs the frames with the rows and warns.
         return decode_video(ref.video_path, *ref.video_span, may_lack=1)
+    except ValueError as e:
+        raise DatasetError(f"episode {ref.index}, field {key!r}: {e}") from e
+
+
+def _decode_first_frame(ref: EpisodeRef, rows: pa.Table, key: str, fps: float) -> np.ndarray:
+    """The (1, H, W, 3) first frame of camera feature `key` in one episode, as stored."""
+    if ref.video_path is None:
+        return decode_images(rows.slice(0, 1), key, ref.data_path)
+    start = ref.video_span[0]
+    try:
+        return decode_video(ref.video_path, start, start + 1 / fps)
     except ValueError as e:
         raise DatasetError(f"episode {ref.index}, field {key!r}: {e}") from e
 

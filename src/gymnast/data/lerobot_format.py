@@ -22,7 +22,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 from PIL import Image
 
-from gymnast.data.schema import EXTERNAL, Episode, EpisodeInfo
+from gymnast.data.schema import EXTERNAL, Episode, EpisodeColumns, EpisodeInfo
 
 logger = logging.getLogger(__name__)
 
@@ -368,12 +368,9 @@ def match_frames_to_rows(frames: np.ndarray, n_rows: int, ref: EpisodeRef) -> np
     return frames
 
 
-def assemble_episode(
-    ref: EpisodeRef, rows: pa.Table, frames: np.ndarray, views: Mapping[str, np.ndarray] | None = None,
-    keys: FeatureKeys = FeatureKeys(),
-) -> Episode:
-    """Build an `Episode` from its L data rows and L frames (and every camera's, `views`, the
-    primary's being `frames`: `Episode.views`); `keys` names the action and state columns.
+def episode_columns(ref: EpisodeRef, rows: pa.Table, keys: FeatureKeys = FeatureKeys()) -> EpisodeColumns:
+    """An episode's vectors and facts from its L data rows (L - 1 steps); `keys` names the action
+    and state columns.
 
     Rows written by gymnast end with one padded action (``action_is_pad``); rows from elsewhere
     pair every frame with an action, and the last action is dropped because the frame it leads
@@ -383,7 +380,6 @@ def assemble_episode(
     path, n_rows = ref.data_path, rows.num_rows
     if n_rows < 2:
         raise DatasetError(f"{path}: episode {ref.index} has {n_rows} rows, at least 2 are needed")
-    frames = match_frames_to_rows(frames, n_rows, ref)
     n_steps, names = n_rows - 1, rows.column_names
     if "action_is_pad" in names:
         pad = column_vector(rows, "action_is_pad", path, bool)
@@ -407,8 +403,19 @@ def assemble_episode(
     flags = column_vector(rows, "next.success", path, bool) if "next.success" in names else None
     # Without success flags the episode is taken to be a demonstration that ends in success.
     successes = flags[:n_steps] if flags is not None else np.arange(n_steps) == n_steps - 1
-    info = episode_info(ref, flags)
+    return EpisodeColumns(states, env_states, actions, rewards, successes, episode_info(ref, flags))
+
+
+def assemble_episode(
+    ref: EpisodeRef, rows: pa.Table, frames: np.ndarray, views: Mapping[str, np.ndarray] | None = None,
+    keys: FeatureKeys = FeatureKeys(),
+) -> Episode:
+    """Build an `Episode` from its L data rows (`episode_columns`) and L frames (and every
+    camera's, `views`, the primary's being `frames`: `Episode.views`)."""
+    columns = episode_columns(ref, rows, keys)
+    frames = match_frames_to_rows(frames, rows.num_rows, ref)
     try:
-        return Episode(frames, states, env_states, actions, rewards, successes, info, dict(views or {}))
+        return Episode(frames, columns.states, columns.env_states, columns.actions, columns.rewards,
+                       columns.successes, columns.info, dict(views or {}))
     except ValueError as e:  # shapes that disagree between fields
-        raise DatasetError(f"{path}: episode {ref.index}: {e}") from e
+        raise DatasetError(f"{ref.data_path}: episode {ref.index}: {e}") from e

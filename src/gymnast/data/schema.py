@@ -107,6 +107,30 @@ class EpisodeInfo:
         return dataclasses.asdict(self)
 
 
+def fullest_states(states: np.ndarray, env_states: np.ndarray) -> np.ndarray:
+    """The environment states where they were recorded (objects and goal too), else the robot's own."""
+    return env_states if env_states.shape[1] else states
+
+
+@dataclass(frozen=True)
+class EpisodeColumns:
+    """An episode's recorded vectors and facts: an `Episode` without its frames, what a dataset
+    gives without decoding a video (`gymnast.data.lerobot.EpisodeDataset.columns`). The fields
+    are `Episode`'s."""
+
+    states: np.ndarray
+    env_states: np.ndarray
+    actions: np.ndarray
+    rewards: np.ndarray
+    successes: np.ndarray
+    info: EpisodeInfo
+
+    @property
+    def full_states(self) -> np.ndarray:
+        """(T+1, S) as `Episode.full_states`."""
+        return fullest_states(self.states, self.env_states)
+
+
 @dataclass(frozen=True)
 class Episode:
     """One recorded episode.
@@ -136,7 +160,7 @@ class Episode:
     def full_states(self) -> np.ndarray:
         """(T+1, S) the fullest state recorded: the environment state where there is one (objects
         and goal too), else the robot's own; what state models and grounded world models read."""
-        return self.env_states if self.env_states.shape[1] else self.states
+        return fullest_states(self.states, self.env_states)
 
     def __post_init__(self) -> None:
         n_steps = len(self.actions)

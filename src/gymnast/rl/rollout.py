@@ -326,12 +326,11 @@ def dataset_starts(data: Path, tasks: Sequence[str] | None = None, image_size: i
     if not best:
         raise ValueError(f"{data} has no successful expert episode of {', '.join(tasks or ['any task'])} to start from")
     starts = []
-    for key in sorted(best):
-        episode = dataset.load(best[key])
-        state = episode.full_states[0]
-        starts.append(Start(episode.info.task, episode.info.seed, episode.info.instruction,
-                            episode.observed_frames[:1].copy(), episode.actions.astype(np.float32),
-                            state=np.asarray(state, np.float32)))
+    for key in sorted(best):  # a first frame is decoded alone, not its episode's video
+        columns = dataset.columns(best[key])
+        starts.append(Start(columns.info.task, columns.info.seed, columns.info.instruction,
+                            dataset.first_frame(best[key])[None], columns.actions.astype(np.float32),
+                            state=np.asarray(columns.full_states[0], np.float32)))
     return starts
 
 
