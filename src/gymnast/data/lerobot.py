@@ -7,6 +7,8 @@
     square = dataset.fitted(96, "crop")      # the same episodes with 96 x 96 frames (gymnast.data.frames)
     both = EpisodeDataset("data/demo", cameras=("front", "gripper"))
     both.load(0).views["gripper"]            # (T+1, H, W, 3) uint8; views["front"] is frames
+    both.first_frame(0)                      # (H, 2W, 3): both views' first frames, decoded alone
+    both.columns(0).actions                  # (T, A): load's vectors and facts, no frame decoded
     theirs = EpisodeDataset("data/x", camera="image", keys=FeatureKeys("actions", "state"))
 
 Datasets made elsewhere have no ``gymnast/...`` episode columns; their `EpisodeInfo` gets the
@@ -37,9 +39,9 @@ from gymnast.data.lerobot_format import (
     EpisodeRef,
     FeatureKeys,
     assemble_episode,
-    episode_columns,
     column_vector,
     decode_images,
+    episode_columns,
     episode_info,
     has_info_columns,
     match_frames_to_rows,
