@@ -133,8 +133,7 @@ class FlowVLA(ObservationConditioned):
     def log_prob(self, obs: torch.Tensor, instructions: Sequence[str], tokens: torch.Tensor,
                  temperature: float = 1.0, states: torch.Tensor | None = None) -> torch.Tensor:
         """(B, N) log-density of each action element's path, summed over the steps; differentiable."""
-        memory = self.observe(obs, instructions, states=states)
-        return self._path_log_prob(memory, self._path(tokens).to(memory.device), temperature)[0]
+        return self.log_prob_and_entropy(obs, instructions, tokens, temperature, states)[0]
 
     def log_prob_and_entropy(self, obs: torch.Tensor, instructions: Sequence[str], tokens: torch.Tensor,
                              temperature: float = 1.0, states: torch.Tensor | None = None

@@ -82,11 +82,6 @@ class LeRobotFlowPolicy(LeRobotPolicy):
         return ActionSample(actions=self.to_actions(executed[:, -1]), tokens=executed.flatten(1).cpu(),
                             logp=self._executed(logp).cpu())
 
-    def log_prob(self, obs: torch.Tensor, instructions: Sequence[str], tokens: torch.Tensor,
-                 temperature: float = 1.0, states: torch.Tensor | None = None) -> torch.Tensor:
-        """(B, N) log-density of each executed element's path, summed over the steps; differentiable."""
-        return self.log_prob_and_entropy(obs, instructions, tokens, temperature, states)[0]
-
     def log_prob_and_entropy(self, obs: torch.Tensor, instructions: Sequence[str], tokens: torch.Tensor,
                              temperature: float = 1.0, states: torch.Tensor | None = None
                              ) -> tuple[torch.Tensor, torch.Tensor]:

@@ -70,11 +70,6 @@ class LeRobotGaussianPolicy(LeRobotPolicy):
         logp = self._log_prob(mean, chunk, temperature)[0]
         return ActionSample(actions=self.to_actions(chunk), tokens=chunk.flatten(1).cpu(), logp=logp.cpu())
 
-    def log_prob(self, obs: torch.Tensor, instructions: Sequence[str], tokens: torch.Tensor,
-                 temperature: float = 1.0, states: torch.Tensor | None = None) -> torch.Tensor:
-        """(B, N) log-density of each sampled action element; differentiable."""
-        return self.log_prob_and_entropy(obs, instructions, tokens, temperature, states)[0]
-
     def log_prob_and_entropy(self, obs: torch.Tensor, instructions: Sequence[str], tokens: torch.Tensor,
                              temperature: float = 1.0, states: torch.Tensor | None = None
                              ) -> tuple[torch.Tensor, torch.Tensor]:

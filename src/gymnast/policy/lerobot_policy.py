@@ -112,6 +112,17 @@ class LeRobotPolicy(nn.Module):
         """(B, K, A) actions -> the record of a greedy rollout, which is never trained on."""
         raise NotImplementedError
 
+    def log_prob_and_entropy(self, obs: torch.Tensor, instructions: Sequence[str], tokens: torch.Tensor,
+                             temperature: float = 1.0, states: torch.Tensor | None = None
+                             ) -> tuple[torch.Tensor, torch.Tensor]:
+        """(B, N) log-density of each sampled action element (differentiable) and its entropy."""
+        raise NotImplementedError
+
+    def log_prob(self, obs: torch.Tensor, instructions: Sequence[str], tokens: torch.Tensor,
+                 temperature: float = 1.0, states: torch.Tensor | None = None) -> torch.Tensor:
+        """(B, N) log-density of each sampled action element; differentiable."""
+        return self.log_prob_and_entropy(obs, instructions, tokens, temperature, states)[0]
+
     # -- inputs and outputs -------------------------------------------------------------------------
 
     def inputs(self, obs: torch.Tensor, instructions: Sequence[str], states: torch.Tensor | None = None,
