@@ -135,9 +135,12 @@ def test_the_writer_refuses_an_episode_without_its_cameras_and_names_them(tmp_pa
 
 
 def assert_start_of(dataset: EpisodeDataset, i: int) -> None:
-    """`first_frame` and `columns` of episode i are what `load` gives, to the bit."""
+    """`first_frame`, `frames` and `columns` of episode i are what `load` gives, to the bit."""
     episode, columns = dataset.load(i), dataset.columns(i)
     np.testing.assert_array_equal(dataset.first_frame(i), episode.observed_frames[0])
+    last = len(episode.observed_frames)
+    for first, stop in ((0, last), (1, 3), (last // 2, last), (last - 1, last)):  # the end: a short video's
+        np.testing.assert_array_equal(dataset.frames(i, first, stop), episode.observed_frames[first:stop])
     for field in ("states", "env_states", "actions", "rewards", "successes", "full_states"):
         np.testing.assert_array_equal(getattr(columns, field), getattr(episode, field))
     assert columns.info == episode.info
@@ -152,6 +155,14 @@ def test_a_first_frame_and_the_columns_are_the_loaded_episodes_without_decoding_
         for i in range(len(dataset)):  # the second episode starts inside the video file: a seek
             assert_start_of(dataset, i)
         assert dataset.first_frame(1).shape == (dataset.image_shape[0], len(cameras) * dataset.image_shape[1], 3)
+
+
+def test_a_range_of_frames_outside_the_episode_is_refused_naming_it(tmp_path):
+    dataset = EpisodeDataset(two_camera_writer_dataset(tmp_path), cameras=("front", "gripper"))
+    frames = len(dataset.load(0).frames)
+    for first, stop in ((0, frames + 1), (-1, 2), (3, 3)):
+        with pytest.raises(IndexError, match=rf"frames \[{first}, {stop}\) are outside episode 0 .* {frames} frames"):
+            dataset.frames(0, first, stop)
 
 
 @pytest.mark.parametrize("version", ["v2.1", "v3.0"])

@@ -84,6 +84,22 @@ def test_every_keyframe_start_has_the_same_context_length_with_the_first_frame_r
     assert all(len(s.reference_actions) <= 6 for s in starts)
 
 
+@pytest.mark.parametrize("sampling", ["uniform", "near_success", "failures"])
+def test_dataset_keyframes_decode_only_their_context_and_equal_starts_made_from_whole_episodes(tiny_dataset, sampling):
+    dataset = EpisodeDataset(tiny_dataset)
+    config = KeyframeConfig(sampling=sampling, per_episode=2, context_frames=3, horizon=5)
+    starts = dataset_keyframes(dataset, range(len(dataset)), config, seed=3)
+    rng, expected = np.random.default_rng(3), []
+    for i in range(len(dataset)):
+        episode = dataset.load(i)
+        expected += [keyframe_start(episode, t, config) for t in keyframe_indices(episode, config, rng)]
+    assert len(starts) == len(expected) > 0
+    for start, whole in zip(starts, expected, strict=True):
+        assert (start.task, start.seed, start.instruction) == (whole.task, whole.seed, whole.instruction)
+        for field in ("frames", "reference_actions", "prefix", "state"):
+            np.testing.assert_array_equal(getattr(start, field), getattr(whole, field))
+
+
 def test_an_unknown_sampling_is_refused_with_the_choices():
     with pytest.raises(ValueError, match="near_success"):
         KeyframeConfig(sampling="middle")

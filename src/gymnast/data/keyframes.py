@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gymnast.data.lerobot import EpisodeDataset
-from gymnast.data.schema import Episode
+from gymnast.data.schema import Episode, EpisodeColumns
 from gymnast.envs.starts import Start
 
 SAMPLINGS = ("first", "uniform", "near_success", "failures")
@@ -58,7 +58,7 @@ class KeyframeConfig:
                 raise ValueError(f"KeyframeConfig.{name} must be at least 1, got {getattr(self, name)}")
 
 
-def keyframe_indices(episode: Episode, config: KeyframeConfig, rng: np.random.Generator) -> list[int]:
+def keyframe_indices(episode: Episode | EpisodeColumns, config: KeyframeConfig, rng: np.random.Generator) -> list[int]:
     """`config.per_episode` keyframe indices t (0 <= t < T) of `episode` by `config.sampling`;
     none for ``failures`` in an episode that succeeded."""
     steps = len(episode.actions)
@@ -76,23 +76,41 @@ def keyframe_indices(episode: Episode, config: KeyframeConfig, rng: np.random.Ge
 def keyframe_start(episode: Episode, t: int, config: KeyframeConfig) -> Start:
     """The start at frame `t` of `episode`: the C frames up to it, its state, the L actions the episode
     took from there (the reference) and the t actions that led there (the prefix)."""
-    if not 0 <= t < len(episode.actions):
-        raise ValueError(f"keyframe {t} is outside episode of {len(episode.actions)} actions "
-                         f"({episode.info.task}, seed {episode.info.seed})")
-    # Frames before the first repeat it (the robot standing still), so every start has C frames.
-    frames = episode.observed_frames[np.clip(np.arange(t - config.context_frames + 1, t + 1), 0, None)]  # (C, H, V*W, 3)
-    state = episode.full_states[t]
-    return Start(episode.info.task, episode.info.seed, episode.info.instruction, frames,
-                 reference_actions=episode.actions[t: t + config.horizon].astype(np.float32),
-                 prefix=episode.actions[:t].astype(np.float32), state=np.asarray(state, np.float32))
+    _check_keyframe(episode, t)
+    return _start_at(episode, episode.observed_frames[context_indices(t, config)], t, config)
 
 
 def dataset_keyframes(dataset: EpisodeDataset, episodes: Sequence[int], config: KeyframeConfig,
                       seed: int = 0) -> list[Start]:
-    """Keyframe starts drawn from the given episodes of `dataset` (reproducibly from `seed`)."""
+    """Keyframe starts drawn from the given episodes of `dataset` (reproducibly from `seed`), as
+    `keyframe_start` makes them from whole episodes, decoding only each start's context frames."""
     rng = np.random.default_rng(seed)
     starts = []
     for i in episodes:
-        episode = dataset.load(i)
-        starts += [keyframe_start(episode, t, config) for t in keyframe_indices(episode, config, rng)]
+        columns = dataset.columns(i)
+        for t in keyframe_indices(columns, config, rng):
+            _check_keyframe(columns, t)
+            indices = context_indices(t, config)
+            context = dataset.frames(i, int(indices[0]), t + 1)[indices - indices[0]]
+            starts.append(_start_at(columns, context, t, config))
     return starts
+
+
+def context_indices(t: int, config: KeyframeConfig) -> np.ndarray:
+    """(C,) the frames a start at keyframe `t` shows: the C up to it, the first frame repeated for
+    those before it (the robot standing still), so every start has C frames."""
+    return np.clip(np.arange(t - config.context_frames + 1, t + 1), 0, None)
+
+
+def _check_keyframe(episode: Episode | EpisodeColumns, t: int) -> None:
+    if not 0 <= t < len(episode.actions):
+        raise ValueError(f"keyframe {t} is outside episode of {len(episode.actions)} actions "
+                         f"({episode.info.task}, seed {episode.info.seed})")
+
+
+def _start_at(episode: Episode | EpisodeColumns, context: np.ndarray, t: int, config: KeyframeConfig) -> Start:
+    """The start at keyframe `t` of an episode whose (C, H, V*W, 3) context frames are given."""
+    return Start(episode.info.task, episode.info.seed, episode.info.instruction, context,
+                 reference_actions=episode.actions[t: t + config.horizon].astype(np.float32),
+                 prefix=episode.actions[:t].astype(np.float32),
+                 state=np.asarray(episode.full_states[t], np.float32))

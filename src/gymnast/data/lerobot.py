@@ -8,6 +8,7 @@
     both = EpisodeDataset("data/demo", cameras=("front", "gripper"))
     both.load(0).views["gripper"]            # (T+1, H, W, 3) uint8; views["front"] is frames
     both.first_frame(0)                      # (H, 2W, 3): both views' first frames, decoded alone
+    both.frames(0, 10, 12)                   # (2, H, 2W, 3): frames 10 and 11, decoded alone
     both.columns(0).actions                  # (T, A): load's vectors and facts, no frame decoded
     theirs = EpisodeDataset("data/x", camera="image", keys=FeatureKeys("actions", "state"))
 
@@ -189,21 +190,32 @@ class EpisodeDataset:
         return episode_columns(ref, rows, self.keys)
 
     def first_frame(self, i: int) -> np.ndarray:
-        """(H, V*W, 3) uint8 episode ``i``'s first frame of every camera read, fitted and side by
-        side as in `load(i).observed_frames[0]`, decoding that frame alone: a start state needs
-        no more, and a long episode's video costs seconds to decode whole.
+        """(H, V*W, 3) uint8 episode ``i``'s first frame of every camera read, as
+        `load(i).observed_frames[0]`, decoding that frame alone: a start state needs no more, and a
+        long episode's video costs seconds to decode whole."""
+        return self.frames(i, 0, 1)[0]
+
+    def frames(self, i: int, first: int, stop: int) -> np.ndarray:
+        """(stop - first, H, V*W, 3) uint8 frames ``first`` to ``stop - 1`` of episode ``i``, every
+        camera read fitted and side by side as in `load(i).observed_frames[first:stop]`, decoding
+        those frames alone (a video from its key frame at or before ``first``): a keyframe start
+        needs a few frames of its episode.
 
         Raises:
-            IndexError, FileNotFoundError, DatasetError: as `load` (a camera's first frame of
-                another size than the primary's names the camera, the episode and the file).
+            IndexError: no episode ``i``, or a range outside its frames.
+            FileNotFoundError, DatasetError: as `load` (a camera's frames of another count or size
+                than the primary's name the camera, the episode and the file).
         """
         _, rows, refs = self._episode(i)
-        views = {name: _decode_first_frame(refs[name], rows, key, self.fps)
+        if not 0 <= first < stop <= rows.num_rows:
+            raise IndexError(f"frames [{first}, {stop}) are outside episode {i} of {self.root}, "
+                             f"which has {rows.num_rows} frames")
+        views = {name: _decode_frame_range(refs[name], rows, key, self.fps, first, stop)
                  for name, key in self._camera_features.items()}
         _check_views(views, refs)
         if self._fit is not None:
             views = {name: fit_frames(frames, *self._fit) for name, frames in views.items()}
-        return tile_views([frames[0] for frames in views.values()])
+        return tile_views(list(views.values()))
 
     def _episode(self, i: int) -> tuple[EpisodeRef, pa.Table, dict[str, EpisodeRef]]:
         """Episode ``i``'s reference, its data rows and every camera's reference by name."""
@@ -303,15 +315,21 @@ def _decode_frames(ref: EpisodeRef, rows: pa.Table, key: str) -> np.ndarray:
         raise DatasetError(f"episode {ref.index}, field {key!r}: {e}") from e
 
 
-def _decode_first_frame(ref: EpisodeRef, rows: pa.Table, key: str, fps: float) -> np.ndarray:
-    """The (1, H, W, 3) first frame of camera feature `key` in one episode, as stored."""
+def _decode_frame_range(ref: EpisodeRef, rows: pa.Table, key: str, fps: float, first: int, stop: int) -> np.ndarray:
+    """The (stop - first, H, W, 3) frames of camera feature `key` of data rows [first, stop) of one
+    episode, as stored."""
     if ref.video_path is None:
-        return decode_images(rows.slice(0, 1), key, ref.data_path)
+        return decode_images(rows.slice(first, stop - first), key, ref.data_path)
     start = ref.video_span[0]
+    # A video one frame short of the rows pairs its last frame with the last row too, as in `load`:
+    # a range to the end reads one frame more before it, which stands in for a missing last one.
+    lead = 1 if stop == rows.num_rows and first > 0 else 0
     try:
-        return decode_video(ref.video_path, start, start + 1 / fps)
+        frames = decode_video(ref.video_path, start + (first - lead) / fps, start + stop / fps,
+                              may_lack=1 if stop == rows.num_rows else 0)
     except ValueError as e:
         raise DatasetError(f"episode {ref.index}, field {key!r}: {e}") from e
+    return match_frames_to_rows(frames, stop - first + lead, ref)[lead:]
 
 
 def _check_views(views: dict[str, np.ndarray], refs: dict[str, EpisodeRef]) -> None:
