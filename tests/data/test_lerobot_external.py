@@ -174,6 +174,7 @@ def test_images_stored_in_the_rows_are_read_when_there_is_no_video(tmp_path):
 
     np.testing.assert_array_equal(EpisodeDataset(tmp_path).load(0).frames, frames)  # PNG is lossless
     np.testing.assert_array_equal(EpisodeDataset(tmp_path).first_frame(0), frames[0])  # from the first row alone
+    np.testing.assert_array_equal(EpisodeDataset(tmp_path).frames(0, 1, 3), frames[1:3])  # from those rows alone
 
 
 
@@ -188,6 +189,9 @@ def test_a_video_one_frame_short_of_its_rows_reuses_its_last_frame_with_a_warnin
     assert psnr(frames[:5], episode.frames[:5]).per_frame.min() >= 40.0
     np.testing.assert_array_equal(episode.frames[5], episode.frames[4])
     np.testing.assert_array_equal(episode.actions, columns["action"][:5])
+    dataset = EpisodeDataset(tmp_path)
+    np.testing.assert_array_equal(dataset.frames(0, 5, 6), episode.frames[5:])  # the missing last frame alone
+    np.testing.assert_array_equal(dataset.frames(0, 3, 6), episode.frames[3:])
 
 
 def test_a_video_one_frame_longer_than_its_rows_reads_the_rows_frames():
