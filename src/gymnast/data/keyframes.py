@@ -24,7 +24,7 @@ Sampling (`KeyframeConfig.sampling`):
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -76,8 +76,7 @@ def keyframe_indices(episode: Episode | EpisodeColumns, config: KeyframeConfig, 
 def keyframe_start(episode: Episode, t: int, config: KeyframeConfig) -> Start:
     """The start at frame `t` of `episode`: the C frames up to it, its state, the L actions the episode
     took from there (the reference) and the t actions that led there (the prefix)."""
-    _check_keyframe(episode, t)
-    return _start_at(episode, episode.observed_frames[context_indices(t, config)], t, config)
+    return _start_at(episode, t, config, lambda first, stop: episode.observed_frames[first:stop])
 
 
 def dataset_keyframes(dataset: EpisodeDataset, episodes: Sequence[int], config: KeyframeConfig,
@@ -88,29 +87,21 @@ def dataset_keyframes(dataset: EpisodeDataset, episodes: Sequence[int], config: 
     starts = []
     for i in episodes:
         columns = dataset.columns(i)
-        for t in keyframe_indices(columns, config, rng):
-            _check_keyframe(columns, t)
-            indices = context_indices(t, config)
-            context = dataset.frames(i, int(indices[0]), t + 1)[indices - indices[0]]
-            starts.append(_start_at(columns, context, t, config))
+        starts += [_start_at(columns, t, config, lambda first, stop: dataset.frames(i, first, stop))
+                   for t in keyframe_indices(columns, config, rng)]
     return starts
 
 
-def context_indices(t: int, config: KeyframeConfig) -> np.ndarray:
-    """(C,) the frames a start at keyframe `t` shows: the C up to it, the first frame repeated for
-    those before it (the robot standing still), so every start has C frames."""
-    return np.clip(np.arange(t - config.context_frames + 1, t + 1), 0, None)
-
-
-def _check_keyframe(episode: Episode | EpisodeColumns, t: int) -> None:
+def _start_at(episode: Episode | EpisodeColumns, t: int, config: KeyframeConfig,
+              read_frames: Callable[[int, int], np.ndarray]) -> Start:
+    """The start at keyframe `t` of an episode whose frames [first, stop) `read_frames` gives."""
     if not 0 <= t < len(episode.actions):
         raise ValueError(f"keyframe {t} is outside episode of {len(episode.actions)} actions "
                          f"({episode.info.task}, seed {episode.info.seed})")
-
-
-def _start_at(episode: Episode | EpisodeColumns, context: np.ndarray, t: int, config: KeyframeConfig) -> Start:
-    """The start at keyframe `t` of an episode whose (C, H, V*W, 3) context frames are given."""
-    return Start(episode.info.task, episode.info.seed, episode.info.instruction, context,
+    # Frames before the first repeat it (the robot standing still), so every start has C frames.
+    indices = np.clip(np.arange(t - config.context_frames + 1, t + 1), 0, None)
+    frames = read_frames(int(indices[0]), t + 1)[indices - indices[0]]  # (C, H, V*W, 3)
+    return Start(episode.info.task, episode.info.seed, episode.info.instruction, frames,
                  reference_actions=episode.actions[t: t + config.horizon].astype(np.float32),
                  prefix=episode.actions[:t].astype(np.float32),
                  state=np.asarray(episode.full_states[t], np.float32))

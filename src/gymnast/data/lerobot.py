@@ -323,10 +323,10 @@ def _decode_frame_range(ref: EpisodeRef, rows: pa.Table, key: str, fps: float, f
     start = ref.video_span[0]
     # A video one frame short of the rows pairs its last frame with the last row too, as in `load`:
     # a range to the end reads one frame more before it, which stands in for a missing last one.
-    lead = 1 if stop == rows.num_rows and first > 0 else 0
+    to_end = stop == rows.num_rows
+    lead = 1 if to_end and first > 0 else 0
     try:
-        frames = decode_video(ref.video_path, start + (first - lead) / fps, start + stop / fps,
-                              may_lack=1 if stop == rows.num_rows else 0)
+        frames = decode_video(ref.video_path, start + (first - lead) / fps, start + stop / fps, may_lack=int(to_end))
     except ValueError as e:
         raise DatasetError(f"episode {ref.index}, field {key!r}: {e}") from e
     return match_frames_to_rows(frames, stop - first + lead, ref)[lead:]
