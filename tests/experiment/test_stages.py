@@ -76,7 +76,7 @@ def test_a_recording_is_made_whole_only_while_a_stage_still_to_run_reads_it(tmp_
     dataset, calls = tmp_path / "rollouts", []
 
     def restore(stages: Stages, readers=("refit",)) -> None:
-        stages.restore_dataset("judge", dataset, lambda: calls.append(stages.out.name), readers, "the rollouts")
+        stages.restore_dataset("judge", dataset, lambda: calls.append(stages.out.name) or {}, readers, "the rollouts")
 
     restore(Stages(tmp_path / "new"))  # not recorded yet: the stage itself will
     here = Stages(tmp_path / "here")
@@ -95,6 +95,22 @@ def test_a_recording_is_made_whole_only_while_a_stage_still_to_run_reads_it(tmp_
     elsewhere.run("judge", pytest.fail)
     restore(elsewhere)  # another run's recording is not this one's to make
     assert calls == ["here", "here"]
+
+
+def test_a_recording_made_again_that_differs_from_the_first_is_said(tmp_path, caplog):
+    dataset, stages = tmp_path / "rollouts", Stages(tmp_path)
+    stages.run("judge", lambda: {"rollouts": {"episodes": 400, "successes": 274, "real_interactions": 60000}}, dataset)
+
+    def restore(now: dict) -> None:
+        caplog.clear()
+        stages.restore_dataset("judge", dataset, lambda: now, ["refit"], "the rollouts", lambda record: record["rollouts"])
+
+    restore({"episodes": 400, "successes": 274, "real_interactions": 60000})
+    assert "differ" not in caplog.text
+    restore({"episodes": 400, "successes": 270, "real_interactions": 60000})
+    assert "successes 270 (the stage's recording: 274)" in caplog.text and "episodes 400" not in caplog.text
+    restore({"episodes": 399, "successes": 274})
+    assert "episodes 399 (the stage's recording: 400)" in caplog.text and str(dataset) in caplog.text
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="malloc_trim is glibc's")

@@ -137,7 +137,7 @@ def _restore_judge_rollouts(stages: Stages, config: ExperimentConfig, recorded: 
         (["equal_budget_imagined"] if config.equal_budget.rollouts_per_task > 0 else [])
     readers = refitting if stages.record("judge").get("rollouts") else []  # none recorded: nothing to restore
     stages.restore_dataset("judge", recorded, lambda: _judge_rollouts(stages.path("sft"), config, recorded, progress),
-                           readers, "the judge's real rollouts")
+                           readers, "the judge's real rollouts", lambda record: record["rollouts"])
 
 
 def _check_freeze(sft: Path, freeze: tuple[str, ...]) -> None:

@@ -87,17 +87,28 @@ class Stages:
         write_json(self.record_path(name), record)
         return record
 
-    def restore_dataset(self, name: str, dataset: Path, record: Callable[[], object], readers: Sequence[str],
-                        what: str) -> None:
+    def restore_dataset(self, name: str, dataset: Path, record: Callable[[], dict], readers: Sequence[str],
+                        what: str, recorded: Callable[[dict], dict] = lambda record: record) -> None:
         """Makes whole the real rollouts that stage `name` recorded here into `dataset` when a stage
         still to run among `readers` reads them: `record()` again (the same scenes, seeds and
         settings; it skips the episodes already there) records them anew in a run copied without
-        its datasets and finishes a recording that was interrupted. `what` names them in the log."""
+        its datasets and finishes a recording that was interrupted. `what` names them in the log.
+
+        `record()` returns what the recording holds (``episodes``, ``successes``), and `recorded`
+        finds the same figures in the stage's record: a recording made again that differs from the
+        first (on a CPU of another kind the same seeds can take other trajectories) is said in a
+        warning, as the stages still to run learn from this one.
+        """
         if not self.done(name) or self.record(name)["reused"] or all(self.done(reader) for reader in readers):
             return
         if not (dataset / INFO_PATH).is_file():
             logger.warning("%s is missing: recording %s again, as a stage still to run reads them", dataset, what)
-        record()
+        now, first = record(), recorded(self.record(name))
+        changed = [f"{key} {now.get(key)} (the stage's recording: {first.get(key)})"
+                   for key in ("episodes", "successes") if now.get(key) != first.get(key)]
+        if changed:
+            logger.warning("%s in %s differ from what stage %s recorded: %s; the stages still to run learn from "
+                           "these", what, dataset, name, ", ".join(changed))
 
     def path(self, name: str) -> Path:
         """Where a finished (or reused) stage's output lives."""
