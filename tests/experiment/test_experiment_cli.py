@@ -16,6 +16,7 @@ from gymnast.data.lerobot import EpisodeDataset
 from gymnast.envs.tasks import eval_seed, resolve_tasks
 from gymnast.experiment.arms import ARM_NAMES
 from gymnast.experiment.config import EXPERIMENT_PRESETS
+from gymnast.experiment.stages import measured_elsewhere
 
 pytestmark = pytest.mark.slow
 
@@ -304,6 +305,26 @@ def test_judge_rollouts_recorded_in_part_are_finished_before_dyna_refits_the_jud
     recorded = EpisodeDataset(partial / "judge_rollouts", cameras=("front", "gripper"))
     assert sorted(info.seed for info in recorded.episodes) == [300_000, 300_001]
     assert np.array_equal(recorded.load(0).actions, EpisodeDataset(experiment / "judge_rollouts").load(0).actions)
+
+
+def test_a_reused_judges_rollouts_are_recorded_again_in_the_experiment_it_learnt_them_in(experiment: Path,
+                                                                                          tmp_path: Path):
+    maker, here = tmp_path / "maker", tmp_path / "here"  # `here` reuses the judge `maker` trained on its rollouts
+    copy_experiment(experiment, maker, judge_rollouts=False)
+    copy_experiment(experiment, here, judge_rollouts=False)
+    shutil.rmtree(here / "judge")
+    reused = {"stage": "judge", "path": str(maker / "judge"), "reused": True, "wall_s": None,
+              **measured_elsewhere("judge", maker / "judge")}
+    (here / "stages" / "judge.json").write_text(json.dumps(reused))
+    for stage in ("arm_dyna", "eval_dyna"):  # Dyna still to run here: it refits that judge on them
+        (here / "stages" / f"{stage}.json").unlink()
+    shutil.rmtree(here / "arms" / "dyna")
+    main(["experiment", "--out", str(here), "--resume"])
+    assert not (here / "judge_rollouts").exists()  # not this experiment's to record
+    first, again = (EpisodeDataset(run / "judge_rollouts") for run in (experiment, maker))
+    assert [info.seed for info in again.episodes] == [info.seed for info in first.episodes]  # the maker's settings
+    assert all(np.array_equal(again.load(i).actions, first.load(i).actions) for i in range(len(first)))
+    assert (here / "stages" / "arm_dyna.json").is_file()
 
 
 def test_the_equal_budgets_rollouts_are_recorded_again_when_an_arm_still_to_run_reads_them(experiment: Path,

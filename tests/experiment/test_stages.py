@@ -76,7 +76,8 @@ def test_a_recording_is_made_whole_only_while_a_stage_still_to_run_reads_it(tmp_
     dataset, calls = tmp_path / "rollouts", []
 
     def restore(stages: Stages, readers=("refit",)) -> None:
-        stages.restore_dataset("judge", dataset, lambda: calls.append(stages.out.name) or {}, readers, "the rollouts")
+        stages.restore_dataset("judge", dataset, lambda: calls.append(stages.out.name) or {}, stages.pending(readers),
+                               "the rollouts")
 
     restore(Stages(tmp_path / "new"))  # not recorded yet: the stage itself will
     here = Stages(tmp_path / "here")
@@ -103,7 +104,7 @@ def test_a_recording_made_again_that_differs_from_the_first_is_said(tmp_path, ca
 
     def restore(now: dict) -> None:
         caplog.clear()
-        stages.restore_dataset("judge", dataset, lambda: now, ["refit"], "the rollouts", lambda record: record["rollouts"])
+        stages.restore_dataset("judge", dataset, lambda: now, True, "the rollouts", lambda record: record["rollouts"])
 
     restore({"episodes": 400, "successes": 274, "real_interactions": 60000})
     assert "differ" not in caplog.text

@@ -71,7 +71,8 @@ def train_equal_budget(stages: Stages, config: ExperimentConfig, out: Path, sft:
     budget = budget_for(config.equal_budget, config)
     rollouts = out / "rollouts"
     record = functools.partial(_record, sft, config, rollouts, progress)
-    stages.restore_dataset("equal_budget_rollouts", rollouts, record, ["equal_budget_imagined", "equal_budget_iter_sft"],
+    stages.restore_dataset("equal_budget_rollouts", rollouts, record,
+                           stages.pending(["equal_budget_imagined", "equal_budget_iter_sft"]),
                            "the equal budget's real rollouts")
     stages.run("equal_budget_rollouts", record, rollouts)
     recorded = stages.record("equal_budget_rollouts")["real_interactions"]

@@ -132,12 +132,23 @@ def _models(stages: Stages, config: ExperimentConfig, out: Path, progress: bool
 
 def _restore_judge_rollouts(stages: Stages, config: ExperimentConfig, recorded: Path, progress: bool) -> None:
     """The judge's real rollouts made whole (`Stages.restore_dataset`) when the judge stage recorded
-    them and a stage still to run refits the judge on them (Dyna's rounds, the equal budgets' imagined arm)."""
+    them and a stage still to run refits the judge on them (Dyna's rounds, the equal budgets'
+    imagined arm). A judge reused from another experiment learnt from that experiment's SFT policy's
+    rollouts, in its directory: they are recorded there again, with its settings, when a refit here
+    reads them."""
     refitting = (["arm_dyna"] if config.dyna.rounds > 1 else []) + \
         (["equal_budget_imagined"] if config.equal_budget.rollouts_per_task > 0 else [])
-    readers = refitting if stages.record("judge").get("rollouts") else []  # none recorded: nothing to restore
-    stages.restore_dataset("judge", recorded, lambda: _judge_rollouts(stages.path("sft"), config, recorded, progress),
-                           readers, "the judge's real rollouts", lambda record: record["rollouts"])
+    judge = stages.record("judge")
+    if not judge.get("rollouts") or not stages.pending(refitting):  # none recorded, or no refit still to run
+        return
+    maker, settings = stages, config
+    if judge["reused"]:
+        made_in = Path(judge["measured_in"])
+        maker, recorded = Stages(made_in), made_in / "judge_rollouts"
+        settings = dataclasses.replace(saved_experiment_config(made_in), workers=config.workers,
+                                       runner=config.runner).resolved()
+    maker.restore_dataset("judge", recorded, lambda: _judge_rollouts(maker.path("sft"), settings, recorded, progress),
+                          True, "the judge's real rollouts", lambda record: record["rollouts"])
 
 
 def _check_freeze(sft: Path, freeze: tuple[str, ...]) -> None:

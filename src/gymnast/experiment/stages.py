@@ -87,19 +87,24 @@ class Stages:
         write_json(self.record_path(name), record)
         return record
 
-    def restore_dataset(self, name: str, dataset: Path, record: Callable[[], dict], readers: Sequence[str],
-                        what: str, recorded: Callable[[dict], dict] = lambda record: record) -> None:
-        """Makes whole the real rollouts that stage `name` recorded here into `dataset` when a stage
-        still to run among `readers` reads them: `record()` again (the same scenes, seeds and
-        settings; it skips the episodes already there) records them anew in a run copied without
-        its datasets and finishes a recording that was interrupted. `what` names them in the log.
+    def pending(self, names: Sequence[str]) -> bool:
+        """Whether any of the stages `names` is still to run."""
+        return not all(self.done(name) for name in names)
+
+    def restore_dataset(self, name: str, dataset: Path, record: Callable[[], dict], still_read: bool, what: str,
+                        recorded: Callable[[dict], dict] = lambda record: record) -> None:
+        """Makes whole the real rollouts that stage `name` recorded here into `dataset` while a stage
+        still to run reads them (`still_read`: in this experiment, or in one that reuses this one's
+        stage): `record()` again (the same scenes, seeds and settings; it skips the episodes already
+        there) records them anew in a run copied without its datasets and finishes a recording that
+        was interrupted. `what` names them in the log.
 
         `record()` returns what the recording holds (``episodes``, ``successes``), and `recorded`
         finds the same figures in the stage's record: a recording made again that differs from the
         first (on a CPU of another kind the same seeds can take other trajectories) is said in a
         warning, as the stages still to run learn from this one.
         """
-        if not self.done(name) or self.record(name)["reused"] or all(self.done(reader) for reader in readers):
+        if not still_read or not self.done(name) or self.record(name)["reused"]:
             return
         if not (dataset / INFO_PATH).is_file():
             logger.warning("%s is missing: recording %s again, as a stage still to run reads them", dataset, what)
