@@ -313,6 +313,8 @@ def test_a_reused_judges_rollouts_are_recorded_again_in_the_experiment_it_learnt
     copy_experiment(experiment, maker, judge_rollouts=False)
     copy_experiment(experiment, here, judge_rollouts=False)
     shutil.rmtree(here / "judge")
+    made = json.loads((maker / "stages" / "judge.json").read_text())
+    (maker / "stages" / "judge.json").write_text(json.dumps({**made, "path": str(maker / "judge")}))  # made there
     reused = {"stage": "judge", "path": str(maker / "judge"), "reused": True, "wall_s": None,
               **measured_elsewhere("judge", maker / "judge")}
     (here / "stages" / "judge.json").write_text(json.dumps(reused))
