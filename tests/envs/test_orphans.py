@@ -57,6 +57,28 @@ def _alive(pid: int) -> bool:
     return state != "Z"  # a zombie has exited; only its entry waits to be reaped
 
 
+def _cpu_ticks(pid: int) -> int:
+    """The CPU time `pid` has used so far, in clock ticks (user + system), or -1 once it is gone."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    except OSError:
+        return -1
+    return int(fields[11]) + int(fields[12])  # utime, stime: the stat file's 14th and 15th fields
+
+
+def _wait_until_idle(pids: set[int], seconds: float) -> None:
+    """Waits until none of `pids` used CPU for a whole second: started (imports, the watchdog set up
+    first thing in a worker) and waiting on its job or its pipe, however loaded the machine is."""
+    deadline, before = time.monotonic() + seconds, {pid: _cpu_ticks(pid) for pid in pids}
+    while time.monotonic() < deadline:
+        time.sleep(1)
+        now = {pid: _cpu_ticks(pid) for pid in pids}
+        if now == before:
+            return
+        before = now
+    raise AssertionError(f"workers {sorted(pids)} were still starting after {seconds} s")
+
+
 def _survivors_of_killing(parent: subprocess.Popen, pids, seconds: float) -> set[int]:
     """SIGKILLs `parent`, then waits up to `seconds` for `pids` to exit; returns those still alive."""
     parent.send_signal(signal.SIGKILL)
@@ -77,8 +99,9 @@ def test_workers_exit_within_seconds_of_their_parent_being_killed(kind):
             assert parent.poll() is None, f"the {kind} parent exited early with {parent.returncode}"
             assert time.monotonic() < deadline, f"the {kind} parent started no workers"
             time.sleep(0.2)
-        time.sleep(3)  # let them finish starting (the watchdog is set up first thing)
-        survivors = _survivors_of_killing(parent, _children(parent.pid), seconds=10)
+        workers = _children(parent.pid)
+        _wait_until_idle(workers, seconds=120)
+        survivors = _survivors_of_killing(parent, workers, seconds=10)
         assert not survivors, f"{kind}: workers {sorted(survivors)} outlived their killed parent"
     finally:
         if parent.poll() is None:
