@@ -21,16 +21,17 @@ PARENTS = {
 }
 
 
+def _stat_fields(stat: Path) -> list[str] | None:
+    """A /proc/PID/stat file's fields after the command name (state first), or None once it is gone."""
+    try:
+        return stat.read_text().rsplit(")", 1)[1].split()
+    except OSError:
+        return None
+
+
 def _children(pid: int) -> set[int]:
-    found = set()
-    for stat in Path("/proc").glob("[0-9]*/stat"):
-        try:
-            fields = stat.read_text().rsplit(")", 1)[1].split()
-        except OSError:
-            continue
-        if int(fields[1]) == pid:
-            found.add(int(stat.parent.name))
-    return found
+    return {int(stat.parent.name) for stat in Path("/proc").glob("[0-9]*/stat")
+            if (fields := _stat_fields(stat)) and int(fields[1]) == pid}
 
 
 def _descendants(pid: int) -> set[int]:
@@ -50,20 +51,14 @@ def _title(pid: int) -> str:
 
 
 def _alive(pid: int) -> bool:
-    try:
-        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
-    except OSError:
-        return False
-    return state != "Z"  # a zombie has exited; only its entry waits to be reaped
+    fields = _stat_fields(Path(f"/proc/{pid}/stat"))
+    return fields is not None and fields[0] != "Z"  # a zombie has exited; only its entry waits to be reaped  # a zombie has exited; only its entry waits to be reaped
 
 
 def _cpu_ticks(pid: int) -> int:
     """The CPU time `pid` has used so far, in clock ticks (user + system), or -1 once it is gone."""
-    try:
-        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    except OSError:
-        return -1
-    return int(fields[11]) + int(fields[12])  # utime, stime: the stat file's 14th and 15th fields
+    fields = _stat_fields(Path(f"/proc/{pid}/stat"))
+    return -1 if fields is None else int(fields[11]) + int(fields[12])  # utime, stime: the stat file's 14th and 15th fields
 
 
 def _wait_until_idle(pids: set[int], seconds: float) -> None:
