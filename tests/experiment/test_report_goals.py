@@ -84,3 +84,18 @@ def test_an_unmet_watch_is_set_against_imaginations_false_successes_before_pract
     summary["watch_false_success"] = {"rl_wm_judge": 0.05}  # met: nothing stands in the way
     summary["goals"] = experiment_goals(summary["arms"], None, 0.5, summary["watch_false_success"])
     assert "Before any practice" not in format_table(summary)
+
+
+def test_the_report_reads_the_judges_ranking_apart_from_its_threshold_when_measured():
+    from collections import defaultdict
+
+    from gymnast.experiment.report_text import report_markdown
+
+    plots = defaultdict(lambda: "plot.png")
+    summary = json.loads(COMMITTED_HEADLINE.read_text())
+    summary["judge"].pop("real_roc", None)  # measured before the readout existed: nothing said
+    assert "(AUC)" not in report_markdown(summary, plots)
+    summary["judge"]["real_roc"] = {"auc": 0.9876, "at_tpr": 0.95, "lowest_fpr": 0.0526}
+    text = report_markdown(summary, plots)
+    assert ("ranks a success above a failure 98.8% of the time (AUC); the best threshold for these very cases "
+            "would pass at least 95.0% of the successes at FPR 0.05.") in text

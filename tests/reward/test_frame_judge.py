@@ -11,7 +11,8 @@ from gymnast.data.lerobot import EpisodeDataset
 from gymnast.reward.frame_judge import FrameJudge
 from gymnast.reward.judge import JudgeConfig
 from gymnast.reward.train_judge import (HARD_CANDIDATES, JUDGE_PRESETS, FramePool, JudgeTrainConfig, Video,
-                                        choose_threshold, judge_cases, load_judge, split_scenes, train_judge)
+                                        choose_threshold, evaluate_judge, judge_cases, load_judge, roc_readout,
+                                        split_scenes, train_judge)
 
 DEBUG = dataclasses.replace(JUDGE_PRESETS["debug"], heldout_fraction=0.25, validation_fraction=0.2)
 
@@ -118,6 +119,32 @@ def test_a_threshold_for_a_true_positive_rate_is_the_highest_that_keeps_it():
     assert half["tpr"] == 0.5 and half["fpr"] == round(2 / 11, 4)
     with pytest.raises(ValueError, match="threshold_tpr"):
         dataclasses.replace(DEBUG, threshold_tpr=0.0)
+
+
+def test_the_roc_readout_ranks_cases_apart_from_the_threshold():
+    # Successes 0.9, 0.8, 0.4; failures 0.7, 0.3, 0.2, 0.1: 11 of the 12 pairs are ranked right.
+    scores = torch.tensor([0.9, 0.8, 0.4, 0.7, 0.3, 0.2, 0.1], dtype=torch.float64)
+    truth = torch.tensor([True, True, True, False, False, False, False])
+    assert roc_readout(scores, truth) == {"auc": round(11 / 12, 4), "at_tpr": 0.95, "lowest_fpr": 0.25}  # 0.4 lets 0.7 in
+    assert roc_readout(scores, truth, at_tpr=0.6)["lowest_fpr"] == 0.0  # 0.8 passes two successes and no failure
+    tied = roc_readout(torch.full((7,), 0.5, dtype=torch.float64), truth)
+    assert tied["auc"] == 0.5 and tied["lowest_fpr"] == 1.0  # ties count half; one threshold passes all
+    assert roc_readout(scores, torch.ones(7, dtype=torch.bool))["auc"] is None
+
+
+def test_a_learned_judges_verdicts_in_its_metrics_are_those_it_scores_with():
+    videos = [video([False] * 8 + [True], value=v) for v in (40, 90, 160)] + [video([False] * 9, value=v) for v in (20, 120)]
+    judge = FrameJudge(JudgeConfig(width=16, image_size=8)).eval()
+    probabilities = [judge.probability(frames[None], [text]).item() for frames, text, *_ in judge_cases(videos)]
+    judge.config = dataclasses.replace(judge.config, threshold=sorted(probabilities)[len(probabilities) // 2])
+    report = evaluate_judge(judge, videos)
+    cases = judge_cases(videos)
+    said = torch.cat([judge.score(frames[None], [text]) for frames, text, *_ in cases]).bool()
+    truth = torch.tensor([label for _, _, label, _, _ in cases])
+    assert 0 < said.sum() < len(cases)  # the threshold splits the cases, so the rates below can be wrong
+    assert report["real_tpr"] == round((said & truth).sum().item() / truth.sum().item(), 4)
+    assert report["real_fpr"] == round((said & ~truth).sum().item() / (~truth).sum().item(), 4)
+    assert report["real_roc"] == roc_readout(torch.tensor(probabilities, dtype=torch.float64), truth)
 
 
 def test_scenes_split_three_ways_without_overlap(tiny_dataset):

@@ -47,6 +47,7 @@ def test_metrics_on_known_labels(videos):
     assert yes["real_positives"] == positives > 0 and yes["real_negatives"] > yes["real_whole_failures"]
     assert yes["real_accuracy"] == pytest.approx(positives / (positives + yes["real_negatives"]), abs=1e-4)
     assert "imagined_tpr" not in yes  # no world model, no imagined videos
+    assert yes["real_roc"] == {"auc": 0.5, "at_tpr": 0.95, "lowest_fpr": 1.0}  # one score for all: no ranking
 
 
 def test_training_with_a_world_model_reports_real_and_imagined_figures(tiny_dataset, tmp_path):

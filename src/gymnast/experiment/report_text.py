@@ -320,6 +320,15 @@ def _fidelity(model: dict | None) -> list[str]:
     return [" ".join(lines), ""]
 
 
+def _ranking(roc: dict | None) -> str:
+    """The judge's ROC on the real held-out cases in words (nothing for a judge measured before it was read out)."""
+    if not roc or roc.get("auc") is None:
+        return ""
+    return (f" On real video its P(success) ranks a success above a failure {pct(roc['auc'])} of the time (AUC); the "
+            f"best threshold for these very cases would pass at least {pct(roc['at_tpr'])} of the successes at FPR "
+            f"{_num(roc['lowest_fpr'])}.")
+
+
 def _evidence(summary: dict) -> list[str]:
     judge, rollouts = summary["judge"], summary.get("judge_rollouts")
     learned = (f" It also learned from {rollouts['episodes']} real rollouts of the SFT policy ({rollouts['successes']} "
@@ -327,7 +336,8 @@ def _evidence(summary: dict) -> list[str]:
     lines = [*_fidelity(summary.get("world_model")),
              ("**The judge** on held-out episodes (its own training stage): "
               f"real video TPR {_num(judge.get('real_tpr'))}, FPR {_num(judge.get('real_fpr'))}; "
-              f"imagined video TPR {_num(judge.get('imagined_tpr'))}, FPR {_num(judge.get('imagined_fpr'))}.{learned}"), ""]
+              f"imagined video TPR {_num(judge.get('imagined_tpr'))}, FPR {_num(judge.get('imagined_fpr'))}."
+              f"{_ranking(judge.get('real_roc'))}{learned}"), ""]
     for name, rows in summary["watch"].items():
         if not rows:
             continue

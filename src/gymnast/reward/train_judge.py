@@ -35,7 +35,7 @@ from gymnast.data.lerobot import EpisodeDataset, FeatureKeys
 from gymnast.reward.base import Reward, RewardContext
 from gymnast.reward.frame_judge import FrameJudge, frame_loss
 from gymnast.reward.progress_judge import ProgressJudge, evaluate_progress, progress_loss, progress_targets
-from gymnast.reward.judge import JudgeConfig, LearnedJudge, judge_loss, judged_frame_indices
+from gymnast.reward.judge import JudgeConfig, LearnedJudge, ThresholdJudge, judge_loss, judged_frame_indices
 from gymnast.utils.atomic import write_json
 from gymnast.utils.checkpoint import begin_training, load_model, save_training, write_run_config
 from gymnast.utils.device import resolve_device
@@ -51,6 +51,7 @@ HARD_CANDIDATES = 4  # random negatives drawn per hard one kept (scored without 
 Scorer = Callable[[torch.Tensor, torch.Tensor, list[str]], torch.Tensor]
 """(N, H, W, 3) first frames, (N, H, W, 3) frames and N instructions -> (N,) success logits."""
 NEAR_MISS_STEPS = 10  # a held-out negative: a successful episode cut this many steps before its success
+ROC_TPR = 0.95  # the TPR at which `roc_readout` finds the lowest FPR: the operating point the judge is held to
 JUDGES = {"frames": FrameJudge, "video": LearnedJudge, "progress": ProgressJudge}
 """Judge kinds by name; a checkpoint names its class by `backend`."""
 
@@ -413,12 +414,10 @@ def choose_threshold(judge: Reward, videos: list[Video], tpr: float | None = Non
     if not truth.any() or truth.all():
         logger.warning("no validation scene with both outcomes: the judge keeps the threshold 0.5")
         return {"threshold": 0.5, "tpr": None, "fpr": None, "cases": len(cases)}
-    with torch.no_grad():
-        scores = torch.cat([judge.probability(frames[None], [text]) for frames, text, _, _, _ in cases]).double()
-    candidates = torch.unique(scores)  # sorted; a threshold in (candidates[i-1], candidates[i]] passes the same cases
-    passed = torch.stack([(scores[truth] >= c).double().mean() for c in candidates])
+    scores = _probabilities(judge, cases).double()
+    candidates, passed, failed = operating_points(scores, truth)
     if tpr is None:
-        quality = passed - torch.stack([(scores[~truth] >= c).double().mean() for c in candidates])
+        quality = passed - failed
         best = torch.nonzero(quality == quality.max()).flatten()
         first, last = int(best[0]), int(best[-1])
     else:  # the share passed falls as the threshold rises: the last candidate still at the rate
@@ -427,6 +426,36 @@ def choose_threshold(judge: Reward, videos: list[Video], tpr: float | None = Non
     threshold = float((low + candidates[last]) / 2)
     return {"threshold": threshold, "tpr": _rate(scores >= threshold, truth), "fpr": _rate(scores >= threshold, ~truth),
             "cases": len(cases)}
+
+
+def operating_points(scores: torch.Tensor, truth: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Every distinct threshold worth trying on (N,) scores of cases labelled (N,) `truth` (both
+    labels present), ascending, with the TPR and FPR of ``scores >= threshold`` at each: a threshold
+    in (candidates[i-1], candidates[i]] passes the same cases as candidates[i]."""
+    candidates = torch.unique(scores)  # sorted
+    passes = scores[None, :] >= candidates[:, None]  # (C, N)
+    return candidates, passes[:, truth].double().mean(1), passes[:, ~truth].double().mean(1)
+
+
+def roc_readout(scores: torch.Tensor, truth: torch.Tensor, at_tpr: float = ROC_TPR) -> dict:
+    """How well P(success) ranks these cases, apart from the threshold the judge has: the ROC's AUC
+    (the chance that a success outscores a failure, ties counting half) and the lowest FPR that any
+    threshold gives here with TPR at least `at_tpr`. Both are chosen on the very cases they
+    measure: an upper bound on what tuning the threshold could buy, not the judge as it runs.
+    None with cases of one label only."""
+    if not truth.any() or truth.all():
+        return {"auc": None, "at_tpr": at_tpr, "lowest_fpr": None}
+    positives, negatives = scores[truth], scores[~truth]
+    above = (positives[:, None] > negatives[None, :]).double() + 0.5 * (positives[:, None] == negatives[None, :]).double()
+    _, passed, failed = operating_points(scores, truth)
+    return {"auc": round(above.mean().item(), 4), "at_tpr": at_tpr,
+            "lowest_fpr": round(failed[passed >= at_tpr - 1e-9].min().item(), 4)}
+
+
+def _probabilities(judge, cases: list[tuple[torch.Tensor, str, bool, bool, bool]]) -> torch.Tensor:
+    """(N,) P(success) of each case, from a judge with a `probability`, in the judge's precision."""
+    with torch.no_grad():
+        return torch.cat([judge.probability(frames[None], [text]) for frames, text, _, _, _ in cases])
 
 
 def judge_cases(videos: list[Video]) -> list[tuple[torch.Tensor, str, bool, bool, bool]]:
@@ -445,17 +474,24 @@ def judge_cases(videos: list[Video]) -> list[tuple[torch.Tensor, str, bool, bool
 
 def evaluate_judge(judge: Reward, videos: list[Video]) -> dict:
     """TPR, FPR and accuracy of any 0/1 judge, real and imagined apart; FPR over all negatives and over
-    whole failed episodes. A NaN verdict (could not score) counts as "not success" and is counted."""
+    whole failed episodes. A NaN verdict (could not score) counts as "not success" and is counted.
+    A judge that gives P(success) (the learned ones) gets its verdicts from it and its threshold, and
+    its ROC read out too (``real_roc``: `roc_readout`): is the threshold or the ranking at fault?"""
     report = {}
     for imagined in (False, True):
         cases = [case for case in judge_cases(videos) if case[4] == imagined]
         if not cases:
             continue
-        verdicts = torch.stack([judge.score(f[None], [text], RewardContext())[0] for f, text, _, _, _ in cases])
-        predicted = verdicts >= 0.5  # NaN compares False
         truth = torch.tensor([label for _, _, label, _, _ in cases])
-        whole = torch.tensor([w for _, _, _, w, _ in cases])
         prefix = "imagined" if imagined else "real"
+        if isinstance(judge, ThresholdJudge):
+            probabilities = _probabilities(judge, cases)
+            verdicts = (probabilities >= judge.config.threshold).float()  # as `ThresholdJudge.score`
+            report[f"{prefix}_roc"] = roc_readout(probabilities.double(), truth)
+        else:
+            verdicts = torch.stack([judge.score(f[None], [text], RewardContext())[0] for f, text, _, _, _ in cases])
+        predicted = verdicts >= 0.5  # NaN compares False
+        whole = torch.tensor([w for _, _, _, w, _ in cases])
         report |= {
             f"{prefix}_tpr": _rate(predicted, truth),
             f"{prefix}_fpr": _rate(predicted, ~truth),
