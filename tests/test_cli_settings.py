@@ -1,4 +1,4 @@
-"""Presets, overrides and --resume (`gymnast.cli_settings`), and settings read back from a run's JSON."""
+"""Presets, overrides and --resume (`gymnast.cli.settings`), and settings read back from a run's JSON."""
 
 from __future__ import annotations
 
@@ -9,10 +9,11 @@ from pathlib import Path
 import pytest
 import tyro
 
-from gymnast.cli_models import RL_PRESETS, RLConfig, RLFlags
-from gymnast.cli_settings import resolve
+from gymnast.cli.flags import RLFlags
+from gymnast.cli.settings import resolve
 from gymnast.experiment.config import EXPERIMENT_PRESETS, ExperimentConfig
 from gymnast.policy.sft import SFT_PRESETS
+from gymnast.rl.config import RL_PRESETS, RLConfig
 from gymnast.utils.settings import from_json
 from gymnast.world_model.train import WM_PRESETS, WorldModelTrainConfig
 

@@ -1,0 +1,71 @@
+"""The `gymnast` command: one subcommand per job, each a thin call into the library."""
+
+from __future__ import annotations
+
+import logging
+import sys
+
+import tyro
+
+import gymnast  # noqa: F401  (sets MUJOCO_GL before anything imports mujoco)
+from gymnast.cli.data import collect, contact_sheet, gap_report, inspect, tasks
+from gymnast.cli.judge import eval_judge, serve_judge, train_judge
+from gymnast.cli.measure import imagination, practice_summary, rl_signal, worldgym
+from gymnast.cli.policy import evaluate_command, sft
+from gymnast.cli.practice import dyna, experiment, rl
+from gymnast.cli.world_model import eval_wm, make_ensemble, object_fidelity, train_state, train_wm
+
+
+def doctor() -> None:
+    """Check that this machine can render the simulator headlessly, and say what to install if not."""
+    from gymnast.utils.device import bf16_status
+    from gymnast.utils.disk_cache import CACHE_ENV, cache_root
+    from gymnast.utils.system import check_rendering
+
+    ok, message = check_rendering()
+    print(message)
+    print(bf16_status())
+    root = cache_root()
+    print(f"cache: {root if root else f'off ({CACHE_ENV})'} (sentence embeddings shared by every process)")
+    if not ok:
+        raise SystemExit(1)
+
+
+COMMANDS = {
+    "collect": collect,
+    "inspect": inspect,
+    "sft": sft,
+    "eval": evaluate_command,
+    "train-wm": train_wm,
+    "train-state": train_state,
+    "eval-wm": eval_wm,
+    "make-ensemble": make_ensemble,
+    "object-fidelity": object_fidelity,
+    "train-judge": train_judge,
+    "serve-judge": serve_judge,
+    "eval-judge": eval_judge,
+    "rl": rl,
+    "experiment": experiment,
+    "dyna": dyna,
+    "imagination": imagination,
+    "rl-signal": rl_signal,
+    "practice-summary": practice_summary,
+    "worldgym": worldgym,
+    "contact-sheet": contact_sheet,
+    "gap-report": gap_report,
+    "tasks": tasks,
+    "doctor": doctor,
+}
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Entry point of the `gymnast` console script."""
+    logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
+    logging.getLogger("OpenGL").setLevel(logging.WARNING)
+    try:
+        tyro.extras.subcommand_cli_from_dict(COMMANDS, args=sys.argv[1:] if argv is None else argv,
+                                             prog="gymnast", description=__doc__)
+    except (ValueError, FileNotFoundError) as error:
+        # Bad input is the user's to fix: say what is wrong without a traceback.
+        print(f"gymnast: error: {error}", file=sys.stderr)
+        raise SystemExit(2) from None

@@ -1,0 +1,139 @@
+"""`gymnast` commands that train, serve and measure success judges."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Annotated, Literal
+
+import tyro
+
+from gymnast.cli.flags import GPUPreset, KeyFlags, feature_keys, key_overrides
+from gymnast.cli.settings import resolve, saved_inputs
+from gymnast.config import CameraNames
+from gymnast.data.frames import Fit
+from gymnast.reward.chat_server import ChatLimits
+from gymnast.reward.spec import RewardSpec
+
+
+def train_judge(
+    out: Path,
+    data: Path | None = None,
+    wm: Path | None = None,
+    preset: GPUPreset = "full",
+    resume: bool = False,
+    steps: int | None = None,
+    kind: Literal["frames", "video", "progress"] | None = None,
+    extra_data: tuple[Path, ...] = (),
+    init: Path | None = None,
+    camera: str | None = None,
+    cameras: CameraNames = (),
+    fit: Fit | None = None,
+    threshold_tpr: float | None = None,
+    hard_negatives: float | None = None,
+    device: str | None = None,
+    keys: Annotated[KeyFlags, tyro.conf.arg(name="")] = KeyFlags(),
+) -> None:
+    """Train the embedded success judge on real episodes (and their re-imaginings with --wm), choose
+    its threshold on validation scenes, then report its TPR and FPR on held-out real and imagined videos.
+
+    Args:
+        out: run directory: checkpoints, metrics.jsonl, metrics.json (the held-out figures).
+        data: dataset directory (from `gymnast collect`); with --resume, the run's own.
+        wm: world-model run: also train and measure on its re-imagining of every episode.
+        preset: debug (seconds), demo (minutes), full or gpu (a wider judge for one GPU; docs/gpu.md).
+        resume: continue the run in OUT from its last checkpoint, with the settings, data and world model
+            saved there.
+        steps: override the preset's optimizer steps.
+        kind: frames (judge every frame; the default), video (four frames of the whole video) or progress
+            (every frame's dense reward; a video scores its mean: a continuous reward, no threshold).
+        extra_data: more datasets to train and measure on (e.g. a policy's recorded rollouts).
+        init: a judge run (or checkpoint) to fine-tune instead of starting from random weights.
+        camera: the dataset camera to read, by name (front: observation.images.front) or by feature key
+            (image, observation.images.top); default: its first video (else image) feature.
+        cameras: several dataset cameras the per-frame judges see side by side, the primary first
+            (e.g. front,gripper; with --wm, a world model of the same cameras). Default: --camera alone.
+        fit: how frames that are not the model's square size are fitted: resize (squash the whole
+            frame) or crop (the central square); saved with the run.
+        threshold_tpr: choose the threshold for this TPR on the validation scenes (the highest that
+            passes this share of their successes) instead of the most TPR - FPR; e.g. 0.95.
+        hard_negatives: share of each batch's negative frames chosen as those the judge rates highest
+            of four times as many random ones (its near misses); default 0, all random.
+        device: auto (CUDA when torch sees a GPU, else the CPU), cpu, cuda or cuda:N; --resume may change it.
+        keys: which dataset features are the actions and the states (default: LeRobot's action and
+            observation.state); saved with the run.
+    """
+    from gymnast.reward.train_judge import JUDGE_PRESETS, saved_judge_config
+    from gymnast.reward.train_judge import train_judge as train
+
+    config, inputs = resolve(
+        "train-judge", out, resume, JUDGE_PRESETS[preset], inputs={"data": data, "wm": wm}, required=("data",),
+        overrides={"steps": steps, "kind": kind, "extra_data": extra_data or None, "init": init, "camera": camera,
+                   "cameras": cameras or None, "fit": fit, "threshold_tpr": threshold_tpr,
+                   "hard_negatives": hard_negatives, "device": device, **key_overrides(keys)},
+        saved=lambda: (saved_judge_config(out), saved_inputs(out, "data", "wm")))
+    report = train(inputs["data"], out, config, wm=inputs["wm"], resume=resume)
+    print(json.dumps({k: v for k, v in report.items() if k.startswith(("real", "imagined"))}, indent=2))
+    print(f"judge: {out}")
+
+
+def serve_judge(
+    judge: Path,
+    port: int = 8000,
+    host: str = "127.0.0.1",
+    limits: Annotated[ChatLimits, tyro.conf.arg(name="")] = ChatLimits(),
+) -> None:
+    """Serve the learned judge over the OpenAI chat-completions protocol (POST /v1/chat/completions).
+
+    A malformed request, one past the limits, or one that stalls past the read timeout gets a 4xx
+    JSON error in the OpenAI shape naming the field at fault; the server logs it and serves on.
+
+    Args:
+        judge: judge run (or checkpoint) directory, from `gymnast train-judge`.
+        port: TCP port to listen on.
+        host: address to bind (127.0.0.1: this machine only).
+        limits: the largest request body and `n`, and the read timeout.
+    """
+    import time
+
+    from gymnast.reward.serve import judge_server
+
+    with judge_server(judge, host, port, limits=limits) as server:
+        print(f"judge: {judge} at {server.url} (model gymnast-judge); Ctrl-C stops", flush=True)
+        try:
+            while True:
+                time.sleep(3600)
+        except KeyboardInterrupt:
+            pass
+
+
+def eval_judge(
+    reward: str,
+    data: Path,
+    out: Path,
+    wm: Path | None = None,
+    heldout_fraction: float = 0.1,
+    device: str = "auto",
+    camera: str | None = None,
+    keys: Annotated[KeyFlags, tyro.conf.arg(name="")] = KeyFlags(),
+) -> None:
+    """Measure a 0/1 judge (judge:RUN or vlm:MODEL@BASE_URL) on held-out episodes: TPR and FPR on
+    real videos and, with --wm, on the world model's re-imagining of the same episodes.
+
+    Args:
+        reward: the judge, e.g. judge:runs/judge or vlm:gpt-4o@https://api.openai.com/v1 (key from OPENAI_API_KEY).
+        data: dataset directory; the episodes of its held-out scenes are judged.
+        out: report JSON.
+        wm: world-model run whose imagined videos are judged too.
+        heldout_fraction: the held-out share of scenes (the world model's, so its videos are unseen).
+        device: where a learned judge and the world model run: auto (CUDA when torch sees a GPU), cpu, cuda or cuda:N.
+        camera: the dataset camera to judge, by name (front: observation.images.front) or by feature key
+            (image, observation.images.top); default: its first video (else image) feature.
+        keys: which dataset features are the actions (re-imagined with --wm) and the states (default:
+            LeRobot's action and observation.state).
+    """
+    from gymnast.reward.select import measure_judge
+
+    report = measure_judge(RewardSpec.parse(reward), data, out, wm, heldout_fraction, device, camera,
+                           feature_keys(keys))
+    print(json.dumps(report, indent=2))

@@ -1,0 +1,93 @@
+"""`gymnast` commands that train and measure a policy: behaviour cloning and real-world evaluation."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Literal
+
+import tyro
+
+from gymnast.cli.flags import KeyFlags, Preset, key_overrides
+from gymnast.cli.settings import resolve, saved_inputs
+from gymnast.config import CameraNames
+from gymnast.data.frames import Fit
+from gymnast.eval.evaluate import EvalConfig
+
+
+def sft(
+    out: Path,
+    data: Path | None = None,
+    preset: Preset = "full",
+    resume: bool = False,
+    demos_per_task: int | None = None,
+    steps: int | None = None,
+    vision: Literal["cnn", "efficientnet"] | None = None,
+    tasks: str | None = None,
+    seed: int | None = None,
+    camera: str | None = None,
+    cameras: CameraNames = (),
+    policy_type: Literal["tokens", "flow"] | None = None,
+    robot_state: bool | None = None,
+    fit: Fit | None = None,
+    device: str | None = None,
+    keys: Annotated[KeyFlags, tyro.conf.arg(name="")] = KeyFlags(),
+) -> None:
+    """Behaviour-clone a VLA on N successful expert demonstrations per task.
+
+    Args:
+        out: run directory: checkpoints, metrics.jsonl, config.json.
+        data: dataset directory (from `gymnast collect`); with --resume, the run's own.
+        preset: debug (seconds), demo (minutes) or full (the default policy).
+        resume: continue the run in OUT from its last checkpoint, with the settings and data saved there.
+        demos_per_task: override the preset's demonstrations per task.
+        steps: override the preset's optimizer steps.
+        vision: override the image encoder.
+        tasks: restrict to these tasks (comma-separated).
+        seed: override the seed.
+        camera: the dataset camera to read, by name (front: observation.images.front) or by feature key
+            (image, observation.images.top); default: its first video (else image) feature.
+        cameras: several dataset cameras the policy sees side by side, the primary first (e.g.
+            front,gripper); saved with the policy, so eval and rl render the same views. Default: --camera alone.
+        policy_type: the policy family: tokens (the tokenized VLA, the default) or flow (the
+            flow-matching VLA of VLA-RFT). Saved with the checkpoint; rl and eval read it there.
+        robot_state: True: the policy also reads the robot's state (the dataset's observation.state,
+            e.g. hand xyz and gripper); eval and rl give it the simulator's, imagination a state model's.
+        fit: how frames that are not the model's square size are fitted: resize (squash the whole
+            frame) or crop (the central square); saved with the run.
+        device: auto (CUDA when torch sees a GPU, else the CPU), cpu, cuda or cuda:N; --resume may change it.
+        keys: which dataset features are the actions and the states (default: LeRobot's action and
+            observation.state); saved with the run.
+    """
+    from gymnast.policy.sft import SFT_PRESETS, saved_sft_config, train_sft
+
+    config, inputs = resolve(
+        "sft", out, resume, SFT_PRESETS[preset], inputs={"data": data}, required=("data",),
+        overrides={"demos_per_task": demos_per_task, "steps": steps, "tasks": tasks, "seed": seed,
+                   "vla.vision": vision, "camera": camera, "cameras": cameras or None, "policy": policy_type,
+                   "robot_state": robot_state, "fit": fit, "device": device,
+                   **key_overrides(keys)},
+        saved=lambda: (saved_sft_config(out), saved_inputs(out, "data")))
+    checkpoint = train_sft(inputs["data"], out, config, resume=resume)
+    print(f"policy: {checkpoint}")
+
+
+def evaluate_command(
+    policy: str,
+    out: Path,
+    config: Annotated[EvalConfig, tyro.conf.arg(name="")] = EvalConfig(),
+) -> None:
+    """Evaluate a policy in the real world on held-out seeds: success per task with 95% CIs.
+
+    Args:
+        policy: an SFT/RL run directory (its newest checkpoint), 'expert' for the scripted reference, or
+            lerobot:PATH for a LeRobot pretrained_model folder (acts in this process: --workers 1).
+        out: JSON report (per-episode records included); videos are saved beside it in <name>_videos/.
+        config: tasks, episodes, perturbation, gap and workers.
+    """
+    from gymnast.eval.evaluate import evaluate, format_summary
+    from gymnast.policy.load import is_lerobot, load_policy
+
+    # A LeRobot folder is no run directory for the workers to load: it acts in this process.
+    report = evaluate(load_policy(policy) if is_lerobot(policy) else policy, config, out)
+    print(format_summary(report))
+    print(f"report: {out}")

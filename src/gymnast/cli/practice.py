@@ -1,0 +1,202 @@
+"""`gymnast` commands that practise: GRPO through one loop, Dyna's rounds and the headline experiment."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+from typing import Annotated
+
+import tyro
+
+from gymnast.cli.flags import GPUPreset, Preset, RLFlags
+from gymnast.cli.settings import resolve
+from gymnast.config import CameraNames
+from gymnast.envs.kinds import EnvName, env_kind
+from gymnast.reward.spec import RewardSpec
+from gymnast.rl.config import RL_PRESETS, RLConfig
+
+
+def rl(
+    out: Path,
+    policy: Path | None = None,
+    env: EnvName | None = None,
+    reward: str | None = None,
+    wm: Path | None = None,
+    data: Path | None = None,
+    robot_state: Path | None = None,
+    preset: GPUPreset = "full",
+    resume: bool = False,
+    config: Annotated[RLFlags, tyro.conf.arg(name="")] = RLFlags(),
+) -> None:
+    """Fine-tune a policy with GRPO in the world model (imagined), the software simulator or the real world.
+
+    Args:
+        out: run directory: checkpoints, metrics.jsonl, tensorboard/, videos/, summary.json.
+        policy: the SFT (or RL) run or checkpoint to start from (required unless --resume).
+        env: where rollouts happen: imagined (in --wm), sim (the software simulator, --gap) or real.
+        reward: judge:RUN | vlm:MODEL@BASE_URL | verified | sim | sim-dense.
+        wm: the world model run (needed by --env imagined and --reward verified).
+        data: dataset whose scenes are the start states (default: the one the policy was trained on).
+        robot_state: with --env imagined, a state model (or ensemble) run stepped beside the world
+            model, whose imagined robot state is given to a policy that reads one (observation.state).
+        preset: debug (seconds), demo (minutes), full or gpu (400 steps of 256 rollouts; docs/gpu.md).
+        resume: continue the run in OUT from its last checkpoint, with the settings, policy, env,
+            reward, world model and data saved there.
+        config: the GRPO settings; each one left out keeps the preset's value.
+    """
+    from gymnast.rl.config import RLRun, saved_rl_settings
+    from gymnast.rl.inputs import with_tasks_from_data
+    from gymnast.rl.train import train_rl
+
+    def saved() -> tuple[RLConfig, dict]:
+        run_spec, settings = saved_rl_settings(out)
+        return settings, {field.name: getattr(run_spec, field.name) for field in dataclasses.fields(run_spec)}
+
+    # Parsed here, once: the library takes the env kind and the reward spec, never their names.
+    settings, inputs = resolve(
+        "rl", out, resume, RL_PRESETS[preset], overrides=dataclasses.asdict(config), saved=saved,
+        inputs={"policy": policy, "env": None if env is None else env_kind(env),
+                "reward": None if reward is None else RewardSpec.parse(reward), "wm": wm, "data": data,
+                "robot_state": robot_state},
+        required=("policy", "env", "reward"))
+    run_spec = RLRun(**{name: str(value) if isinstance(value, Path) else value for name, value in inputs.items()})
+    if not resume and config.tasks is None:  # the preset's tasks may not be in the data
+        settings = with_tasks_from_data(run_spec, settings)
+    summary = train_rl(run_spec, out, settings, resume=resume)
+    summary.pop("curve")
+    print(json.dumps(summary, indent=2))
+
+
+def dyna(
+    out: Path,
+    policy: Path | None = None,
+    wm: Path | None = None,
+    judge: Path | None = None,
+    state: Path | None = None,
+    data: Path | None = None,
+    preset: Preset = "full",
+    resume: bool = False,
+    rounds: int | None = None,
+    rollouts_per_task: int | None = None,
+    steps: int | None = None,
+    tasks: str | None = None,
+    keyframes: str | None = None,
+    horizon: int | None = None,
+    eval_horizon: int | None = None,
+    practice_from_rollouts: bool | None = None,
+    state_steps: int | None = None,
+    wm_steps: int | None = None,
+    workers: int | None = None,
+    runner: str | None = None,
+    real_rl: bool | None = None,
+) -> None:
+    """World-Gymnast's loop: RL in imagination, a few counted real rollouts of the new policy, the
+    world model and the reward model (judge or state model) fine-tuned on them, a real evaluation;
+    repeated. Writes OUT/round_k/, OUT/summary.json, OUT/dyna.md (table) and OUT/dyna.png (real
+    success against real interactions), beside RL in the real world with the same settings.
+    Rerunning skips what finished.
+
+    Args:
+        out: run directory.
+        policy: the SFT (or RL) run to start from (required unless --resume).
+        wm: the world-model run imagined RL starts in; fine-tuned every round.
+        judge: the judge run that rewards imagined RL; fine-tuned every round (this or --state).
+        state: instead of a judge, a state-model run or ensemble (`gymnast train-state`,
+            `gymnast make-ensemble`) whose reward head rewards imagined RL; every member fine-tuned
+            every round.
+        data: dataset whose scenes imagined RL starts from (default: the one the policy was trained on).
+        preset: debug (seconds; tests), demo (minutes) or full.
+        resume: continue the run in OUT with the settings and inputs saved there.
+        rounds: rounds of the loop (default: the preset's).
+        rollouts_per_task: real episodes recorded per task and round (default: the preset's).
+        steps: RL steps in imagination per round (default: the preset's).
+        tasks: tasks trained and evaluated on (default: the preset's).
+        keyframes: where in the start episodes practice begins (see `gymnast rl --help`; default: the preset's).
+        horizon: actions per imagined rollout, e.g. 20 for short segments (default: the preset's).
+        eval_horizon: actions per real episode, recorded or evaluated (0: --horizon; with segments,
+            the task's 150).
+        practice_from_rollouts: rounds after the first practise from the previous round's real
+            rollouts instead of --data (default: the preset's, off).
+        state_steps: fine-tuning steps of the state model per round (default: the preset's).
+        wm_steps: fine-tuning steps of the world model per round; 0 keeps the given one (default: the preset's).
+        workers: simulator processes (default: the preset's).
+        runner: where they run: local, ray or ray:ADDRESS (default: the preset's, local).
+        real_rl: also run RL in the real world for comparison (default: the preset's, on).
+    """
+    from gymnast.experiment.dyna import DYNA_PRESETS, DynaInputs, run_dyna, saved_dyna_settings
+    from gymnast.experiment.dyna_report import dyna_table
+
+    def saved():
+        config, inputs = saved_dyna_settings(out)
+        return config, dataclasses.asdict(inputs)
+
+    config, inputs = resolve(
+        "dyna", out, resume, DYNA_PRESETS[preset],
+        inputs={"policy": policy, "wm": wm, "judge": judge, "state": state, "data": data},
+        overrides={"rounds": rounds, "rollouts_per_task": rollouts_per_task, "rl.steps": steps, "rl.tasks": tasks,
+                   "rl.keyframes": keyframes, "rl.horizon": horizon, "rl.eval_horizon": eval_horizon,
+                   "practice_from_rollouts": practice_from_rollouts,
+                   "state_steps": state_steps, "wm_steps": wm_steps, "workers": workers, "runner": runner,
+                   "real_rl": real_rl}, saved=saved, required=("policy", "wm"))
+    summary = run_dyna(config, DynaInputs(**inputs), out)
+    print(dyna_table(summary))
+    print(f"summary: {out / 'summary.json'}, plot: {out / summary['plot']}")
+
+
+def experiment(
+    out: Path,
+    preset: GPUPreset = "full",
+    resume: bool = False,
+    reuse: Annotated[list[str], tyro.conf.UseAppendAction] = [],  # noqa: B006 (read by tyro, never mutated)
+    workers: int | None = None,
+    sentences: Path | None = None,
+    runner: str | None = None,
+    device: str | None = None,
+    cameras: CameraNames | None = None,
+    judge_rollouts: int | None = None,
+    demos_per_task: int | None = None,
+    freeze: tuple[str, ...] | None = None,
+) -> None:
+    """The headline comparison: data, SFT, world model, judge, state model, eight arms, real-world
+    evaluation and the WorldGym check, then OUT/report.md, OUT/summary.json and OUT/plots/.
+    Rerunning the same command skips the stages that finished and continues an interrupted one.
+
+    Args:
+        out: experiment directory.
+        preset: debug (a minute; tests), demo (a few tasks, what `make demo` runs), full (MT10) or gpu
+            (MT10 at the papers' budget, for one GPU and its host's cores; docs/gpu.md).
+        resume: continue the experiment in OUT with the settings saved there (whatever its preset).
+        reuse: a stage to take from an earlier run instead of running it, as STAGE=DIR (collect=DATASET,
+            sft=RUN, world_model=RUN, judge=RUN, state_model=RUN or an ensemble of them); repeat for
+            several, e.g. --reuse collect=data/mt10 --reuse world_model=runs/wm_full.
+        workers: simulator processes (default: the preset's, one per core on 2 cores).
+        sentences: a file of `task: sentence` lines, your own wording of the tasks: the language
+            check gives the policies these instead of the held-out paraphrases.
+        runner: where they run: local, ray or ray:ADDRESS (default: the preset's, local).
+        device: where the models train, imagine and judge: auto (CUDA when torch sees a GPU, else the
+            CPU), cpu, cuda or cuda:N; --resume may change it.
+        cameras: the views recorded and seen side by side by the policy, the world model and the
+            judges, e.g. front or front,gripper,hand (default: the preset's, front,gripper).
+        judge_rollouts: real rollouts per task of the SFT policy, played past any success, that the
+            judge also learns from (its near misses; counted in summary.json); default: the preset's.
+        demos_per_task: expert demonstrations per task the SFT policy learns from (default: the
+            preset's, 10); the world model and the judge still learn from the whole dataset. 2 is
+            the data-scarce regime (results/sft/scarce: SFT at 15-40% on MT10).
+        freeze: parts of the policy the RL arms leave as SFT made them, by parameter-name prefix
+            (default: the preset's, vision: the embedded policies' image encoder; a LeRobot
+            policy's are its own, e.g. model.backbone; none: `--freeze` alone).
+    """
+    from gymnast.experiment.config import EXPERIMENT_PRESETS
+    from gymnast.experiment.pipeline import run_experiment, saved_experiment_config
+    from gymnast.experiment.report import format_table
+    from gymnast.experiment.stages import parse_reuse
+
+    config, _ = resolve("experiment", out, resume, EXPERIMENT_PRESETS[preset],
+                        overrides={"workers": workers, "sentences": sentences, "runner": runner, "device": device,
+                                   "cameras": cameras, "judge_rollouts": judge_rollouts,
+                                   "sft.demos_per_task": demos_per_task, "rl.freeze": freeze},
+                        inputs={}, saved=lambda: (saved_experiment_config(out), {}))
+    summary = run_experiment(config, out, parse_reuse(reuse))
+    print(format_table(summary))
+    print(f"report: {out / 'report.md'}")
