@@ -18,8 +18,9 @@ from pathlib import Path
 
 import torch
 
-from gymnast.reward.frame_judge import FrameJudge
-from gymnast.reward.judge import JudgeConfig, LearnedJudge
+from gymnast.reward.judges.frames import FrameJudge
+from gymnast.reward.judges.base import JudgeConfig
+from gymnast.reward.judges.video import LearnedJudge
 from gymnast.utils.atomic import write_json
 from policy import seconds_per_call  # benchmarks/policy.py: median wall time after warm-up calls
 

@@ -35,7 +35,7 @@ from gymnast.envs.parallel import cached_env, parallel_map
 from gymnast.envs.tasks import DATA_SEEDS
 from gymnast.eval.actors import PolicyActor, load_run_policy
 from gymnast.experiment.practice_signal import dense_return, signal_figures
-from gymnast.reward.train_judge import load_judge
+from gymnast.reward.judges.train import load_judge
 from gymnast.utils.atomic import write_json
 
 RESULTS = Path(__file__).parent / "results" / "judge_ranking.json"

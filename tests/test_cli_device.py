@@ -11,7 +11,7 @@ from robot_datasets import write_robot_dataset
 
 from gymnast.cli import main
 from gymnast.experiment.config import EXPERIMENT_PRESETS
-from gymnast.reward.train_judge import JUDGE_PRESETS
+from gymnast.reward.judges.train import JUDGE_PRESETS
 from gymnast.rl.config import RL_PRESETS
 from gymnast.world_model.base import load_world_model
 from gymnast.world_model.train import WM_PRESETS

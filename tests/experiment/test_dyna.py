@@ -14,7 +14,7 @@ from gymnast.config import EnvConfig
 from gymnast.data.collect import CollectConfig, collect
 from gymnast.data.lerobot import EpisodeDataset
 from gymnast.experiment.dyna import DYNA_PRESETS, DynaInputs, run_dyna
-from gymnast.reward.train_judge import JUDGE_PRESETS, build_judge, train_judge
+from gymnast.reward.judges.train import JUDGE_PRESETS, build_judge, train_judge
 from gymnast.world_model.train import WM_PRESETS, train_world_model
 
 pytestmark = pytest.mark.slow
@@ -122,7 +122,7 @@ def test_bad_inputs_are_refused_before_anything_runs(models, tmp_path):
 def test_a_judge_fine_tunes_from_the_given_judge_and_only_one_of_its_own_kind(models):
     import torch
 
-    from gymnast.reward.train_judge import load_judge, saved_judge_config
+    from gymnast.reward.judges.train import load_judge, saved_judge_config
 
     source = load_judge(models["judge"])
     config = dataclasses.replace(saved_judge_config(models["judge"]), init=models["judge"], seed=7)

@@ -78,8 +78,8 @@ def test_a_per_frame_judge_is_read_at_every_horizon_from_one_pass():
 
 
 def test_a_progress_judge_is_read_as_its_score_at_every_horizon():
-    from gymnast.reward.judge import JudgeConfig
-    from gymnast.reward.progress_judge import ProgressJudge
+    from gymnast.reward.judges.base import JudgeConfig
+    from gymnast.reward.judges.progress import ProgressJudge
 
     judge = ProgressJudge(JudgeConfig(width=16, image_size=16)).eval()
     frames = torch.randint(0, 256, (2, 11, 16, 16, 3), dtype=torch.uint8)

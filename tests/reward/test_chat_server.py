@@ -18,9 +18,10 @@ from PIL import Image
 
 from gymnast.cli import main
 from gymnast.policy.text import InstructionEncoder
-from gymnast.reward.chat_server import ChatLimits, ChatServer
-from gymnast.reward.judge import JudgeConfig, LearnedJudge
-from gymnast.reward.serve import judge_answer
+from gymnast.reward.chat.server import ChatLimits, ChatServer
+from gymnast.reward.judges.base import JudgeConfig
+from gymnast.reward.judges.video import LearnedJudge
+from gymnast.reward.chat.serve import judge_answer
 
 LIMITS = ChatLimits(max_body_mb=0.5, read_timeout_s=0.5, max_choices=4)
 SIZE = 32  # the tiny judge's image size
@@ -175,7 +176,7 @@ MALFORMED = {
 @pytest.mark.parametrize("case", MALFORMED, ids=str)
 def test_each_malformed_raw_request_gets_a_4xx_openai_error_and_the_server_serves_on(server, client, caplog, case):
     status, code, param, says, request = MALFORMED[case]
-    with caplog.at_level(logging.WARNING, logger="gymnast.reward.chat_server"):
+    with caplog.at_level(logging.WARNING, logger="gymnast.reward.chat.server"):
         answered, body, seconds = exchange(server, request)
     assert answered == status
     assert_openai_error(body, code, param, says)

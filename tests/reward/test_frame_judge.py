@@ -8,11 +8,12 @@ import pytest
 import torch
 
 from gymnast.data.lerobot import EpisodeDataset
-from gymnast.reward.frame_judge import FrameJudge
-from gymnast.reward.judge import JudgeConfig
-from gymnast.reward.train_judge import (HARD_CANDIDATES, JUDGE_PRESETS, FramePool, JudgeTrainConfig, Video,
-                                        choose_threshold, evaluate_judge, judge_cases, load_judge, roc_readout,
-                                        split_scenes, train_judge)
+from gymnast.reward.judges.frames import FrameJudge
+from gymnast.reward.judges.base import JudgeConfig
+from gymnast.reward.judges.measure import choose_threshold, evaluate_judge, roc_readout
+from gymnast.reward.judges.train import (HARD_CANDIDATES, JUDGE_PRESETS, FramePool, JudgeTrainConfig, load_judge,
+                                         split_scenes, train_judge)
+from gymnast.reward.judges.videos import Video, judge_cases
 
 DEBUG = dataclasses.replace(JUDGE_PRESETS["debug"], heldout_fraction=0.25, validation_fraction=0.2)
 
@@ -193,7 +194,7 @@ def test_the_committed_video_judge_still_loads():
 
 
 def test_episodes_imagined_together_match_episodes_imagined_alone(tiny_dataset, tmp_path):
-    from gymnast.reward.train_judge import load_videos
+    from gymnast.reward.judges.videos import load_videos
     from gymnast.world_model.train import WM_PRESETS, train_world_model
 
     train_world_model(tiny_dataset, tmp_path / "wm", WM_PRESETS["debug"], progress=False)

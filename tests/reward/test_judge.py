@@ -9,10 +9,13 @@ from robot_datasets import write_robot_dataset
 
 from gymnast.cli import main
 from gymnast.data.lerobot import EpisodeDataset
-from gymnast.reward.judge import JudgeConfig, LearnedJudge, judged_frame_indices
-from gymnast.reward.serve import judge_server
-from gymnast.reward.train_judge import JUDGE_PRESETS, evaluate_judge, load_judge, load_videos, train_judge
-from gymnast.reward.vlm import VLMJudge, VLMJudgeConfig
+from gymnast.reward.judges.base import JudgeConfig
+from gymnast.reward.judges.video import LearnedJudge, judged_frame_indices
+from gymnast.reward.chat.serve import judge_server
+from gymnast.reward.judges.measure import evaluate_judge
+from gymnast.reward.judges.train import JUDGE_PRESETS, load_judge, train_judge
+from gymnast.reward.judges.videos import load_videos
+from gymnast.reward.chat.vlm import VLMJudge, VLMJudgeConfig
 from gymnast.world_model.train import WM_PRESETS, train_world_model
 
 # The tiny dataset's scene drawer-close/0 is held out at 0.25 (see tests/world_model/test_train.py).

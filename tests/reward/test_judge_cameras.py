@@ -10,9 +10,10 @@ import pytest
 import torch
 
 from gymnast.cli import main
-from gymnast.reward.frame_judge import FrameJudge
-from gymnast.reward.judge import JudgeConfig, LearnedJudge
-from gymnast.reward.train_judge import load_judge
+from gymnast.reward.judges.frames import FrameJudge
+from gymnast.reward.judges.base import JudgeConfig
+from gymnast.reward.judges.video import LearnedJudge
+from gymnast.reward.judges.train import load_judge
 
 WORLD_MODEL = Path(__file__).resolve().parents[2] / "results" / "world_model" / "wm"
 

@@ -7,11 +7,12 @@ import numpy as np
 import pytest
 import torch
 
-from gymnast.reward.judge import JudgeConfig
-from gymnast.reward.progress_judge import ProgressJudge, progress_loss, progress_targets
+from gymnast.reward.judges.base import JudgeConfig
+from gymnast.reward.judges.progress import ProgressJudge, progress_loss, progress_targets
 from gymnast.reward.select import make_reward, measure_judge
 from gymnast.reward.spec import RewardSpec
-from gymnast.reward.train_judge import JUDGE_PRESETS, FramePool, Video, load_judge, train_judge
+from gymnast.reward.judges.train import JUDGE_PRESETS, FramePool, load_judge, train_judge
+from gymnast.reward.judges.videos import Video
 
 DEBUG = dataclasses.replace(JUDGE_PRESETS["debug"], kind="progress", heldout_fraction=0.25, validation_fraction=0.2)
 

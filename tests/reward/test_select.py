@@ -7,13 +7,13 @@ import pytest
 
 from gymnast.envs.kinds import ENV_KINDS, IMAGINED, REAL, SIM
 from gymnast.reward.base import RewardNeeds, check_fits
-from gymnast.reward.frame_judge import FrameJudge
-from gymnast.reward.judge import LearnedJudge
+from gymnast.reward.judges.frames import FrameJudge
+from gymnast.reward.judges.video import LearnedJudge
 from gymnast.reward.select import make_reward
 from gymnast.reward.sim import SimDense, SimSuccess
 from gymnast.reward.spec import RewardSpec
 from gymnast.reward.verified import VerifiedReward
-from gymnast.reward.vlm import VLMJudge, VLMJudgeConfig
+from gymnast.reward.chat.vlm import VLMJudge, VLMJudgeConfig
 from gymnast.world_model.embedded import EmbeddedWorldModel, EmbeddedWorldModelConfig
 
 SPECS = ["judge:runs/judge", "state:runs/state", "vlm:gpt-4o@http://127.0.0.1:9/v1", "verified", "sim", "sim-dense"]

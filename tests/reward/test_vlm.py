@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 import torch
 
-from gymnast.reward.chat_server import ChatServer
-from gymnast.reward.vlm import VLMJudge, VLMJudgeConfig, parse_answer
+from gymnast.reward.chat.server import ChatServer
+from gymnast.reward.chat.vlm import VLMJudge, VLMJudgeConfig, parse_answer
 
 INSTRUCTIONS = ["open the drawer", "close it"]
 

@@ -68,7 +68,7 @@ def _assert_each_chunk_shows_one_frame(video):
 
 
 def test_rl_with_the_vlm_judge_talks_to_a_served_judge(rl_dataset, tmp_path):
-    from gymnast.reward.serve import judge_server
+    from gymnast.reward.chat.serve import judge_server
 
     with judge_server(JUDGE) as server:
         main(_rl_args("imagined", f"vlm:gymnast-judge@{server.url}", tmp_path / "run", rl_dataset))

@@ -12,7 +12,7 @@ from gymnast.cli.flags import GPUPreset, KeyFlags, feature_keys, key_overrides
 from gymnast.cli.settings import resolve, saved_inputs
 from gymnast.config import CameraNames
 from gymnast.data.frames import Fit
-from gymnast.reward.chat_server import ChatLimits
+from gymnast.reward.chat.server import ChatLimits
 from gymnast.reward.spec import RewardSpec
 
 
@@ -63,8 +63,8 @@ def train_judge(
         keys: which dataset features are the actions and the states (default: LeRobot's action and
             observation.state); saved with the run.
     """
-    from gymnast.reward.train_judge import JUDGE_PRESETS, saved_judge_config
-    from gymnast.reward.train_judge import train_judge as train
+    from gymnast.reward.judges.train import JUDGE_PRESETS, saved_judge_config
+    from gymnast.reward.judges.train import train_judge as train
 
     config, inputs = resolve(
         "train-judge", out, resume, JUDGE_PRESETS[preset], inputs={"data": data, "wm": wm}, required=("data",),
@@ -96,7 +96,7 @@ def serve_judge(
     """
     import time
 
-    from gymnast.reward.serve import judge_server
+    from gymnast.reward.chat.serve import judge_server
 
     with judge_server(judge, host, port, limits=limits) as server:
         print(f"judge: {judge} at {server.url} (model gymnast-judge); Ctrl-C stops", flush=True)

@@ -19,7 +19,7 @@ from gymnast.envs.instructions import read_sentences
 from gymnast.envs.tasks import resolve_tasks
 from gymnast.envs.workers import parse_runner
 from gymnast.policy.sft import SFT_PRESETS, SFTConfig
-from gymnast.reward.train_judge import JUDGE_PRESETS, JudgeTrainConfig
+from gymnast.reward.judges.train import JUDGE_PRESETS, JudgeTrainConfig
 from gymnast.rl.config import RL_PRESETS, RLConfig
 from gymnast.world_model.embedded import EmbeddedWorldModelConfig
 from gymnast.world_model.train import WM_PRESETS, WorldModelTrainConfig

@@ -260,7 +260,9 @@ def record_rollouts(k: int, policy: Path, judge: Path | None, config: DynaConfig
     taken, from the dataset itself) and how the judge that guided the round's RL, if one did, scores them."""
     from gymnast.data.lerobot import EpisodeDataset
     from gymnast.eval.record import record_real_rollouts
-    from gymnast.reward.train_judge import evaluate_judge, load_judge, load_videos
+    from gymnast.reward.judges.measure import evaluate_judge
+    from gymnast.reward.judges.train import load_judge
+    from gymnast.reward.judges.videos import load_videos
 
     counts = record_real_rollouts(policy, config.rl.tasks, config.rollouts_per_task,
                                   config.first_rollout_seed + (k - 1) * config.rollouts_per_task,
@@ -291,7 +293,7 @@ def fine_tune_judge(original: Path, current: Path, wm: Path, recorded: list[Path
                     progress: bool) -> dict:
     """The judge `current`, fine-tuned for `steps` on `original`'s data plus every recorded rollout (re-imagined
     by the round's world model when the original judge learned from imagined video too)."""
-    from gymnast.reward.train_judge import saved_judge_config, train_judge
+    from gymnast.reward.judges.train import saved_judge_config, train_judge
 
     saved = saved_settings(original)
     settings = _fine_tuning(saved_judge_config(original), steps, current, recorded)

@@ -102,7 +102,7 @@ def _models(stages: Stages, config: ExperimentConfig, out: Path, progress: bool
     """The dataset, SFT policy, world model, judge and state model, trained here or reused."""
     from gymnast.data.collect import collect
     from gymnast.policy.sft import train_sft
-    from gymnast.reward.train_judge import train_judge
+    from gymnast.reward.judges.train import train_judge
     from gymnast.world_model.train import train_world_model
     from gymnast.world_model.train_state import train_state_model
 

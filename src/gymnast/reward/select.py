@@ -29,7 +29,7 @@ def make_reward(spec: RewardSpec, world_model: WorldModel | None = None) -> Rewa
         FileNotFoundError: `judge:RUN` where RUN has no checkpoint.
     """
     if spec.kind == "judge":
-        from gymnast.reward.train_judge import load_judge
+        from gymnast.reward.judges.train import load_judge
 
         return load_judge(spec.run)
     if spec.kind == "state":
@@ -38,7 +38,7 @@ def make_reward(spec: RewardSpec, world_model: WorldModel | None = None) -> Rewa
 
         return StateReward(load_state_models(spec.run))
     if spec.kind == "vlm":
-        from gymnast.reward.vlm import VLMJudge, VLMJudgeConfig
+        from gymnast.reward.chat.vlm import VLMJudge, VLMJudgeConfig
 
         return VLMJudge(VLMJudgeConfig(model=spec.model, base_url=spec.base_url))
     if spec.kind == "verified":
@@ -59,8 +59,10 @@ def measure_judge(reward: RewardSpec, data: Path, out: Path, wm: Path | None = N
     its actions and states read by `keys`), and with `wm`
     on its re-imaginings of them, or `evaluate_progress` of a progress judge (which gives degrees,
     not verdicts); written to `out` (JSON). A learned judge and the world model run on `device`."""
-    from gymnast.reward.progress_judge import evaluate_progress
-    from gymnast.reward.train_judge import evaluate_judge, heldout_videos, saved_judge_config
+    from gymnast.reward.judges.progress import evaluate_progress
+    from gymnast.reward.judges.measure import evaluate_judge
+    from gymnast.reward.judges.train import saved_judge_config
+    from gymnast.reward.judges.videos import heldout_videos
 
     if reward.kind not in ("judge", "vlm"):
         raise ValueError(f"eval-judge measures judges (judge:RUN or vlm:MODEL@BASE_URL), got {str(reward)!r}")

@@ -27,9 +27,9 @@ from torch import nn
 
 from gymnast.policy.text import EMBEDDING_DIM, InstructionEncoder
 from gymnast.policy.vision import to_float_image
-from gymnast.utils.images import changed_frames, latest_changed, split_views
-from gymnast.reward.judge import JudgeConfig, ThresholdJudge, check_videos, labelled_loss
+from gymnast.reward.judges.base import JudgeConfig, ThresholdJudge, check_videos, labelled_loss
 from gymnast.utils.device import bf16_autocast, to_device
+from gymnast.utils.images import changed_frames, latest_changed, split_views
 
 FRAMES_PER_PASS = 512  # frames through the CNN at once: bounds memory on long batches of videos
 
@@ -105,9 +105,7 @@ class FrameJudge(ThresholdJudge, nn.Module):
         return self.frame_probabilities(videos, instructions).max(dim=1).values
 
 
-
 def frame_loss(judge: FrameJudge, first: torch.Tensor, frames: torch.Tensor, text: torch.Tensor, labels: torch.Tensor):
     """Binary cross-entropy of (N, H, W, 3) frames, beside their videos' (N, H, W, 3) first frames,
     against (N,) labels; (loss, metrics)."""
     return labelled_loss(judge(first, frames, text), labels)
-

@@ -8,7 +8,7 @@ than chance, even on real video, while the simulator's dense reward ranks them w
 rl-signal`, results/fidelity/signal/): a verdict says nothing about which of two failures came
 closer, which is most of what GRPO has to learn from there. This judge learns the dense reward
 itself, from every frame of real (and re-imagined) episodes: the per-frame judge's network
-(`gymnast.reward.frame_judge`), its output read as the step's reward scaled to [0, 1] and trained
+(`gymnast.reward.judges.frames`), its output read as the step's reward scaled to [0, 1] and trained
 with binary cross-entropy against that soft target. A video scores the mean over its frames after
 the first, as `gymnast.reward.sim.SimDense` scores a simulator's rollout: a continuous reward, so RL
 keeps the groups whose scores differ, and no threshold is chosen.
@@ -23,7 +23,7 @@ import torch
 import torch.nn.functional as F
 
 from gymnast.reward.base import RewardContext
-from gymnast.reward.frame_judge import FrameJudge
+from gymnast.reward.judges.frames import FrameJudge
 from gymnast.reward.sim import META_WORLD_MAX_STEP_REWARD
 from gymnast.utils.device import to_device
 from gymnast.world_model.metrics import pearson

@@ -1,9 +1,9 @@
 """`gymnast train-judge`: fit the learned judge on real (and imagined) episodes, then measure it.
 
-Three judges train here: the per-frame judge (`kind="frames"`, `gymnast.reward.frame_judge`), which
+Three judges train here: the per-frame judge (`kind="frames"`, `gymnast.reward.judges.frames`), which
 learns from every frame with Meta-World's per-step success flag; the video judge (`kind="video"`,
-`gymnast.reward.judge`), which learns from whole videos and their prefixes; and the progress judge
-(`kind="progress"`, `gymnast.reward.progress_judge`), which learns every frame's dense reward and
+`gymnast.reward.judges.video`), which learns from whole videos and their prefixes; and the progress judge
+(`kind="progress"`, `gymnast.reward.judges.progress`), which learns every frame's dense reward and
 scores a video by degree, with no threshold (its report has correlations, not TPR/FPR).
 
 Scenes are split three ways by a fixed hash: held-out scenes are the world model's
@@ -32,26 +32,26 @@ from tqdm import tqdm
 
 from gymnast.data.frames import Fit, model_image_size
 from gymnast.data.lerobot import EpisodeDataset, FeatureKeys
-from gymnast.reward.base import Reward, RewardContext
-from gymnast.reward.frame_judge import FrameJudge, frame_loss
-from gymnast.reward.progress_judge import ProgressJudge, evaluate_progress, progress_loss, progress_targets
-from gymnast.reward.judge import JudgeConfig, LearnedJudge, ThresholdJudge, judge_loss, judged_frame_indices
+from gymnast.reward.judges.base import JudgeConfig
+from gymnast.reward.judges.frames import FrameJudge, frame_loss
+from gymnast.reward.judges.measure import choose_threshold, evaluate_judge
+from gymnast.reward.judges.progress import ProgressJudge, evaluate_progress, progress_loss
+from gymnast.reward.judges.video import LearnedJudge, judge_loss, judged_frame_indices
+from gymnast.reward.judges.videos import Video, load_videos
 from gymnast.utils.atomic import write_json
 from gymnast.utils.checkpoint import begin_training, load_model, save_training, write_run_config
 from gymnast.utils.device import resolve_device
 from gymnast.utils.optim import gradient_step, warmup_cosine
 from gymnast.utils.settings import from_json, saved_settings
-from gymnast.world_model.base import load_world_model, rollout
-from gymnast.world_model.views import model_cameras
 from gymnast.world_model.data import split_episodes
 
 logger = logging.getLogger(__name__)
 
 HARD_CANDIDATES = 4  # random negatives drawn per hard one kept (scored without gradients: ~1.2x the step)
+
 Scorer = Callable[[torch.Tensor, torch.Tensor, list[str]], torch.Tensor]
 """(N, H, W, 3) first frames, (N, H, W, 3) frames and N instructions -> (N,) success logits."""
-NEAR_MISS_STEPS = 10  # a held-out negative: a successful episode cut this many steps before its success
-ROC_TPR = 0.95  # the TPR at which `roc_readout` finds the lowest FPR: the operating point the judge is held to
+
 JUDGES = {"frames": FrameJudge, "video": LearnedJudge, "progress": ProgressJudge}
 """Judge kinds by name; a checkpoint names its class by `backend`."""
 
@@ -143,75 +143,6 @@ JUDGE_PRESETS = {
     "gpu": JudgeTrainConfig(steps=8000, batch_size=256, lr=5e-4, warmup_steps=200, hard_negatives=0.5,
                             judge=JudgeConfig(width=256)),
 }
-
-
-@dataclass(frozen=True)
-class Video:
-    """One episode's video (real or imagined) with its success per frame.
-
-    Attributes:
-        frames: (T+1, H, W, 3) uint8.
-        success: (T+1,) bool frame t counts once the episode has succeeded by then.
-        shows: (T+1,) bool the task is done in frame t (Meta-World's per-step flag; an object
-            knocked off its goal again undoes it); frame 0 never.
-        instruction: the task in words.
-        imagined: re-imagined by a world model under the episode's real actions.
-        progress: (T+1,) float32 the dense reward that led to frame t, scaled to [0, 1] (0 at the
-            start frame): the progress judge's targets.
-    """
-
-    frames: torch.Tensor
-    success: torch.Tensor
-    shows: torch.Tensor
-    instruction: str
-    imagined: bool
-    progress: torch.Tensor
-
-
-IMAGINE_BATCH = 32  # episodes re-imagined together: one world-model call per step for all of them
-
-
-def load_videos(dataset: EpisodeDataset, indices: list[int], wm: Path | None, progress: bool,
-                device: torch.device | None = None) -> list[Video]:
-    """Real videos of the episodes, plus their re-imaginings under the real actions with a world
-    model (on `device`, the host by default)."""
-    videos, episodes = [], []
-    for i in tqdm(indices, desc="loading episodes", disable=not progress):
-        episode = dataset.load(i)
-        frames = torch.from_numpy(episode.observed_frames)  # every camera read, side by side
-        shows = torch.cat([torch.zeros(1, dtype=torch.bool), torch.from_numpy(episode.successes).bool()])
-        videos.append(Video(frames, shows.cummax(0).values, shows, episode.info.instruction, imagined=False,
-                            progress=progress_targets(episode.rewards)))
-        episodes.append(torch.from_numpy(episode.actions).float())
-    if wm is None:
-        return videos
-    model = load_world_model(wm).to(device or "cpu")
-    imagines = model_cameras(model)
-    if (len(dataset.cameras) > 1 or imagines) and tuple(dataset.cameras) != imagines:
-        raise ValueError(f"{dataset.root} is read with cameras {','.join(dataset.cameras)}, but the world model {wm} "
-                         f"imagines {','.join(imagines) or 'one camera'}: re-imagine with a world model of the "
-                         "judge's cameras (`gymnast train-wm --cameras`), or train the judge without --wm")
-    # Episodes of similar length share a batch; shorter ones are padded with zero actions at the
-    # end and cut back, which changes none of their frames: frame t follows actions up to t only.
-    order = sorted(range(len(episodes)), key=lambda n: len(episodes[n]))
-    imagined: dict[int, Video] = {}
-    for first in tqdm(range(0, len(order), IMAGINE_BATCH), desc="imagining episodes", disable=not progress):
-        batch = order[first: first + IMAGINE_BATCH]
-        longest = max(len(episodes[n]) for n in batch)
-        actions = torch.stack([torch.nn.functional.pad(episodes[n], (0, 0, 0, longest - len(episodes[n]))) for n in batch])
-        start = torch.stack([videos[n].frames[:1] for n in batch])  # (b, 1, H, W, 3)
-        frames = rollout(model, start, actions=actions).frames  # (b, T_max, H, W, 3)
-        for n, video in zip(batch, frames):
-            real = videos[n]
-            video = torch.cat([real.frames[:1], video[: len(episodes[n])]])
-            imagined[n] = dataclasses.replace(real, frames=video, imagined=True)
-    return [video for n, real in enumerate(videos) for video in (real, imagined[n])]
-
-
-def heldout_videos(dataset: EpisodeDataset, fraction: float, wm: Path | None = None,
-                   device: torch.device | None = None) -> list[Video]:
-    """The videos of the held-out scenes' episodes (and their re-imaginings with a world model on `device`)."""
-    return load_videos(dataset, split_episodes(dataset.episodes, fraction)[1], wm, progress=False, device=device)
 
 
 def split_scenes(dataset: EpisodeDataset, config: JudgeTrainConfig) -> tuple[list[int], list[int], list[int]]:
@@ -399,115 +330,6 @@ def build_judge(config: JudgeTrainConfig) -> LearnedJudge | FrameJudge:
     judge.load_state_dict(source.state_dict())
     logger.info("starting from the weights of %s", config.init)
     return judge
-
-
-def choose_threshold(judge: Reward, videos: list[Video], tpr: float | None = None) -> dict:
-    """The P(success) threshold that best separates the validation cases (most TPR - FPR, real and
-    imagined together), or with `tpr`, the highest one whose TPR is at least `tpr`; in the middle
-    of the range of equally good ones (or of the gap below the chosen score) so that it sits between
-    scores rather than on one; 0.5 with no validation case of each label.
-
-    Returns ``threshold``, ``tpr``, ``fpr`` and ``cases``.
-    """
-    cases = judge_cases(videos)
-    truth = torch.tensor([label for _, _, label, _, _ in cases], dtype=torch.bool)
-    if not truth.any() or truth.all():
-        logger.warning("no validation scene with both outcomes: the judge keeps the threshold 0.5")
-        return {"threshold": 0.5, "tpr": None, "fpr": None, "cases": len(cases)}
-    scores = _probabilities(judge, cases).double()
-    candidates, passed, failed = operating_points(scores, truth)
-    if tpr is None:
-        quality = passed - failed
-        best = torch.nonzero(quality == quality.max()).flatten()
-        first, last = int(best[0]), int(best[-1])
-    else:  # the share passed falls as the threshold rises: the last candidate still at the rate
-        first = last = int(torch.nonzero(passed >= tpr - 1e-9).flatten()[-1])
-    low = candidates[first - 1] if first > 0 else torch.tensor(0.0, dtype=torch.float64)
-    threshold = float((low + candidates[last]) / 2)
-    return {"threshold": threshold, "tpr": _rate(scores >= threshold, truth), "fpr": _rate(scores >= threshold, ~truth),
-            "cases": len(cases)}
-
-
-def operating_points(scores: torch.Tensor, truth: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """Every distinct threshold worth trying on (N,) scores of cases labelled (N,) `truth` (both
-    labels present), ascending, with the TPR and FPR of ``scores >= threshold`` at each: a threshold
-    in (candidates[i-1], candidates[i]] passes the same cases as candidates[i]."""
-    candidates = torch.unique(scores)  # sorted
-    passes = scores[None, :] >= candidates[:, None]  # (C, N)
-    return candidates, passes[:, truth].double().mean(1), passes[:, ~truth].double().mean(1)
-
-
-def roc_readout(scores: torch.Tensor, truth: torch.Tensor, at_tpr: float = ROC_TPR) -> dict:
-    """How well P(success) ranks these cases, apart from the threshold the judge has: the ROC's AUC
-    (the chance that a success outscores a failure, ties counting half) and the lowest FPR that any
-    threshold gives here with TPR at least `at_tpr`. Both are chosen on the very cases they
-    measure: an upper bound on what tuning the threshold could buy, not the judge as it runs.
-    None with cases of one label only."""
-    if not truth.any() or truth.all():
-        return {"auc": None, "at_tpr": at_tpr, "lowest_fpr": None}
-    positives, negatives = scores[truth], scores[~truth]
-    above = (positives[:, None] > negatives[None, :]).double() + 0.5 * (positives[:, None] == negatives[None, :]).double()
-    _, passed, failed = operating_points(scores, truth)
-    return {"auc": round(above.mean().item(), 4), "at_tpr": at_tpr,
-            "lowest_fpr": round(failed[passed >= at_tpr - 1e-9].min().item(), 4)}
-
-
-def _probabilities(judge, cases: list[tuple[torch.Tensor, str, bool, bool, bool]]) -> torch.Tensor:
-    """(N,) P(success) of each case, from a judge with a `probability`, in the judge's precision."""
-    with torch.no_grad():
-        return torch.cat([judge.probability(frames[None], [text]) for frames, text, _, _, _ in cases])
-
-
-def judge_cases(videos: list[Video]) -> list[tuple[torch.Tensor, str, bool, bool, bool]]:
-    """What a judge is measured on: (frames, instruction, label, whole episode?, imagined?) for every
-    whole video, and for successful ones, cuts halfway to their success and `NEAR_MISS_STEPS` short."""
-    cases = []
-    for video in videos:
-        cases.append((video.frames, video.instruction, bool(video.success[-1]), True, video.imagined))
-        if video.success[-1]:
-            first = int(video.success.float().argmax())  # the first frame showing success
-            for cut in sorted({first // 2, first - NEAR_MISS_STEPS}):  # halfway there; a few steps short
-                if cut >= 2:
-                    cases.append((video.frames[:cut], video.instruction, False, False, video.imagined))
-    return cases
-
-
-def evaluate_judge(judge: Reward, videos: list[Video]) -> dict:
-    """TPR, FPR and accuracy of any 0/1 judge, real and imagined apart; FPR over all negatives and over
-    whole failed episodes. A NaN verdict (could not score) counts as "not success" and is counted.
-    A judge that gives P(success) (the learned ones) gets its verdicts from it and its threshold, and
-    its ROC read out too (``real_roc``: `roc_readout`): is the threshold or the ranking at fault?"""
-    report = {}
-    for imagined in (False, True):
-        cases = [case for case in judge_cases(videos) if case[4] == imagined]
-        if not cases:
-            continue
-        truth = torch.tensor([label for _, _, label, _, _ in cases])
-        prefix = "imagined" if imagined else "real"
-        if isinstance(judge, ThresholdJudge):
-            probabilities = _probabilities(judge, cases)
-            verdicts = (probabilities >= judge.config.threshold).float()  # as `ThresholdJudge.score`
-            report[f"{prefix}_roc"] = roc_readout(probabilities.double(), truth)
-        else:
-            verdicts = torch.stack([judge.score(f[None], [text], RewardContext())[0] for f, text, _, _, _ in cases])
-        predicted = verdicts >= 0.5  # NaN compares False
-        whole = torch.tensor([w for _, _, _, w, _ in cases])
-        report |= {
-            f"{prefix}_tpr": _rate(predicted, truth),
-            f"{prefix}_fpr": _rate(predicted, ~truth),
-            f"{prefix}_fpr_whole_failures": _rate(predicted, ~truth & whole),
-            f"{prefix}_accuracy": round((predicted == truth).float().mean().item(), 4),
-            f"{prefix}_positives": int(truth.sum()),
-            f"{prefix}_negatives": int((~truth).sum()),
-            f"{prefix}_whole_failures": int((~truth & whole).sum()),
-            f"{prefix}_unscored": int(torch.isnan(verdicts).sum()),
-        }
-    return report
-
-
-def _rate(predicted: torch.Tensor, among: torch.Tensor) -> float | None:
-    """Share of `among` predicted positive (None when there are none)."""
-    return round((predicted & among).sum().item() / among.sum().item(), 4) if among.any() else None
 
 
 def saved_judge_config(run: Path) -> JudgeTrainConfig:

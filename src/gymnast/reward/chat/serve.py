@@ -2,7 +2,7 @@
 
 Many rollout workers (or any tool that speaks to VLMs) can then share one judge, and the VLM-judge
 client is exercised end to end against a real server. The instruction is read from the rubric's
-``Task:`` line (`gymnast.reward.vlm.RUBRIC`), the frames from the request's images; the answer
+``Task:`` line (`gymnast.reward.chat.vlm.RUBRIC`), the frames from the request's images; the answer
 ends with the line ``ANSWER: 1`` or ``ANSWER: 0`` the rubric asks for.
 """
 
@@ -15,11 +15,11 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from gymnast.reward.chat_request import InvalidRequest
-from gymnast.reward.chat_server import Answer, ChatLimits, ChatServer
-from gymnast.reward.frame_judge import FrameJudge
-from gymnast.reward.judge import LearnedJudge
-from gymnast.reward.train_judge import load_judge
+from gymnast.reward.chat.request import InvalidRequest
+from gymnast.reward.chat.server import Answer, ChatLimits, ChatServer
+from gymnast.reward.judges.frames import FrameJudge
+from gymnast.reward.judges.train import load_judge
+from gymnast.reward.judges.video import LearnedJudge
 
 _TASK = re.compile(r"^Task:\s*(.+)$", re.MULTILINE)
 
@@ -43,7 +43,7 @@ def judge_answer(judge: LearnedJudge | FrameJudge) -> Answer:
     def answer(text: str, frames: list[np.ndarray]) -> str:
         task = _TASK.search(text)
         if task is None:
-            raise InvalidRequest("the messages need a line 'Task: <instruction>' (see gymnast.reward.vlm.RUBRIC)",
+            raise InvalidRequest("the messages need a line 'Task: <instruction>' (see gymnast.reward.chat.vlm.RUBRIC)",
                                  "messages", "missing_task")
         if not frames:
             raise InvalidRequest("the messages need at least one image_url part: the video's frames", "messages",

@@ -4,7 +4,7 @@ Legend: B rollouts, T frames, H/W image size.
 
 Each rollout's video is thinned to every k-th frame (always keeping the last, where success shows),
 encoded as JPEG data URLs and sent with a rubric (`RUBRIC`) to a chat-completions endpoint: OpenAI
-itself, or a local server (vLLM, SGLang, `gymnast.reward.chat_server.ChatServer`) at `base_url`.
+itself, or a local server (vLLM, SGLang, `gymnast.reward.chat.server.ChatServer`) at `base_url`.
 The judge is asked `samples` times per rollout, one request per sample, and the answers are
 majority-voted; a sample whose answer has no final `ANSWER: 0|1` line, or whose request still fails
 after the retries, counts as "no opinion" (NaN), and a rollout with no opinions at all scores NaN,

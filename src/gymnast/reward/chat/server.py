@@ -5,7 +5,7 @@ VLM judge can be tested with the real `openai` client over real HTTP, and so tha
 be served to anything that speaks the protocol. `faults` injects the failures a real deployment
 shows (rate limits, server errors, slow or malformed answers), one per request, in order.
 
-Every request gets an answer: a malformed one (see `gymnast.reward.chat_request`), one past the
+Every request gets an answer: a malformed one (see `gymnast.reward.chat.request`), one past the
 `ChatLimits`, or one that stalls gets a 4xx JSON error in the OpenAI shape
 (``{"error": {"message", "type", "param", "code"}}``), is logged, and the server serves on.
 """
@@ -26,7 +26,7 @@ from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 
 import numpy as np
 
-from gymnast.reward.chat_request import InvalidRequest, parse_chat_request
+from gymnast.reward.chat.request import InvalidRequest, parse_chat_request
 
 logger = logging.getLogger(__name__)
 

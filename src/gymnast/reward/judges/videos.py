@@ -1,0 +1,104 @@
+"""The videos a judge learns from and is measured on: real episodes, their re-imaginings by a world model, and the cases cut from them.
+
+Legend: T steps, H/W image size.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from pathlib import Path
+
+import torch
+from tqdm import tqdm
+
+from gymnast.data.lerobot import EpisodeDataset
+from gymnast.reward.judges.progress import progress_targets
+from gymnast.world_model.base import load_world_model, rollout
+from gymnast.world_model.data import split_episodes
+from gymnast.world_model.views import model_cameras
+
+NEAR_MISS_STEPS = 10  # a held-out negative: a successful episode cut this many steps before its success
+
+
+@dataclass(frozen=True)
+class Video:
+    """One episode's video (real or imagined) with its success per frame.
+
+    Attributes:
+        frames: (T+1, H, W, 3) uint8.
+        success: (T+1,) bool frame t counts once the episode has succeeded by then.
+        shows: (T+1,) bool the task is done in frame t (Meta-World's per-step flag; an object
+            knocked off its goal again undoes it); frame 0 never.
+        instruction: the task in words.
+        imagined: re-imagined by a world model under the episode's real actions.
+        progress: (T+1,) float32 the dense reward that led to frame t, scaled to [0, 1] (0 at the
+            start frame): the progress judge's targets.
+    """
+
+    frames: torch.Tensor
+    success: torch.Tensor
+    shows: torch.Tensor
+    instruction: str
+    imagined: bool
+    progress: torch.Tensor
+
+
+IMAGINE_BATCH = 32  # episodes re-imagined together: one world-model call per step for all of them
+
+
+def load_videos(dataset: EpisodeDataset, indices: list[int], wm: Path | None, progress: bool,
+                device: torch.device | None = None) -> list[Video]:
+    """Real videos of the episodes, plus their re-imaginings under the real actions with a world
+    model (on `device`, the host by default)."""
+    videos, episodes = [], []
+    for i in tqdm(indices, desc="loading episodes", disable=not progress):
+        episode = dataset.load(i)
+        frames = torch.from_numpy(episode.observed_frames)  # every camera read, side by side
+        shows = torch.cat([torch.zeros(1, dtype=torch.bool), torch.from_numpy(episode.successes).bool()])
+        videos.append(Video(frames, shows.cummax(0).values, shows, episode.info.instruction, imagined=False,
+                            progress=progress_targets(episode.rewards)))
+        episodes.append(torch.from_numpy(episode.actions).float())
+    if wm is None:
+        return videos
+    model = load_world_model(wm).to(device or "cpu")
+    imagines = model_cameras(model)
+    if (len(dataset.cameras) > 1 or imagines) and tuple(dataset.cameras) != imagines:
+        raise ValueError(f"{dataset.root} is read with cameras {','.join(dataset.cameras)}, but the world model {wm} "
+                         f"imagines {','.join(imagines) or 'one camera'}: re-imagine with a world model of the "
+                         "judge's cameras (`gymnast train-wm --cameras`), or train the judge without --wm")
+    # Episodes of similar length share a batch; shorter ones are padded with zero actions at the
+    # end and cut back, which changes none of their frames: frame t follows actions up to t only.
+    order = sorted(range(len(episodes)), key=lambda n: len(episodes[n]))
+    imagined: dict[int, Video] = {}
+    for first in tqdm(range(0, len(order), IMAGINE_BATCH), desc="imagining episodes", disable=not progress):
+        batch = order[first: first + IMAGINE_BATCH]
+        longest = max(len(episodes[n]) for n in batch)
+        actions = torch.stack([torch.nn.functional.pad(episodes[n], (0, 0, 0, longest - len(episodes[n]))) for n in batch])
+        start = torch.stack([videos[n].frames[:1] for n in batch])  # (b, 1, H, W, 3)
+        frames = rollout(model, start, actions=actions).frames  # (b, T_max, H, W, 3)
+        for n, video in zip(batch, frames):
+            real = videos[n]
+            video = torch.cat([real.frames[:1], video[: len(episodes[n])]])
+            imagined[n] = dataclasses.replace(real, frames=video, imagined=True)
+    return [video for n, real in enumerate(videos) for video in (real, imagined[n])]
+
+
+def heldout_videos(dataset: EpisodeDataset, fraction: float, wm: Path | None = None,
+                   device: torch.device | None = None) -> list[Video]:
+    """The videos of the held-out scenes' episodes (and their re-imaginings with a world model on `device`)."""
+    return load_videos(dataset, split_episodes(dataset.episodes, fraction)[1], wm, progress=False, device=device)
+
+
+def judge_cases(videos: list[Video]) -> list[tuple[torch.Tensor, str, bool, bool, bool]]:
+    """What a judge is measured on: (frames, instruction, label, whole episode?, imagined?) for every
+    whole video, and for successful ones, cuts halfway to their success and `NEAR_MISS_STEPS` short."""
+    cases = []
+    for video in videos:
+        cases.append((video.frames, video.instruction, bool(video.success[-1]), True, video.imagined))
+        if video.success[-1]:
+            first = int(video.success.float().argmax())  # the first frame showing success
+            for cut in sorted({first // 2, first - NEAR_MISS_STEPS}):  # halfway there; a few steps short
+                if cut >= 2:
+                    cases.append((video.frames[:cut], video.instruction, False, False, video.imagined))
+    return cases
