@@ -1,7 +1,7 @@
 import json
 from pathlib import Path
 
-from gymnast.experiment.equal_time import equal_wall_clock, training_seconds
+from gymnast.experiment.report.equal_time import equal_wall_clock, training_seconds
 
 
 def _run(root: Path, name: str, step_seconds: list[float], repeat: int | None = None) -> Path:

@@ -8,9 +8,9 @@ from pathlib import Path
 
 from gymnast.eval.stats import wilson_interval
 from gymnast.experiment.arms import ARM_NAMES
-from gymnast.experiment.goals import experiment_goals
-from gymnast.experiment.report import format_table
-from gymnast.experiment.report_text import goal_in_words
+from gymnast.experiment.report.goals import experiment_goals
+from gymnast.experiment.report.write import format_table
+from gymnast.experiment.report.text import goal_in_words
 
 COMMITTED_HEADLINE = Path(__file__).resolve().parents[2] / "results" / "headline" / "summary.json"
 
@@ -89,7 +89,7 @@ def test_an_unmet_watch_is_set_against_imaginations_false_successes_before_pract
 def test_the_report_reads_the_judges_ranking_apart_from_its_threshold_when_measured():
     from collections import defaultdict
 
-    from gymnast.experiment.report_text import report_markdown
+    from gymnast.experiment.report.text import report_markdown
 
     plots = defaultdict(lambda: "plot.png")
     summary = json.loads(COMMITTED_HEADLINE.read_text())

@@ -189,7 +189,7 @@ def experiment(
     """
     from gymnast.experiment.config import EXPERIMENT_PRESETS
     from gymnast.experiment.pipeline import run_experiment, saved_experiment_config
-    from gymnast.experiment.report import format_table
+    from gymnast.experiment.report.write import format_table
     from gymnast.experiment.stages import parse_reuse
 
     config, _ = resolve("experiment", out, resume, EXPERIMENT_PRESETS[preset],

@@ -55,7 +55,7 @@ def run_experiment(config: ExperimentConfig, out: Path, reuse: dict[str, Path] |
 
 
 def _run_experiment(config: ExperimentConfig, out: Path, reuse: dict[str, Path] | None, progress: bool) -> dict:
-    from gymnast.experiment.report import write_report
+    from gymnast.experiment.report.write import write_report
 
     config = config.resolved()
     resolve_device(config.device)  # a missing GPU is said now, not after the data is recorded

@@ -12,8 +12,9 @@ from pathlib import Path
 
 from gymnast.experiment.arms import ARMS, PERTURBATIONS, ROBUSTNESS_ARMS, WM_ARMS, arm
 from gymnast.experiment.config import ExperimentConfig
-from gymnast.experiment.equal_time import equal_wall_clock
-from gymnast.experiment.goals import experiment_goals
+from gymnast.experiment.formatting import number, ratio, wall_time
+from gymnast.experiment.report.equal_time import equal_wall_clock
+from gymnast.experiment.report.goals import experiment_goals
 from gymnast.experiment.stages import BOOKKEEPING, Stages
 from gymnast.utils.atomic import write_bytes, write_json
 
@@ -253,7 +254,7 @@ def _read_json(path: Path) -> dict | None:
 def write_report(out: Path, stages: Stages, config: ExperimentConfig) -> dict:
     """Writes summary.json, plots/ and report.md in `out`; returns the summary."""
     from gymnast.experiment.plots import plot_curves, plot_per_task, plot_worldgym
-    from gymnast.experiment.report_text import report_markdown
+    from gymnast.experiment.report.text import report_markdown
 
     summary = build_summary(stages, config)
     write_json(out / "summary.json", summary)
@@ -273,25 +274,16 @@ def write_report(out: Path, stages: Stages, config: ExperimentConfig) -> dict:
 def format_table(summary: dict) -> str:
     """The arms as aligned text (success, 95% CI, real interactions, wall time), then the result in
     sentences, each goal met, not met or "not significant at this size" as report.md says it."""
-    from gymnast.experiment.report_text import verdict_lines
+    from gymnast.experiment.report.text import verdict_lines
 
     rows = [("arm", "success", "95% CI", "real interactions", "wall time")]
     for row in summary["arms"].values():
-        wall = f"{row['wall_s'] / 60:.1f} min" if row["wall_s"] is not None else ("reused" if row["reused"] else "-")
         rows.append((row["title"], f"{row['success']:.1%}", f"[{row['ci_low']:.1%}, {row['ci_high']:.1%}]",
-                     f"{row['real_interactions']:,}", wall))
+                     f"{row['real_interactions']:,}", wall_time(row)))
     widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
     lines = ["  ".join(cell.ljust(width) for cell, width in zip(row, widths)).rstrip() for row in rows]
     lines.insert(1, "  ".join("-" * width for width in widths))
-    ratios = (f"world-model RL (judge) / SFT: {_fmt_ratio(summary['wm_rl_over_sft'])}; "
-              f"/ software-sim RL: {_fmt_ratio(summary['wm_rl_over_sim_rl'])}; "
-              f"WorldGym Pearson r: {_fmt(summary['worldgym_pearson'])}, Spearman: {_fmt(summary['worldgym_spearman'])}")
+    ratios = (f"world-model RL (judge) / SFT: {ratio(summary['wm_rl_over_sft'])}; "
+              f"/ software-sim RL: {ratio(summary['wm_rl_over_sim_rl'])}; "
+              f"WorldGym Pearson r: {number(summary['worldgym_pearson'])}, Spearman: {number(summary['worldgym_spearman'])}")
     return "\n".join([*lines, "", ratios, "", *(line.replace("**", "") for line in verdict_lines(summary))])
-
-
-def _fmt_ratio(value: float | None) -> str:
-    return "undefined" if value is None else f"{value:.2f}x"
-
-
-def _fmt(value: float | None) -> str:
-    return "undefined" if value is None else f"{value:.2f}"

@@ -6,20 +6,10 @@ Every sentence is computed from summary.json; nothing here is written in advance
 from __future__ import annotations
 
 from gymnast.experiment.dyna_report import dyna_table
-from gymnast.experiment.formatting import ci, pct
-from gymnast.experiment.goals import GOAL_DYNA_SHARE, GOAL_OVER_SFT
+from gymnast.experiment.formatting import ci, number, pct, ratio, wall_time
+from gymnast.experiment.report.goals import GOAL_DYNA_SHARE, GOAL_OVER_SFT
 from gymnast.experiment.new_scenes import table as practice_table
-from gymnast.world_model.metrics import measured_step
-
-
-def _ratio(value: float | None) -> str:
-    return "undefined (division by zero success)" if value is None else f"{value:.2f}x"
-
-
-def _minutes(row: dict) -> str:
-    if row["wall_s"] is None:
-        return "reused" if row["reused"] else "-"
-    return f"{row['wall_s'] / 60:.1f} min" + (" (reused run's log)" if row["reused"] else "")
+from gymnast.experiment.report.evidence import evidence_section, imagination_section, signal_section
 
 
 def _arms_table(summary: dict) -> list[str]:
@@ -27,7 +17,7 @@ def _arms_table(summary: dict) -> list[str]:
              "|---|---|---|---|---|---|"]
     for row in summary["arms"].values():
         lines.append(f"| {row['title']} | **{pct(row['success'])}** | {ci(row)} | {row['real_interactions']:,} | "
-                     f"{row['eval_real_interactions'] + row['watch_real_interactions']:,} | {_minutes(row)} |")
+                     f"{row['eval_real_interactions'] + row['watch_real_interactions']:,} | {wall_time(row)} |")
     return lines
 
 
@@ -39,19 +29,19 @@ def verdict_lines(summary: dict) -> list[str]:
     learned = goals.get("rl_real_beats_sft")  # None in experiments from before the goal
     return [
         (f"- World-model RL with the judge (World-Gymnast) reached {pct(wm['success'])} against SFT's "
-         f"{pct(sft['success'])}: {_ratio(summary['wm_rl_over_sft'])} SFT ({_significance(wm, sft)}). "
+         f"{pct(sft['success'])}: {ratio(summary['wm_rl_over_sft'])} SFT ({_significance(wm, sft)}). "
          f"Goal of at least 2x: **{goal_in_words(goals['wm_rl_at_least_2x_sft'], wm['success'] >= GOAL_OVER_SFT * sft['success'])}**."),
-        (f"- Against RL in the software simulator ({pct(sim['success'])}): {_ratio(summary['wm_rl_over_sim_rl'])} "
+        (f"- Against RL in the software simulator ({pct(sim['success'])}): {ratio(summary['wm_rl_over_sim_rl'])} "
          f"({_significance(wm, sim)}). Goal of beating it: "
          f"**{goal_in_words(goals['wm_rl_beats_sim_rl'], wm['success'] > sim['success'])}**."),
         (f"- World-model RL with the verified reward (VLA-RFT) reached {pct(verified['success'])}: "
-         f"{_ratio(summary['wm_rl_verified_over_sft'])} SFT ({_significance(verified, sft)})."),
+         f"{ratio(summary['wm_rl_verified_over_sft'])} SFT ({_significance(verified, sft)})."),
         *_grounded_verdict(arms),
         (f"- RL in the real world, which spent {real['real_interactions']:,} real interactions on training, "
          f"reached {pct(real['success'])} ({_significance(real, sft)} with SFT)"
          + ("." if learned is None else
             f". Goal of beating SFT (the recipe learns): **{goal_in_words(learned, real['success'] > sft['success'])}**.")),
-        (f"- WorldGym: Pearson r = {_num(summary['worldgym_pearson'])}, Spearman = {_num(summary['worldgym_spearman'])} over "
+        (f"- WorldGym: Pearson r = {number(summary['worldgym_pearson'])}, Spearman = {number(summary['worldgym_spearman'])} over "
          f"{len(summary['worldgym'])} policies. Goal r >= 0.9: **{met[goals['worldgym_r_at_least_0.9']]}**."),
         *_weak_tasks_verdict(summary), *_dyna_verdict(summary), *_equal_budget_verdict(summary), *_watch_verdict(summary),
     ]
@@ -63,7 +53,7 @@ def _short_title(summary: dict, name: str) -> str:
 
 
 def _equal_time_section(summary: dict) -> list[str]:
-    """The RL arms at equal wall-clock (`gymnast.experiment.equal_time`): the steps each had time
+    """The RL arms at equal wall-clock (`gymnast.experiment.report.equal_time`): the steps each had time
     for, and RL in the real world's success by the time each other arm had finished."""
     timing = summary.get("equal_wall_clock")  # None in experiments from before the readout
     if not timing or not timing["arms"]:
@@ -199,10 +189,6 @@ def _significance(a: dict, b: dict) -> str:
     return "the 95% intervals do not overlap"
 
 
-def _num(value: float | None) -> str:
-    return "undefined" if value is None else f"{value:.2f}"
-
-
 def _per_task_table(summary: dict) -> list[str]:
     arms = summary["arms"]
     tasks = list(next(iter(arms.values()))["per_task"])
@@ -233,128 +219,6 @@ def _worldgym_table(summary: dict) -> list[str]:
     for row in summary["worldgym"]:
         lines.append(f"| {row['policy']} | {pct(row['imagined'])} ({row['imagined_episodes']} ep.) | "
                      f"{pct(row['real'])} ({row['real_episodes']} ep.) |")
-    return lines
-
-
-def _imagination(summary: dict) -> list[str]:
-    """The SFT policy's judged imagined rollouts against the same actions replayed in the real world."""
-    figures = summary.get("imagination")
-    if not figures:
-        return ["Not measured in this experiment (it predates the `imagination` stage).", ""]
-
-    def rate(row: dict) -> str:
-        return f"{pct(row['success'])} {ci(row)}"
-
-    counts, judge = figures["confusion"], figures["judge_on_real"]
-    return [
-        (f"The SFT policy rolled out greedy in the world model from {figures['episodes']} evaluation scenes, each video "
-         "judged by the learned judge, then the same actions replayed in the real world from the same scene."), "",
-        "| imagined success (judged) | real replay of the same actions | SFT closed loop, real | agreement | "
-        "false success | tp / fp / fn / tn | judge on the real videos (TPR / FPR) | PSNR at 8 / 32 steps (dB) |",
-        "|---|---|---|---|---|---|---|---|",
-        (f"| {rate(figures['imagined_success'])} | {rate(figures['replay_success'])} | {rate(figures['real_success'])} | "
-         f"**{pct(figures['agreement'])}** | {pct(figures['false_success'])} | "
-         f"{counts['tp']} / {counts['fp']} / {counts['fn']} / {counts['tn']} | "
-         f"{pct(judge['tpr'])} / {pct(judge['fpr'])} | {_num(figures['psnr_h8'])} / {_num(figures['psnr_h32'])} |"), "",
-        "Per task, PSNR per step and side-by-side videos: [imagination/imagination.md](imagination/imagination.md).", "",
-    ]
-
-
-def _signal(summary: dict) -> list[str]:
-    """Whether GRPO's update in imagination is the one the real outcomes of the same actions would
-    give, over every task and over the weak ones."""
-    figures = summary.get("signal")
-    if not figures:
-        return ["Not measured in this experiment (it predates the `signal` stage).", ""]
-
-    def rows(block: dict) -> list[str]:
-        lines = []
-        for name, key in (("the judge on imagined video (what World-Gymnast's arm trains on)", "imagined"),
-                          ("the state model's reward head on the imagined states (the grounded arm's)", "imagined_state"),
-                          ("the judge on the real replay's video (reference)", "real_video"),
-                          ("the real world's dense reward (reference)", "real_dense")):
-            if key not in block:  # experiments older than a readout
-                continue
-            figures_of = block[key]
-            low, high = figures_of["correlation_ci_low"], figures_of["correlation_ci_high"]
-            interval = "" if low is None else f" [{low:+.2f}, {high:+.2f}]"
-            value = figures_of["advantage_correlation"]
-            correlation = "-" if value is None else f"{value:+.2f}"
-            lines.append(f"| {name} | **{correlation}**{interval} | {pct(figures_of['reinforced_real_success'])} / "
-                         f"{pct(figures_of['discouraged_real_success'])} | {pct(figures_of['signal_groups'])} |")
-        return lines
-
-    header = ["| readout | advantage correlation [95% CI] | real success of reinforced / discouraged rollouts "
-              "| groups ranked |", "|---|---|---|---|"]
-    lines = [
-        (f"{figures['rollouts']} rollouts of the SFT policy sampled in GRPO groups in the world model from the starts "
-         f"the world-model arms practise from ({figures['horizon']} actions), scored, and the same actions replayed "
-         "in the real world. Advantage correlation: 1 = the update in imagination is the one the real outcomes "
-         "would give; 0 = noise (docs/rl.md, `gymnast rl-signal`)."), "", *header, *rows(figures), "",
-    ]
-    weak = summary.get("signal_weak")
-    if weak:
-        lines += [f"The weak tasks alone ({', '.join(weak['tasks'])}; {weak['rollouts']} rollouts):", "",
-                  *header, *rows(weak), ""]
-    return [*lines, "Per task: [signal/signal.md](signal/signal.md).", ""]
-
-
-def _fidelity(model: dict | None) -> list[str]:
-    if not model:
-        return []
-    if "skipped" in model:
-        return [f"**The world model**: fidelity not measured ({model['skipped']}).", ""]
-    control, per_frame = model.get("controllability") or {}, model.get("actions_per_frame", 1)
-    # A model of one frame per chunk of N actions is measured at the first frame it imagines at or after each step.
-    first, eighth, last = (measured_step(h, per_frame) for h in (1, 8, 32))
-    lines = [(f"**The world model** on {model.get('episodes')} held-out episodes, open loop: PSNR {_num(model.get('psnr_h1'))} dB "
-              f"{'one step' if first == 1 else f'{first} steps'} ahead, {_num(model.get('psnr_h8'))} at {eighth} and "
-              f"{_num(model.get('psnr_h32'))} at {last} steps (repeating the last real frame: "
-              f"{_num(model.get('copy_last_psnr_h32'))} at {last}); on the pixels that move, "
-              f"{_num(model.get('moving_psnr_h32'))} dB at {last} steps (repeating: {_num(model.get('copy_last_moving_psnr_h32'))})"
-              + (f"; it imagines one frame per {per_frame} actions." if per_frame > 1 else "."))]
-    if control.get("matched_psnr") is not None:
-        lines.append(f"Controllability: its rollout matches the real rollout of the same actions at {_num(control['matched_psnr'])} dB "
-                     f"and of other actions at {_num(control['mismatched_psnr'])} dB; it picks the right real rollout "
-                     f"{pct(control['identification_accuracy'])} of the time.")
-    return [" ".join(lines), ""]
-
-
-def _ranking(roc: dict | None) -> str:
-    """The judge's ROC on the real held-out cases in words (nothing for a judge measured before it was read out)."""
-    if not roc or roc.get("auc") is None:
-        return ""
-    return (f" On real video its P(success) ranks a success above a failure {pct(roc['auc'])} of the time (AUC); the "
-            f"best threshold for these very cases would pass at least {pct(roc['at_tpr'])} of the successes at FPR "
-            f"{_num(roc['lowest_fpr'])}.")
-
-
-def _evidence(summary: dict) -> list[str]:
-    judge, rollouts = summary["judge"], summary.get("judge_rollouts")
-    learned = (f" It also learned from {rollouts['episodes']} real rollouts of the SFT policy ({rollouts['successes']} "
-               f"successful, {rollouts['real_interactions']:,} real interactions)." if rollouts else "")
-    lines = [*_fidelity(summary.get("world_model")),
-             ("**The judge** on held-out episodes (its own training stage): "
-              f"real video TPR {_num(judge.get('real_tpr'))}, FPR {_num(judge.get('real_fpr'))}; "
-              f"imagined video TPR {_num(judge.get('imagined_tpr'))}, FPR {_num(judge.get('imagined_fpr'))}."
-              f"{_ranking(judge.get('real_roc'))}{learned}"), ""]
-    for name, rows in summary["watch"].items():
-        if not rows:
-            continue
-        lines += [(f"**Reward-hacking watch, {summary['arms'][name]['title']}**: imagined rollouts replayed action for action "
-                  "in the real world."), "",
-                  "| step | imagined success | real success of the same actions | agreement | judged successes that failed for real |",
-                  "|---|---|---|---|---|"]
-        for row in rows:
-            lines.append(f"| {row['step']} | {pct(row.get('imagined_success'))} | {pct(row.get('real_success'))} | "
-                         f"{pct(row.get('agreement'))} | {pct(row.get('false_success'))} |")
-        lines.append("")
-    curve = summary["curves"].get("rl_wm_judge", [])
-    if curve:
-        lines += ["**Imagined against real success during world-model RL (judge)**, greedy, on the evaluation seeds:", "",
-                  "| step | judged in the world model | real world |", "|---|---|---|"]
-        lines += [f"| {p['step']} | {pct(p['own'])} | {pct(p['real'])} |" for p in curve]
-        lines.append("")
     return lines
 
 
@@ -415,9 +279,9 @@ def report_markdown(summary: dict, plots: dict[str, str]) -> str:
         "## Robustness and language", "", *_robustness_tables(summary), "",
         "## WorldGym: does the world model rank policies like the real world?", "", *_worldgym_table(summary), "",
         f"![WorldGym]({plots['worldgym']})", "",
-        "## Imagination under the SFT policy: judged imagined outcomes vs the real world", "", *_imagination(summary),
-        "## Does practice in imagination point the right way?", "", *_signal(summary),
-        "## Evidence: where imagination and reality part", "", *_evidence(summary),
+        "## Imagination under the SFT policy: judged imagined outcomes vs the real world", "", *imagination_section(summary),
+        "## Does practice in imagination point the right way?", "", *signal_section(summary),
+        "## Evidence: where imagination and reality part", "", *evidence_section(summary),
         "## Files", "",
         ("- `summary.json`: every figure above; `config.json`: the resolved settings; `stages/`: one record per stage "
         "with its wall time."),
