@@ -1,4 +1,5 @@
-"""What the learned judges share: their architecture settings, the 0/1 verdict from P(success) and a threshold, the checks of their inputs and their loss."""
+"""What the learned judges share: their architecture settings, the 0/1 verdict from P(success) and
+a threshold, the check of their inputs and their loss."""
 
 from __future__ import annotations
 

@@ -1,4 +1,5 @@
-"""A judge measured on held-out cases: its threshold chosen on validation scenes, TPR / FPR real and imagined apart, and how P(success) ranks them apart from the threshold (ROC)."""
+"""A judge measured on held-out cases: its threshold chosen on validation scenes, TPR and FPR on
+real and imagined videos apart, and how its P(success) ranks the cases apart from the threshold (ROC)."""
 
 from __future__ import annotations
 

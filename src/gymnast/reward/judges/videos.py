@@ -1,4 +1,5 @@
-"""The videos a judge learns from and is measured on: real episodes, their re-imaginings by a world model, and the cases cut from them.
+"""The videos a judge learns from and is measured on: real episodes, their re-imaginings by a world
+model under the real actions, and the cases cut from them.
 
 Legend: T steps, H/W image size.
 """
