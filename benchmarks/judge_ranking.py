@@ -7,7 +7,7 @@ do), with every camera the judges need rendered (the policy sees its own cameras
 `gymnast.eval.actors.PolicyActor.seen`).
 Each judge scores the real videos through its own cameras, and its GRPO advantages within each
 group are held against those of the real success and of the real dense return
-(`gymnast.experiment.practice_signal.signal_figures`, as `gymnast rl-signal` reports its
+(`gymnast.experiment.signal_report.signal_figures`, as `gymnast rl-signal` reports its
 `real_video` readout): no world model is involved, so this is the judge's own ranking.
 
     .venv/bin/python benchmarks/judge_ranking.py --judge front=RUN --judge both=RUN \
@@ -34,7 +34,8 @@ from gymnast.envs.engine import play_episode
 from gymnast.envs.parallel import cached_env, parallel_map
 from gymnast.envs.tasks import DATA_SEEDS
 from gymnast.eval.actors import PolicyActor, load_run_policy
-from gymnast.experiment.practice_signal import dense_return, signal_figures
+from gymnast.experiment.practice_signal import dense_return
+from gymnast.experiment.signal_report import signal_figures
 from gymnast.reward.judges.train import load_judge
 from gymnast.utils.atomic import write_json
 

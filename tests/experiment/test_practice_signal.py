@@ -12,7 +12,8 @@ import pytest
 import torch
 
 from gymnast.cli import main
-from gymnast.experiment.practice_signal import SignalConfig, dense_return, read_out, signal_figures, start_episodes
+from gymnast.experiment.practice_signal import SignalConfig, dense_return, read_out, start_episodes
+from gymnast.experiment.signal_report import signal_figures
 from gymnast.reward.select import make_reward
 from gymnast.reward.spec import RewardSpec
 
@@ -157,7 +158,7 @@ def test_the_command_measures_the_committed_models_against_real_replays(tmp_path
 
 
 def test_the_brief_of_some_tasks_pools_only_their_groups():
-    from gymnast.experiment.practice_signal import REAL_DENSE, SCORE, signal_brief, signal_table
+    from gymnast.experiment.signal_report import REAL_DENSE, SCORE, signal_brief, signal_table
 
     def rollout(task: str, score: float, success: bool, dense: float) -> dict:
         return {"task": task, "real": {"4": success}, "real_return": {"4": dense},

@@ -237,7 +237,8 @@ def _signal(sft: Path, wm: Path, reward: RewardSpec, data: Path, config: Experim
     group size and temperature), scored by an arm's `reward`, against the real outcomes of the
     same actions (`gymnast.experiment.practice_signal`): would practice there push the policy the
     right way? Read over every task and over the weak tasks among them (``weak``)."""
-    from gymnast.experiment.practice_signal import SignalConfig, batch_for, measure_signal_runs, signal_brief
+    from gymnast.experiment.practice_signal import SignalConfig, batch_for, measure_signal_runs
+    from gymnast.experiment.signal_report import signal_brief
     from gymnast.world_model.evaluate import heldout_fraction
 
     group = config.rl.group_size
