@@ -16,7 +16,9 @@ from gymnast.data.lerobot import EpisodeDataset
 from gymnast.envs.tasks import eval_seed, resolve_tasks
 from gymnast.experiment.arms import ARM_NAMES
 from gymnast.experiment.config import EXPERIMENT_PRESETS
+from gymnast.experiment.pipeline import saved_experiment_config
 from gymnast.experiment.stages import measured_elsewhere
+from gymnast.experiment.status import experiment_plan
 
 pytestmark = pytest.mark.slow
 
@@ -261,6 +263,40 @@ def test_a_rerun_skips_every_finished_stage_and_prints_the_table(experiment: Pat
     assert {path.name: path.read_text() for path in (experiment / "stages").glob("*.json")} == records
     out = capsys.readouterr().out
     assert "RL in the real world" in out and "WorldGym Pearson r" in out
+
+
+def test_status_of_a_finished_experiment_lists_every_stage_it_ran_as_done(experiment: Path, capsys):
+    main(["experiment", "--out", str(experiment), "--status"])
+    lines = capsys.readouterr().out.splitlines()
+    recorded = sorted(path.stem for path in (experiment / "stages").glob("*.json"))
+    planned = experiment_plan(experiment, saved_experiment_config(experiment))
+    assert sorted(planned) == recorded  # the plan is the stages the pipeline runs, no more, no fewer
+    assert lines[0].startswith(f"{experiment}: {len(recorded)} of {len(recorded)} stages finished")
+    assert [line.split()[1] for line in lines[1:]] == planned and all(line.split()[0] == "done" for line in lines[1:])
+
+
+def test_status_of_an_interrupted_experiment_says_where_a_rerun_goes_on(experiment: Path, tmp_path: Path, capsys):
+    copy = tmp_path / "copy"
+    copy_experiment(experiment, copy, judge_rollouts=True)
+    planned = experiment_plan(copy, saved_experiment_config(copy))
+    open_from = planned.index("arm_rl_real")
+    for stage in planned[open_from:]:  # as if the run had stopped inside real RL's training
+        (copy / "stages" / f"{stage}.json").unlink()
+    main(["experiment", "--out", str(copy), "--status"])
+    lines = capsys.readouterr().out.splitlines()
+    rows = {next(word for word in line.split() if word in planned): line for line in lines[1:]}
+    steps = EXPERIMENT_PRESETS["debug"].rl.steps
+    assert f"{open_from} of {len(planned)} stages finished" in lines[0]
+    assert rows["arm_rl_real"].split()[:2] == ["under", "way"]
+    assert f"checkpoint at step {steps} of {steps}" in rows["arm_rl_real"]
+    assert all(rows[stage].split()[:2] == ["to", "run"] for stage in planned[open_from + 1:])
+    assert all(rows[stage].split()[0] == "done" for stage in planned[:open_from])
+
+
+def test_status_of_a_directory_without_an_experiment_names_it(tmp_path: Path, capsys):
+    with pytest.raises(SystemExit):
+        main(["experiment", "--out", str(tmp_path / "none"), "--status"])
+    assert f"{tmp_path / 'none'} holds no experiment" in capsys.readouterr().err
 
 
 def test_an_experiment_from_before_an_arm_existed_trains_only_that_arm(experiment: Path, tmp_path: Path):

@@ -157,6 +157,7 @@ def experiment(
     judge_rollouts: int | None = None,
     demos_per_task: int | None = None,
     freeze: tuple[str, ...] | None = None,
+    status: bool = False,
 ) -> None:
     """The headline comparison: data, SFT, world model, judge, state model, eight arms, real-world
     evaluation and the WorldGym check, then OUT/report.md, OUT/summary.json and OUT/plots/.
@@ -186,9 +187,19 @@ def experiment(
         freeze: parts of the policy the RL arms leave as SFT made them, by parameter-name prefix
             (default: the preset's, vision: the embedded policies' image encoder; a LeRobot
             policy's are its own, e.g. model.backbone; none: `--freeze` alone).
+        status: print where the experiment in OUT stands (the stages finished with their wall times,
+            the one under way with its newest checkpoint, those still to run) and exit; nothing runs.
     """
     from gymnast.experiment.config import EXPERIMENT_PRESETS
     from gymnast.experiment.pipeline import run_experiment, saved_experiment_config
+
+    if status:
+        from gymnast.experiment.status import experiment_status, format_status
+
+        if not (out / "config.json").is_file():
+            raise FileNotFoundError(f"--status: {out} holds no experiment (no config.json there)")
+        print(format_status(out, experiment_status(out, saved_experiment_config(out))))
+        return
     from gymnast.experiment.report.write import format_table
     from gymnast.experiment.stages import parse_reuse
 

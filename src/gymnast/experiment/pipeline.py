@@ -328,10 +328,7 @@ def _worldgym(stages: Stages, config: ExperimentConfig, out: Path, policies: dic
     from gymnast.experiment.worldgym import Candidate, WorldGym, correlation, noise_ladder
     from gymnast.policy.load import load_policy
 
-    paths = dict(policies)
-    checkpoints = sorted(p for p in (policies["sft"] / "checkpoints").glob("[0-9]*") if p.is_dir())
-    for checkpoint in checkpoints[:-1]:  # the last one is the SFT arm itself
-        paths[f"sft_step_{int(checkpoint.name)}"] = checkpoint
+    paths = dict(policies) | earlier_sft_checkpoints(policies["sft"])
     # The arms and checkpoints are measured in the real world by `gymnast eval` (a stage each);
     # the noise ladder by WorldGym's own real rollouts, with the same protocol and seeds.
     real = {name: stages.record(f"eval_{name}") if stages.done(f"eval_{name}") else
@@ -344,6 +341,13 @@ def _worldgym(stages: Stages, config: ExperimentConfig, out: Path, policies: dic
     with WorldGym(wm, judge, config.tasks, config.worldgym_episodes, env, config.workers, runner=config.runner) as gym:
         rows = gym.rows(candidates, real, progress)
     return {"policies": rows, **correlation([r["imagined"] for r in rows], [r["real"] for r in rows])}
+
+
+def earlier_sft_checkpoints(sft: Path) -> dict[str, Path]:
+    """The SFT run's checkpoints before its last (the SFT arm itself), which WorldGym measures too,
+    by name (``sft_step_<step>``; a stage ``eval_sft_step_<step>`` each)."""
+    checkpoints = sorted(path for path in (sft / "checkpoints").glob("[0-9]*") if path.is_dir())
+    return {f"sft_step_{int(checkpoint.name)}": checkpoint for checkpoint in checkpoints[:-1]}
 
 
 def _save_settings(out: Path, config: ExperimentConfig) -> None:
