@@ -44,7 +44,7 @@ from gymnast.envs.metaworld import MetaWorldEnv
 from gymnast.envs.parallel import cached_env, parallel_map
 from gymnast.envs.tasks import DATA_SEEDS, resolve_tasks
 from gymnast.envs.workers import parse_runner
-from gymnast.utils.atomic import write_json
+from gymnast.utils.atomic import read_json, write_json
 
 logger = logging.getLogger(__name__)
 
@@ -280,7 +280,7 @@ def _check_settings(out: Path, config: CollectConfig) -> None:
         del settings["env"]["cameras"]
     path = out / SETTINGS_FILE
     if path.exists():
-        recorded = json.loads(path.read_text())
+        recorded = read_json(path)
         current = json.loads(json.dumps(settings))  # tuples become lists, as in the file
         cameras = recorded.get("env", {}).get("cameras", list(EnvConfig().cameras))
         if cameras != list(config.env.cameras):

@@ -28,7 +28,6 @@ from __future__ import annotations
 import copy
 import hashlib
 import itertools
-import json
 import logging
 import math
 from collections.abc import Callable, Sequence
@@ -71,7 +70,7 @@ from gymnast.data.lerobot_v3 import (
 )
 from gymnast.data.schema import Episode
 from gymnast.data.staging import StagingArea
-from gymnast.utils.atomic import atomic_path, is_temporary, write_json, write_parquet
+from gymnast.utils.atomic import atomic_path, is_temporary, read_json, write_json, write_parquet
 from gymnast.utils.video import DEFAULT_CODEC, VideoCodec, decode_video, encode_video, psnr, video_info
 
 logger = logging.getLogger(__name__)
@@ -129,7 +128,7 @@ class LeRobotWriter:
         # The committed tasks and stats stay in memory, so a flush that failed after rewriting
         # their files can be retried without counting anything twice.
         self._tasks = read_tasks(self.root / TASKS_PATH) if self._info else {}
-        self._stats = json.loads((self.root / STATS_PATH).read_text()) if self._info else {}
+        self._stats = read_json(self.root / STATS_PATH) if self._info else {}
         self._staging = StagingArea(self.root / STAGING_DIR)
         committed = {row[KEY_COLUMN] for row in self._rows}
         for number in self._staging.numbers():

@@ -43,6 +43,7 @@ from gymnast.envs.parallel import kept_workers
 from gymnast.envs.workers import parse_runner
 from gymnast.experiment.stages import Stages
 from gymnast.rl.config import RL_PRESETS, RLConfig
+from gymnast.utils.atomic import read_json
 from gymnast.utils.settings import from_json, saved_settings
 
 logger = logging.getLogger(__name__)
@@ -322,7 +323,7 @@ def fine_tune_state_model(original: Path, current: Path, recorded: list[Path], s
                                        init=last, extra_data=(*base.extra_data, *recorded))
         train_state_model(Path(saved["data"]), member, settings, resume=_started(member), progress=progress)
         evaluation = member / "eval.json"
-        reports[member.name] = json.loads(evaluation.read_text()) if evaluation.is_file() else None
+        reports[member.name] = read_json(evaluation) if evaluation.is_file() else None
         members.append(member)
     if len(members) > 1:
         write_state_ensemble(out, members)

@@ -16,11 +16,11 @@ stage with the experiment's SFT policy, world model and judge.
 from __future__ import annotations
 
 import dataclasses
-import json
 from pathlib import Path
 
 from gymnast.eval.stats import wilson_interval
 from gymnast.rl.config import RLConfig, RLRun
+from gymnast.utils.atomic import read_json
 
 Scene = tuple[str, int]
 """A task and the data seed of its scene."""
@@ -62,7 +62,7 @@ def measure(task: str, seed: int, run: Path) -> dict:
     and what the watch saw on the last step's imagined rollouts."""
     from gymnast.utils.metrics import read_metrics
 
-    summary = json.loads((run / "summary.json").read_text())
+    summary = read_json(run / "summary.json")
     metrics = read_metrics(run)
     watched = [m for m in metrics if "eval/watch_real_success" in m]
     last = watched[-1] if watched else {}

@@ -36,7 +36,7 @@ from gymnast.experiment.config import ExperimentConfig
 from gymnast.experiment.stages import Stages
 from gymnast.reward.spec import RewardSpec
 from gymnast.rl.evaluate import shared_evaluations
-from gymnast.utils.atomic import write_json
+from gymnast.utils.atomic import read_json, write_json
 from gymnast.utils.device import resolve_device
 from gymnast.utils.settings import from_json, saved_settings
 
@@ -363,7 +363,7 @@ def _save_settings(out: Path, config: ExperimentConfig) -> None:
     path = out / "config.json"
     if path.exists():
         try:
-            saved = as_json(from_json(ExperimentConfig, _filled(_as_they_ran(json.loads(path.read_text())),
+            saved = as_json(from_json(ExperimentConfig, _filled(_as_they_ran(read_json(path)),
                                                                 as_json(config))))
         except (TypeError, ValueError) as error:
             raise ValueError(f"{path}: not an experiment's settings this version can read ({error})") from error

@@ -15,11 +15,10 @@ watch replays are counted in ``watch_real_interactions``.
 
 from __future__ import annotations
 
-import json
 from collections.abc import Mapping
 from pathlib import Path
 
-from gymnast.utils.atomic import write_json
+from gymnast.utils.atomic import read_json, write_json
 
 ARMS = ("sft", "imagined_rl", "real_rl")
 
@@ -34,7 +33,7 @@ def arm_from_run(run: Path, at_start: bool = False) -> dict:
     path = Path(run) / "summary.json"
     if not path.is_file():
         raise FileNotFoundError(f"{path} does not exist: has the run finished?")
-    summary = json.loads(path.read_text())
+    summary = read_json(path)
     when = "start" if at_start else "end"
     success = summary.get(f"{when}_real_success")
     if success is None:

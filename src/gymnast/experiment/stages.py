@@ -13,14 +13,13 @@ rollouts are real interactions the experiment spent too.
 
 from __future__ import annotations
 
-import json
 import logging
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from gymnast.data.lerobot_v3 import INFO_PATH
-from gymnast.utils.atomic import write_json
+from gymnast.utils.atomic import read_json, write_json
 from gymnast.utils.memory import release_freed_memory
 
 logger = logging.getLogger(__name__)
@@ -58,7 +57,7 @@ class Stages:
         path = self.record_path(name)
         if not path.exists():
             raise FileNotFoundError(f"stage {name!r} has not finished in {self.out} (no {path})")
-        return json.loads(path.read_text())
+        return read_json(path)
 
     def run(self, name: str, work: Callable[[], dict], output: Path | None = None) -> dict:
         """The stage's record: read back if it finished before, else `work()`'s, with ``wall_s``.
@@ -131,7 +130,7 @@ def measured_elsewhere(name: str, path: Path) -> dict:
     source = path.parent / "stages" / f"{name}.json"
     if not source.is_file():
         return {}
-    record = json.loads(source.read_text())
+    record = read_json(source)
     if Path(record.get("path") or "").resolve() != path.resolve():  # that experiment reused another directory
         return {}
     figures = {key: value for key, value in record.items() if key not in BOOKKEEPING}

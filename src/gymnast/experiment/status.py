@@ -8,7 +8,6 @@ stage under way from its trainer's last checkpoint, so this is what a rerun will
 
 from __future__ import annotations
 
-import json
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -18,6 +17,7 @@ from gymnast.experiment.config import ExperimentConfig
 from gymnast.experiment.equal_budget import EQUAL_BUDGET_ARMS
 from gymnast.experiment.pipeline import earlier_sft_checkpoints
 from gymnast.experiment.stages import Stages
+from gymnast.utils.atomic import read_json
 from gymnast.utils.checkpoint import LAST
 
 MODELS = ("collect", "sft", "world_model", "judge", "state_model", "world_model_eval")
@@ -95,7 +95,7 @@ def _trainer_progress(out: Path, name: str) -> dict:
     if not pointers:
         return {}
     checkpoint = pointers[-1].parent / pointers[-1].read_text().strip()
-    trainer = json.loads((checkpoint / "trainer.json").read_text())
+    trainer = read_json(checkpoint / "trainer.json")
     return {"checkpoint": checkpoint, "step": trainer.get("step"), "steps": _steps(checkpoint.parent.parent)}
 
 
@@ -104,7 +104,7 @@ def _steps(run: Path) -> int | None:
     path = run / "config.json"
     if not path.exists():
         return None
-    settings = json.loads(path.read_text())
+    settings = read_json(path)
     for section in ("rl", "train"):
         if isinstance(settings.get(section), dict) and "steps" in settings[section]:
             return settings[section]["steps"]

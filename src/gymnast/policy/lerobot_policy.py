@@ -32,6 +32,7 @@ from torch import nn
 from gymnast.policy.lerobot_features import ACTION, LeRobotFeatures
 from gymnast.policy.lerobot_import import require_lerobot
 from gymnast.policy.observation import simulator_cameras
+from gymnast.utils.atomic import read_json
 
 WEIGHTS = "model.safetensors"
 """The LeRobot policy's weights in a pretrained_model folder (gymnast's checkpoint holds them)."""
@@ -206,7 +207,7 @@ def read_folder(folder: Path) -> dict:
     files: dict[str, Any] = {}
     for path in sorted(Path(folder).iterdir()):
         if path.suffix == ".json":
-            files[path.name] = json.loads(path.read_text())
+            files[path.name] = read_json(path)
         elif path.suffix == ".safetensors" and path.name != WEIGHTS:
             files[path.name] = {key: {"dtype": str(value.dtype).removeprefix("torch."), "data": value.tolist()}
                                 for key, value in load_file(path).items()}

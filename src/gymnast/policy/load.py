@@ -8,13 +8,13 @@ from __future__ import annotations
 
 import dataclasses
 import importlib
-import json
 from pathlib import Path
 
 from torch import nn
 
 from gymnast.config import EnvConfig
 from gymnast.policy.observation import PolicyArchitecture, simulator_cameras
+from gymnast.utils.atomic import read_json
 from gymnast.utils.checkpoint import resolve_checkpoint
 
 POLICY_FAMILIES = {
@@ -103,8 +103,8 @@ def saved_env_view(policy: str | Path) -> tuple[tuple[str, ...], int | None]:
 
     if is_lerobot(policy):
         config = Path(str(policy).removeprefix(LEROBOT)) / "config.json"
-        return simulator_cameras(folder_cameras(json.loads(config.read_text())) if config.is_file() else ()), None
-    spec = json.loads((resolve_checkpoint(Path(policy)) / "config.json").read_text()).get("model", {})
+        return simulator_cameras(folder_cameras(read_json(config)) if config.is_file() else ()), None
+    spec = read_json(resolve_checkpoint(Path(policy)) / "config.json").get("model", {})
     if "lerobot" in spec:
         return simulator_cameras(folder_cameras(spec["lerobot"]["files"]["config.json"])), None
     family = next((spec[name] for name in POLICY_FAMILIES if name in spec), {})

@@ -6,7 +6,6 @@ another robot cannot give.
 from __future__ import annotations
 
 import dataclasses
-import json
 from pathlib import Path
 
 from gymnast.data.lerobot import FeatureKeys
@@ -14,6 +13,7 @@ from gymnast.envs.tasks import resolve_tasks
 from gymnast.policy.load import is_lerobot
 from gymnast.rl.config import RLConfig, RLRun
 from gymnast.rl.rollout import recorded_elsewhere, tasks_with_starts
+from gymnast.utils.atomic import read_json
 from gymnast.utils.checkpoint import resolve_checkpoint
 
 
@@ -64,7 +64,7 @@ def _policy_configs(policy_run: str | Path) -> list[dict]:
         return []
     checkpoint = resolve_checkpoint(Path(policy_run))
     paths = (Path(policy_run) / "config.json", checkpoint / "config.json")
-    return [json.loads(path.read_text()) for path in paths if path.exists()]
+    return [read_json(path) for path in paths if path.exists()]
 
 
 def check_other_robot(data: Path, env, config: RLConfig) -> None:

@@ -1,4 +1,5 @@
-"""Atomic file writes: a reader sees the old file or the new one, never a half-written one.
+"""Atomic file writes: a reader sees the old file or the new one, never a half-written one; and the
+one reader of the JSON files they write, whose errors name the file.
 
 Every writer here writes to a hidden temporary file in the target's directory, flushes it to disk
 (fsync), renames it over the target (``os.replace`` is atomic on POSIX and Windows) and fsyncs the
@@ -72,6 +73,25 @@ def write_bytes(path: str | Path, data: bytes) -> None:
 def write_json(path: str | Path, obj: Any) -> None:
     """Atomically write ``obj`` as indented JSON (NaN and infinity are refused: not valid JSON)."""
     write_bytes(path, (json.dumps(obj, indent=4, allow_nan=False) + "\n").encode())
+
+
+def read_json(path: str | Path) -> Any:
+    """The JSON content of ``path`` (a run's settings, a stage's record, a checkpoint's state).
+
+    Raises:
+        FileNotFoundError: there is no such file.
+        ValueError: naming the file and the place, where it is not valid JSON (cut short by a copy,
+            edited by hand: gymnast's own writes are atomic).
+    """
+    path = Path(path)
+    try:
+        return json.loads(path.read_text())
+    except json.JSONDecodeError as error:
+        raise ValueError(f"{path}: not valid JSON ({error.msg} at line {error.lineno}, column {error.colno}); "
+                         "it was cut short or edited: restore it from a copy, or remove it to redo what wrote it"
+                         ) from None
+    except UnicodeDecodeError as error:
+        raise ValueError(f"{path}: not a JSON text file ({error.reason})") from None
 
 
 def write_parquet(path: str | Path, table: pa.Table) -> None:

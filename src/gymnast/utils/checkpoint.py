@@ -22,7 +22,7 @@ import torch
 from safetensors.torch import load_file, save_file
 from torch import nn
 
-from gymnast.utils.atomic import write_bytes, write_json
+from gymnast.utils.atomic import read_json, write_bytes, write_json
 from gymnast.utils.metrics import MetricsLog
 
 logger = logging.getLogger(__name__)
@@ -91,7 +91,7 @@ def load_checkpoint(checkpoint: Path, model: nn.Module, optimizer: torch.optim.O
         # Read onto the host; the optimizer moves its state to its parameters' device.
         optimizer.load_state_dict(torch.load(checkpoint / "optimizer.pt", weights_only=True, map_location="cpu"))
     rng = torch.load(checkpoint / "rng.pt", weights_only=True, map_location="cpu") if (checkpoint / "rng.pt").exists() else {}
-    return json.loads((checkpoint / "trainer.json").read_text()), rng
+    return read_json(checkpoint / "trainer.json"), rng
 
 
 def load_extra(checkpoint: Path, name: str) -> dict:
@@ -150,7 +150,7 @@ def load_model(run: Path, build: Callable[[dict], nn.Module]) -> nn.Module:
         FileNotFoundError: no checkpoint there.
     """
     path = resolve_checkpoint(Path(run))
-    model = build(json.loads((path / "config.json").read_text()).get("model", {}))
+    model = build(read_json(path / "config.json").get("model", {}))
     model.load_state_dict(load_file(path / "model.safetensors"))
     return model.eval()
 

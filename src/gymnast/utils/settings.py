@@ -9,12 +9,13 @@ reads these before it knows whether a model will be built.
 from __future__ import annotations
 
 import dataclasses
-import json
 import types
 import typing
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, TypeVar
+
+from gymnast.utils.atomic import read_json
 
 T = TypeVar("T")
 
@@ -29,7 +30,7 @@ def saved_settings(run: Path, section: str | None = None) -> dict:
     path = Path(run) / "config.json"
     if not path.exists():
         raise FileNotFoundError(f"nothing to resume: {path} does not exist")
-    saved = json.loads(path.read_text())
+    saved = read_json(path)
     return saved if section is None else saved[section]
 
 

@@ -20,7 +20,6 @@ directory or absolute; `write_ensemble` (``gymnast make-ensemble``) writes one.
 
 from __future__ import annotations
 
-import json
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -30,7 +29,7 @@ from typing import Any
 import torch
 from torch import nn
 
-from gymnast.utils.atomic import write_json
+from gymnast.utils.atomic import read_json, write_json
 from gymnast.world_model.base import (ENSEMBLE_FILE, WorldModel, actions_per_frame, check_context, grounded_state_dim,
                                       load_world_model)
 from gymnast.world_model.views import model_cameras, model_views
@@ -161,7 +160,7 @@ def member_paths(directory: str | Path) -> list[Path]:
         ValueError: the file is not an ensemble description.
     """
     path = Path(directory) / ENSEMBLE_FILE
-    manifest = json.loads(path.read_text())
+    manifest = read_json(path)
     if not isinstance(manifest, dict):
         manifest = {}
     members = manifest.get("members")

@@ -27,7 +27,6 @@ Legend: N rollouts, T imagined frames, H/W image size.
 
 from __future__ import annotations
 
-import json
 import logging
 import time
 from collections import defaultdict
@@ -40,7 +39,7 @@ from tqdm import tqdm
 
 from gymnast.data.frames import Fit, model_image_size
 from gymnast.data.lerobot import EpisodeDataset, FeatureKeys
-from gymnast.utils.atomic import write_json
+from gymnast.utils.atomic import read_json, write_json
 from gymnast.utils.checkpoint import resolve_checkpoint
 from gymnast.utils.device import resolve_device
 from gymnast.utils.images import split_views
@@ -195,7 +194,7 @@ def heldout_fraction(wm: Path) -> float:
     """The held-out share of scenes of a world-model run; of an ensemble, the smallest of its members'."""
     if is_ensemble(wm):
         return min(heldout_fraction(member) for member in member_paths(wm))
-    return json.loads((resolve_checkpoint(wm) / "config.json").read_text())["train"]["heldout_fraction"]
+    return read_json(resolve_checkpoint(wm) / "config.json")["train"]["heldout_fraction"]
 
 
 def frame_fit(wm: Path) -> Fit:
@@ -204,7 +203,7 @@ def frame_fit(wm: Path) -> Fit:
     their own size, which every fit leaves as they are."""
     if is_ensemble(wm):
         return frame_fit(member_paths(wm)[0])
-    return json.loads((resolve_checkpoint(wm) / "config.json").read_text())["train"].get("fit", "resize")
+    return read_json(resolve_checkpoint(wm) / "config.json")["train"].get("fit", "resize")
 
 
 def disagreement_error(table: dict[str, np.ndarray]) -> dict[str, float | None]:

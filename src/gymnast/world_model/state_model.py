@@ -26,7 +26,6 @@ state:RUN` practises on: a world model's own reward, read off its state instead 
 
 from __future__ import annotations
 
-import json
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -34,6 +33,7 @@ from pathlib import Path
 import torch
 from torch import nn
 
+from gymnast.utils.atomic import read_json
 from gymnast.utils.checkpoint import load_model, resolve_checkpoint
 from gymnast.world_model.base import ActionScale, check_action_range
 
@@ -205,7 +205,7 @@ def load_state_models(run: str | Path) -> list[StateModel]:
 def is_state_model(run: str | Path) -> bool:
     """Whether `run` (a run or checkpoint directory) holds a state model rather than a video model."""
     try:
-        spec = json.loads((resolve_checkpoint(Path(run)) / "config.json").read_text()).get("model", {})
+        spec = read_json(resolve_checkpoint(Path(run)) / "config.json").get("model", {})
     except (FileNotFoundError, ValueError):
         return False
     # A video model's spec names its backend (and a grounded one has a state_dim too).

@@ -37,6 +37,7 @@ from tqdm import tqdm
 from gymnast.data.action_stats import ActionStats
 from gymnast.data.frames import Fit, model_image_size
 from gymnast.data.lerobot import EpisodeDataset, FeatureKeys
+from gymnast.utils.atomic import read_json
 from gymnast.utils.checkpoint import begin_training, resolve_checkpoint, save_training
 from gymnast.utils.device import resolve_device, to_device
 from gymnast.utils.distributed import Parallel, data_parallel
@@ -307,7 +308,7 @@ def _saved_pair(checkpoint: Path, first: str, second: str) -> tuple[tuple[float,
     """Two fields of the model a checkpoint saved, as tuples (empty where it predates them): its
     action range (action_low, action_high, empty: the identity) or a grounded model's state
     normalisation (state_mean, state_std), which its weights were trained with."""
-    saved = json.loads((checkpoint / "config.json").read_text()).get("model", {})
+    saved = read_json(checkpoint / "config.json").get("model", {})
     return tuple(saved.get(first, ())), tuple(saved.get(second, ()))
 
 
@@ -356,7 +357,7 @@ def build_model(config: WorldModelTrainConfig) -> EmbeddedWorldModel | FlowWorld
     checkpoint = resolve_checkpoint(config.init)
     # A field the checkpoint predates (say, the action range) had its default value then.
     defaults = json.loads(json.dumps(dataclasses.asdict(type(architecture(config))())))
-    source = defaults | json.loads((checkpoint / "config.json").read_text()).get("model", {})
+    source = defaults | read_json(checkpoint / "config.json").get("model", {})
     # The weights were trained on actions normalised by their own range: it comes with them, and so
     # do a grounded model's state and its normalisation.
     kept = ("action_low", "action_high") + (("state_dim", "state_mean", "state_std") if source.get("state_dim") else ())

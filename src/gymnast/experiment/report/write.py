@@ -16,7 +16,7 @@ from gymnast.experiment.formatting import number, ratio, wall_time
 from gymnast.experiment.report.equal_time import equal_wall_clock
 from gymnast.experiment.report.goals import experiment_goals
 from gymnast.experiment.stages import BOOKKEEPING, Stages
-from gymnast.utils.atomic import write_bytes, write_json
+from gymnast.utils.atomic import read_json, write_bytes, write_json
 
 logger = logging.getLogger(__name__)
 
@@ -59,7 +59,7 @@ def _curves(stages: Stages) -> dict[str, list[dict]]:
             curves[spec.name] = [{"step": row["rl_steps"], "real": row["success"], "real_ci": [row["ci_low"], row["ci_high"]],
                                   "own": None} for row in _dyna_summary(stages)["rounds"]]
             continue
-        summary = json.loads((stages.path(f"arm_{spec.name}") / "summary.json").read_text())
+        summary = read_json(stages.path(f"arm_{spec.name}") / "summary.json")
         where = "own" if spec.env.real_interactions else "real"
         curves[spec.name] = [{"step": point["step"], "real": point.get(f"eval/{where}_success"),
                               "real_ci": [point.get(f"eval/{where}_ci_low"), point.get(f"eval/{where}_ci_high")],
@@ -68,7 +68,7 @@ def _curves(stages: Stages) -> dict[str, list[dict]]:
 
 
 def _dyna_summary(stages: Stages) -> dict:
-    return json.loads((Path(stages.record("arm_dyna")["run"]) / "summary.json").read_text())
+    return read_json(Path(stages.record("arm_dyna")["run"]) / "summary.json")
 
 
 def _watch(stages: Stages) -> dict[str, list[dict]]:
@@ -109,7 +109,7 @@ def _dyna_against_real_rl(stages: Stages, config: ExperimentConfig) -> dict | No
         return None
     dyna = _dyna_summary(stages)
     real = stages.path("arm_rl_real")
-    curve = real_rl_curve(real, json.loads((real / "summary.json").read_text())["curve"])
+    curve = real_rl_curve(real, read_json(real / "summary.json")["curve"])
     keep = ("round", "rl_steps", "success", "ci_low", "ci_high", "episodes", "rollout_episodes", "rollout_successes",
             "judge_fpr_on_rollouts", "judge_heldout_real_fpr", "real_interactions", "measurement_real_interactions")
     return {"tasks": config.tasks, "eval_episodes_per_task": config.rl.eval_episodes,
@@ -222,7 +222,7 @@ def build_summary(stages: Stages, config: ExperimentConfig) -> dict:
         "rl_steps": config.rl.steps,
         "rollouts_per_step": config.rl.starts_per_step * config.rl.group_size,
         "eval_episodes_per_task": config.eval_episodes,
-        "stage_wall_s": {path.stem: json.loads(path.read_text()).get("wall_s")
+        "stage_wall_s": {path.stem: read_json(path).get("wall_s")
                          for path in sorted((stages.out / "stages").glob("*.json"))},
     }
     summary["goals"] = experiment_goals(arms, weak, worldgym["pearson"], summary["watch_false_success"], equal_budget)
@@ -248,7 +248,7 @@ def _brief(record: dict) -> dict:
 
 
 def _read_json(path: Path) -> dict | None:
-    return json.loads(path.read_text()) if path.exists() else None
+    return read_json(path) if path.exists() else None
 
 
 def write_report(out: Path, stages: Stages, config: ExperimentConfig) -> dict:
