@@ -16,6 +16,7 @@ from gymnast.data.lerobot import EpisodeDataset
 from gymnast.envs.tasks import eval_seed, resolve_tasks
 from gymnast.experiment.arms import ARM_NAMES
 from gymnast.experiment.config import EXPERIMENT_PRESETS
+from gymnast.experiment.export import export_run
 from gymnast.experiment.pipeline import saved_experiment_config
 from gymnast.experiment.stages import measured_elsewhere
 from gymnast.experiment.status import experiment_plan
@@ -326,6 +327,26 @@ def test_a_finished_experiment_copied_without_its_judge_rollouts_does_not_record
     copy_experiment(experiment, copy, judge_rollouts=False)
     main(["experiment", "--out", str(copy), "--resume"])
     assert not (copy / "judge_rollouts").exists()  # no stage left to run reads them
+
+
+def test_an_exported_experiment_put_back_where_it_ran_skips_every_stage(experiment: Path, tmp_path: Path, capsys):
+    export_run(experiment, tmp_path / "export")  # no datasets, the newest checkpoints, no optimizer states
+    assert not list((tmp_path / "export").rglob("meta/info.json"))
+    records = {path.name: path.read_text() for path in (experiment / "stages").glob("*.json")}
+    written = {name: (experiment / name).read_text() for name in ("summary.json", "report.md")}
+    aside = tmp_path / "aside"
+    experiment.rename(aside)
+    try:
+        (tmp_path / "export").rename(experiment)
+        capsys.readouterr()
+        main(["experiment", "--out", str(experiment), "--resume"])
+        assert "WorldGym Pearson r" in capsys.readouterr().out
+        assert {path.name: path.read_text() for path in (experiment / "stages").glob("*.json")} == records
+        assert {name: (experiment / name).read_text() for name in written} == written  # the dataset's count included
+        assert not list(experiment.rglob("meta/info.json"))  # no stage left to run reads a dataset: none recorded
+    finally:
+        shutil.rmtree(experiment, ignore_errors=True)
+        aside.rename(experiment)
 
 
 def test_judge_rollouts_recorded_in_part_are_finished_before_dyna_refits_the_judge(experiment: Path, tmp_path: Path):

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import logging
 import sys
+from pathlib import Path
 
 import tyro
 
@@ -31,6 +32,26 @@ def doctor() -> None:
         raise SystemExit(1)
 
 
+def export(run: Path, out: Path, exclude: tuple[str, ...] = (), datasets: bool = False,
+           optimizer: bool = False) -> None:
+    """Copy a run to share or commit: its results, records and newest models, without its bulk.
+
+    Left out: the datasets it recorded (directories with meta/info.json), every checkpoint but the
+    one each trainer's ``last`` names, and the optimizers' states. OUT appears only once complete.
+    A finished experiment copied back to where it ran reruns with every stage skipped.
+
+    Args:
+        run: the run directory (an experiment, an RL, SFT, world-model or judge run).
+        out: the new directory for the copy (must not exist).
+        exclude: glob patterns of paths relative to RUN to leave out too (e.g. 'new_scenes/*/checkpoints').
+        datasets: keep the recorded datasets.
+        optimizer: keep the optimizers' states, so that an unfinished trainer can --resume exactly.
+    """
+    from gymnast.experiment.export import export_run
+
+    print(export_run(run, out, exclude=exclude, datasets=datasets, optimizer=optimizer).summary())
+
+
 COMMANDS = {
     "collect": collect,
     "inspect": inspect,
@@ -54,6 +75,7 @@ COMMANDS = {
     "contact-sheet": contact_sheet,
     "gap-report": gap_report,
     "tasks": tasks,
+    "export": export,
     "doctor": doctor,
 }
 
@@ -65,7 +87,7 @@ def main(argv: list[str] | None = None) -> None:
     try:
         tyro.extras.subcommand_cli_from_dict(COMMANDS, args=sys.argv[1:] if argv is None else argv,
                                              prog="gymnast", description=__doc__)
-    except (ValueError, FileNotFoundError) as error:
+    except (ValueError, FileNotFoundError, FileExistsError) as error:
         # Bad input is the user's to fix: say what is wrong without a traceback.
         print(f"gymnast: error: {error}", file=sys.stderr)
         raise SystemExit(2) from None

@@ -25,6 +25,8 @@ Stages, in order, each done once (`gymnast.experiment.stages`; a rerun skips fin
 from __future__ import annotations
 
 import dataclasses
+import functools
+from collections.abc import Callable
 from pathlib import Path
 
 from gymnast.config import EnvConfig
@@ -79,8 +81,10 @@ def _run_experiment(config: ExperimentConfig, out: Path, reuse: dict[str, Path] 
     if config.new_scenes.scenes_per_task:
         stages.run("new_scenes", lambda: _new_scenes(sft, wm, judge, config, out / "new_scenes", progress),
                    out / "new_scenes")
-    # The real world as the dataset saw it (a reused dataset may have its own image size).
-    env = EnvConfig(image_size=EpisodeDataset(data).image_shape[0], horizon=config.rl.evaluation_horizon)
+    # The real world as the dataset saw it (a reused dataset may have its own image size), read only
+    # by an evaluation still to run: an exported experiment holds no dataset (experiment.export).
+    env = functools.cache(lambda: EnvConfig(image_size=EpisodeDataset(data).image_shape[0],
+                                            horizon=config.rl.evaluation_horizon))
     # The arms are trained: their evaluations share one set of simulator processes.
     with kept_workers(config.workers, config.runner):
         for name, policy in policies.items():
@@ -302,16 +306,17 @@ def _dyna_arm(config: ExperimentConfig, sft: Path, wm: Path, judge: Path, data: 
 
 
 def _evaluate(stages: Stages, stage: str, policy: Path, config: ExperimentConfig, out: Path, episodes: int,
-              env: EnvConfig, progress: bool, perturb: str = "none", instruction_split: str = "train",
+              env: Callable[[], EnvConfig], progress: bool, perturb: str = "none", instruction_split: str = "train",
               sentences: Path | None = None) -> dict:
-    """A real-world evaluation of `policy` as a stage; its record keeps the summary figures."""
+    """A real-world evaluation of `policy` as a stage, in the real world `env()` gives; its record
+    keeps the summary figures."""
     from gymnast.eval.evaluate import EvalConfig, evaluate
 
     def work() -> dict:
         settings = EvalConfig(tasks=config.tasks, episodes=episodes, perturb=perturb, instruction_split=instruction_split,
                               sentences=sentences, workers=config.workers, runner=config.runner,
                               videos_per_task=1 if perturb == "none" else 0,
-                              env=dataclasses.replace(env))
+                              env=dataclasses.replace(env()))
         report = evaluate(str(policy), settings, out / "eval" / f"{stage.removeprefix('eval_')}.json", progress)
         keep = ("success", "ci_low", "ci_high", "episodes", "successes", "per_task", "real_interactions", "videos")
         return {key: report[key] for key in keep}
@@ -320,7 +325,7 @@ def _evaluate(stages: Stages, stage: str, policy: Path, config: ExperimentConfig
 
 
 def _worldgym(stages: Stages, config: ExperimentConfig, out: Path, policies: dict[str, Path], wm: Path, judge: Path,
-              env: EnvConfig, progress: bool) -> dict:
+              env: Callable[[], EnvConfig], progress: bool) -> dict:
     """Imagined and real success of the arms, of the SFT run's earlier checkpoints and of the SFT
     policy's noise ladder (`ExperimentConfig.worldgym_noise`), which spans the range of real success."""
     import math
@@ -338,7 +343,7 @@ def _worldgym(stages: Stages, config: ExperimentConfig, out: Path, policies: dic
     levels = (*config.worldgym_noise, *((math.inf,) if config.worldgym_random else ()))
     if levels:
         candidates += noise_ladder(policies["sft"], levels, config.seed, prefix="sft_")
-    with WorldGym(wm, judge, config.tasks, config.worldgym_episodes, env, config.workers, runner=config.runner) as gym:
+    with WorldGym(wm, judge, config.tasks, config.worldgym_episodes, env(), config.workers, runner=config.runner) as gym:
         rows = gym.rows(candidates, real, progress)
     return {"policies": rows, **correlation([r["imagined"] for r in rows], [r["real"] for r in rows])}
 

@@ -28,6 +28,7 @@ from gymnast.utils.metrics import MetricsLog
 logger = logging.getLogger(__name__)
 
 LAST = "last"
+OPTIMIZER_FILE = "optimizer.pt"
 
 
 def save_checkpoint(
@@ -55,7 +56,7 @@ def save_checkpoint(
         (staging / "config.json").write_text(json.dumps(config, indent=2, default=str))
         (staging / "trainer.json").write_text(json.dumps({"step": step, **(trainer or {})}, indent=2))
         if optimizer is not None:
-            torch.save(optimizer.state_dict(), staging / "optimizer.pt")
+            torch.save(optimizer.state_dict(), staging / OPTIMIZER_FILE)
         if rng is not None:
             torch.save(rng, staging / "rng.pt")
         for name, state in (extra or {}).items():
@@ -89,7 +90,12 @@ def load_checkpoint(checkpoint: Path, model: nn.Module, optimizer: torch.optim.O
     model.load_state_dict(load_file(checkpoint / "model.safetensors"))
     if optimizer is not None:
         # Read onto the host; the optimizer moves its state to its parameters' device.
-        optimizer.load_state_dict(torch.load(checkpoint / "optimizer.pt", weights_only=True, map_location="cpu"))
+        state = checkpoint / OPTIMIZER_FILE
+        if not state.is_file():
+            raise FileNotFoundError(f"{checkpoint} has no {OPTIMIZER_FILE}: the run was exported without its optimizer "
+                                    "state (gymnast export), so its weights load but its training cannot go on exactly; "
+                                    "start a new run from it instead")
+        optimizer.load_state_dict(torch.load(state, weights_only=True, map_location="cpu"))
     rng = torch.load(checkpoint / "rng.pt", weights_only=True, map_location="cpu") if (checkpoint / "rng.pt").exists() else {}
     return read_json(checkpoint / "trainer.json"), rng
 

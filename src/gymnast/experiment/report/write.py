@@ -160,8 +160,6 @@ def _equal_budget_setup(stages: Stages, config: ExperimentConfig) -> dict | None
 
 def build_summary(stages: Stages, config: ExperimentConfig) -> dict:
     """summary.json's content, from the finished stages."""
-    from gymnast.data.lerobot import EpisodeDataset
-
     # An experiment older than an arm (Dyna) reports without it until a rerun has trained it.
     arms = {spec.name: _arm_row(stages, spec.name, spec.title) for spec in ARMS if stages.done(f"eval_{spec.name}")}
     success = {name: row["success"] for name, row in arms.items()}
@@ -172,7 +170,6 @@ def build_summary(stages: Stages, config: ExperimentConfig) -> dict:
                          **{p: _brief(stages.record(f"eval_{name}_{p}")) for p in PERTURBATIONS}} for name in ROBUSTNESS_ARMS}
     language = {name: {"train": robustness[name]["none"], "heldout": _brief(stages.record(f"eval_{name}_heldout"))}
                 for name in ROBUSTNESS_ARMS}
-    dataset = EpisodeDataset(stages.path("collect"))
     # The SFT policy's judged imagination against the real world (None in experiments older than the stage).
     imagination = _without_bookkeeping(stages.record("imagination")) if stages.done("imagination") else None
     # Over every task and over the weak ones (an experiment older than the weak readout has only the first).
@@ -217,7 +214,7 @@ def build_summary(stages: Stages, config: ExperimentConfig) -> dict:
         "imagination": imagination,
         "signal": signal,
         "signal_weak": signal_weak,
-        "dataset": {"episodes": len(dataset), "real_interactions": int(sum(dataset.lengths)), "path": str(dataset.root)},
+        "dataset": _dataset_brief(stages),
         "sft_demonstrations": _sft_demonstrations(stages.path("sft")),
         "rl_steps": config.rl.steps,
         "rollouts_per_step": config.rl.starts_per_step * config.rl.group_size,
@@ -227,6 +224,23 @@ def build_summary(stages: Stages, config: ExperimentConfig) -> dict:
     }
     summary["goals"] = experiment_goals(arms, weak, worldgym["pearson"], summary["watch_false_success"], equal_budget)
     return summary
+
+
+def _dataset_brief(stages: Stages) -> dict:
+    """The collected dataset's episodes and real interactions: counted in it, or, in an exported
+    experiment, which holds no dataset (experiment.export), as the summary written beside it said."""
+    from gymnast.data.lerobot import EpisodeDataset
+    from gymnast.data.lerobot_v3 import INFO_PATH
+
+    path = stages.path("collect")
+    if (path / INFO_PATH).is_file():
+        dataset = EpisodeDataset(path)
+        return {"episodes": len(dataset), "real_interactions": int(sum(dataset.lengths)), "path": str(dataset.root)}
+    written = (_read_json(stages.out / "summary.json") or {}).get("dataset")
+    if written and written.get("path") == str(path):
+        return written
+    raise FileNotFoundError(f"{path}: the experiment's dataset is not there and no summary.json of {stages.out} "
+                            "counted it; record it again with the collect settings in its config.json")
 
 
 def _sft_demonstrations(run: Path) -> dict | None:
