@@ -47,7 +47,7 @@ class Arm:
 
 
 # The simulators' arms are rewarded by success (binary), as the recipe that learns in the real world
-# is (docs/rl.md): GRPO on the dense reward lost ground on MT10 (60.8% -> 56.2%, results/headline).
+# is (docs/rl.md): GRPO on the dense reward lost ground on MT10 (60.8% -> 56.2%, results/headline_one_camera).
 ARMS = (
     Arm("sft", "SFT"),
     Arm("iter_sft", "Iter-SFT (judged imagined successes + demos)"),
