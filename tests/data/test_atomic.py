@@ -45,3 +45,25 @@ def test_written_files_get_ordinary_permissions_not_private_ones(tmp_path):
     mask = os.umask(0)
     os.umask(mask)
     assert target.stat().st_mode & 0o777 == 0o666 & ~mask
+
+
+def test_a_directory_appears_whole_or_not_at_all(tmp_path):
+    from gymnast.utils.atomic import atomic_directory
+
+    target = tmp_path / "run" / "copy"
+    with pytest.raises(RuntimeError), atomic_directory(target) as staging:
+        (staging / "half.txt").write_text("written before the failure")
+        raise RuntimeError("the copy failed half-way")
+    assert not target.exists() and list((tmp_path / "run").iterdir()) == []
+
+    with atomic_directory(target) as staging:
+        (staging / "whole.txt").write_text("first")
+    assert (target / "whole.txt").read_text() == "first"
+
+    with pytest.raises(OSError), atomic_directory(target) as staging:  # no replace: an existing one stays
+        (staging / "whole.txt").write_text("second")
+    assert (target / "whole.txt").read_text() == "first"
+    with atomic_directory(target, replace=True) as staging:
+        (staging / "other.txt").write_text("second")
+    assert [p.name for p in target.iterdir()] == ["other.txt"]
+    assert sorted(p.name for p in target.parent.iterdir()) == ["copy"]

@@ -17,11 +17,11 @@ from __future__ import annotations
 import fnmatch
 import os
 import shutil
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from gymnast.data.lerobot_v3 import INFO_PATH
+from gymnast.utils.atomic import atomic_directory
 from gymnast.utils.checkpoint import LAST, OPTIMIZER_FILE
 
 
@@ -86,40 +86,33 @@ def export_run(run: Path, destination: Path, exclude: tuple[str, ...] = (), data
         raise FileExistsError(f"{destination} exists already; export into a new directory")
     if destination.resolve().is_relative_to(run.resolve()):
         raise ValueError(f"{destination} is inside {run}, the run it would copy")
-    destination.parent.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(dir=destination.parent, prefix=f".{destination.name}."))
     export = Export(destination)
-    try:
-        _copy_tree(run, staging, Path("."), export, exclude, datasets, optimizer)
-        os.replace(staging, destination)
-    except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
-        raise
-    return export
 
-
-def _copy_tree(source: Path, target: Path, relative: Path, export: Export, exclude: tuple[str, ...],
-               datasets: bool, optimizer: bool) -> None:
-    """Copies directory `source` (at `relative` in the run) into `target`, leaving out the bulk."""
-    target.mkdir(exist_ok=True)
-    kept_checkpoint = _kept_checkpoint(source) if source.name == "checkpoints" else None
-    for entry in sorted(source.iterdir()):
-        inside = relative / entry.name
-        if any(fnmatch.fnmatch(inside.as_posix(), pattern) for pattern in exclude):
-            export.left_out["excluded"].add(entry)
-        elif entry.is_dir() and not entry.is_symlink():
-            if not datasets and (entry / INFO_PATH).is_file():
-                export.left_out["datasets"].add(entry)
-            elif kept_checkpoint is not None and entry.name != kept_checkpoint:
-                export.left_out["checkpoints"].add(entry)
+    def copy_tree(source: Path, target: Path, relative: Path) -> None:
+        """Copies directory `source` (at `relative` in the run) into `target`, leaving out the bulk."""
+        target.mkdir(exist_ok=True)
+        kept_checkpoint = _kept_checkpoint(source) if source.name == "checkpoints" else None
+        for entry in sorted(source.iterdir()):
+            inside = relative / entry.name
+            if any(fnmatch.fnmatch(inside.as_posix(), pattern) for pattern in exclude):
+                export.left_out["excluded"].add(entry)
+            elif entry.is_dir() and not entry.is_symlink():
+                if not datasets and (entry / INFO_PATH).is_file():
+                    export.left_out["datasets"].add(entry)
+                elif kept_checkpoint is not None and entry.name != kept_checkpoint:
+                    export.left_out["checkpoints"].add(entry)
+                else:
+                    copy_tree(entry, target / entry.name, inside)
+            elif not optimizer and entry.name == OPTIMIZER_FILE:
+                export.left_out["optimizer"].add(entry)
             else:
-                _copy_tree(entry, target / entry.name, inside, export, exclude, datasets, optimizer)
-        elif not optimizer and entry.name == OPTIMIZER_FILE:
-            export.left_out["optimizer"].add(entry)
-        else:
-            shutil.copy2(entry, target / entry.name, follow_symlinks=False)
-            export.files += 1
-            export.bytes += entry.lstat().st_size
+                shutil.copy2(entry, target / entry.name, follow_symlinks=False)
+                export.files += 1
+                export.bytes += entry.lstat().st_size
+
+    with atomic_directory(destination) as staging:
+        copy_tree(run, staging, Path("."))
+    return export
 
 
 def _kept_checkpoint(checkpoints: Path) -> str | None:

@@ -1,5 +1,6 @@
-"""Atomic file writes: a reader sees the old file or the new one, never a half-written one; and the
-one reader of the JSON files they write, whose errors name the file.
+"""Atomic file writes: a reader sees the old file or the new one, never a half-written one (and a
+directory whole or not at all); and the one reader of the JSON files they write, whose errors name
+the file.
 
 Every writer here writes to a hidden temporary file in the target's directory, flushes it to disk
 (fsync), renames it over the target (``os.replace`` is atomic on POSIX and Windows) and fsyncs the
@@ -13,6 +14,7 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import shutil
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
@@ -56,6 +58,28 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
         tmp.unlink(missing_ok=True)
         raise
     _fsync_directory(path.parent)
+
+
+@contextlib.contextmanager
+def atomic_directory(path: str | Path, replace: bool = False) -> Iterator[Path]:
+    """Yield a hidden staging directory to fill; on success it is renamed to ``path``, so a reader
+    sees the whole directory or none of it. If the body raises, the staging directory is removed.
+
+    Args:
+        path: the final directory; its parent directories are created.
+        replace: an existing ``path`` is removed just before the rename (else the rename fails).
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(dir=path.parent, prefix=f".{path.name}."))
+    try:
+        yield staging
+        if replace and path.exists():
+            shutil.rmtree(path)
+        os.replace(staging, path)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
 
 
 def _current_umask() -> int:

@@ -12,9 +12,6 @@ from __future__ import annotations
 
 import json
 import logging
-import os
-import shutil
-import tempfile
 from collections.abc import Callable
 from pathlib import Path
 
@@ -22,7 +19,7 @@ import torch
 from safetensors.torch import load_file, save_file
 from torch import nn
 
-from gymnast.utils.atomic import read_json, write_bytes, write_json
+from gymnast.utils.atomic import atomic_directory, read_json, write_bytes, write_json
 from gymnast.utils.metrics import MetricsLog
 
 logger = logging.getLogger(__name__)
@@ -49,8 +46,8 @@ def save_checkpoint(
     root = Path(run) / "checkpoints"
     root.mkdir(parents=True, exist_ok=True)
     final = root / f"{step:06d}"
-    staging = Path(tempfile.mkdtemp(dir=root, prefix=f".{step:06d}."))
-    try:
+    # A rerun of the same step (e.g. after a resume) replaces it.
+    with atomic_directory(final, replace=True) as staging:
         # Weights are saved from the host, so a checkpoint written on a GPU loads on any machine.
         save_file({k: v.detach().cpu().contiguous() for k, v in model.state_dict().items()}, staging / "model.safetensors")
         (staging / "config.json").write_text(json.dumps(config, indent=2, default=str))
@@ -61,12 +58,6 @@ def save_checkpoint(
             torch.save(rng, staging / "rng.pt")
         for name, state in (extra or {}).items():
             torch.save(state, staging / f"{name}.pt")
-        if final.exists():  # a rerun of the same step replaces it (e.g. after a resume)
-            shutil.rmtree(final)
-        os.replace(staging, final)
-    except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
-        raise
     write_bytes(root / LAST, final.name.encode())
     return final
 
