@@ -211,7 +211,10 @@ def test_the_practice_signal_of_imagination_is_measured_and_reported(experiment:
     report = json.loads((experiment / "signal" / "signal.json").read_text())
     # debug: one reach start as the world-model arms draw theirs (the dataset's first frames), a group
     # of the RL preset's size, the RL horizon
-    settings = json.loads((experiment / "config.json").read_text())["rl"]
+    saved = json.loads((experiment / "config.json").read_text())
+    settings = saved["rl"]
+    # The weak tasks take their own number of starts (reach is one).
+    assert report["settings"]["task_starts"] == {"reach-v3": saved["signal_weak_scenes"]}
     assert report["settings"]["data"] == str(experiment / "data") and report["settings"]["keyframes"] == settings["keyframes"]
     assert figures["rollouts"] == len(report["rollouts"]) == 2 and figures["horizon"] == settings["horizon"] == HORIZON
     assert figures["real_interactions"] == report["interactions"] == 2 * HORIZON

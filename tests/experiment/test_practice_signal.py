@@ -216,3 +216,24 @@ def test_starts_take_every_held_out_episode_once_before_lending_trained_ones_and
     short = start_episodes([1], [10], 5, draw)
     assert len(short) == 5 and set(short) == {1, 10}
     assert start_episodes([], [7, 8], 2, draw) in ([7, 8], [8, 7])
+
+
+def test_tasks_named_in_task_starts_get_their_own_number_of_scenes_never_one_twice():
+    from gymnast.config import EnvConfig
+    from gymnast.experiment.practice_signal import fresh_starts
+
+    config = SignalConfig(tasks="reach-v3,push-v3", starts_per_task=1, task_starts={"push-v3": 3})
+    assert [config.starts_for(task) for task in ("reach-v3", "push-v3")] == [1, 3]
+    starts = fresh_starts({task: config.starts_for(task) for task in ("reach-v3", "push-v3")}, EnvConfig(), seed=0)
+    assert [start.task for start in starts] == ["reach-v3", "push-v3", "push-v3", "push-v3"]
+    assert len({start.seed for start in starts}) == 4
+    # The same counts for every task draw the scenes they drew before counts could differ.
+    even = fresh_starts({"reach-v3": 2, "push-v3": 2}, EnvConfig(), seed=0)
+    draw = np.random.default_rng(0)
+    from gymnast.envs.tasks import DATA_SEEDS
+    seeds = draw.choice(DATA_SEEDS.stop - DATA_SEEDS.start, size=4, replace=False) + DATA_SEEDS.start
+    assert [start.seed for start in even] == [int(seed) for seed in seeds]
+    with pytest.raises(ValueError, match=r"task_starts\['push-v3'\] must be at least 1"):
+        SignalConfig(task_starts={"push-v3": 0})
+    with pytest.raises(ValueError, match=r"names \['door-open-v3'\], not among its tasks"):
+        SignalConfig(tasks="reach-v3", task_starts={"door-open-v3": 4})

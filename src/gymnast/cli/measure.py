@@ -65,6 +65,7 @@ def rl_signal(
     like: Path | None = None,
     tasks: str | None = None,
     starts_per_task: int = 8,
+    task_starts: dict[str, int] | None = None,
     group_size: int | None = None,
     temperature: float | None = None,
     horizons: tuple[int, ...] | None = None,
@@ -93,6 +94,8 @@ def rl_signal(
             unless given here.
         tasks: task names and/or sets, comma-separated (default: --like's, else the four weak tasks).
         starts_per_task: starts (GRPO groups) per task.
+        task_starts: tasks that take another number of starts, as TASK N pairs, e.g. `--task-starts
+            push-v3 12 reach-v3 12` (the experiment's weak tasks take `signal_weak_scenes`).
         group_size: rollouts per scene (default: --like's, else 8).
         temperature: the policy's sampling temperature (default: --like's, else 1).
         horizons: horizons read out, the largest the rollouts' length (default: --like's horizon, else 50 100 150).
@@ -124,8 +127,8 @@ def rl_signal(
     settings |= {name: value for name, value in chosen.items() if value is not None}
     if batch is None and "group_size" in settings:
         settings["batch"] = batch_for(settings["group_size"])
-    config = SignalConfig(**settings, starts_per_task=starts_per_task, workers=workers, runner=runner,
-                          heldout_fraction=heldout_fraction)
+    config = SignalConfig(**settings, starts_per_task=starts_per_task, task_starts=task_starts or {}, workers=workers,
+                          runner=runner, heldout_fraction=heldout_fraction)
     measure_signal_runs(inputs["policy"], inputs["wm"], RewardSpec.parse(inputs["reward"]), config, out,
                         robot_state=inputs.get("robot_state"))
     print((out / "signal.md").read_text())

@@ -248,7 +248,8 @@ def _signal(sft: Path, wm: Path, reward: RewardSpec, data: Path, config: Experim
     group = config.rl.group_size
     # The starts come from the scenes the world model held out; a dataset too small to hold any out
     # lends its others (with a warning), so a tiny experiment still measures.
-    settings = SignalConfig(tasks=config.tasks, starts_per_task=config.signal_scenes, data=str(data),
+    settings = SignalConfig(tasks=config.tasks, starts_per_task=config.signal_scenes,
+                            task_starts=dict.fromkeys(config.weak_task_list, config.signal_weak_scenes), data=str(data),
                             keyframes=config.rl.keyframes, heldout_fraction=heldout_fraction(wm), group_size=group,
                             temperature=config.rl.temperature, horizons=(config.rl.horizon,),
                             batch=batch_for(group), workers=config.workers, runner=config.runner,

@@ -50,7 +50,7 @@ import dataclasses
 import logging
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -61,7 +61,7 @@ from gymnast.config import EnvConfig
 from gymnast.data.keyframes import KeyframeConfig
 from gymnast.envs.kinds import IMAGINED, REAL
 from gymnast.envs.starts import Start, scene_starts
-from gymnast.envs.tasks import DATA_SEEDS
+from gymnast.envs.tasks import DATA_SEEDS, resolve_tasks
 from gymnast.envs.workers import parse_runner
 from gymnast.experiment.signal_report import (ON_REAL_VIDEO, PROBABILITY, REAL_DENSE, SCORE, VERDICT, format_signal,
                                              signal_table)
@@ -93,6 +93,9 @@ class SignalConfig:
     """Task names and/or task sets (mt10, mt50), comma-separated."""
     starts_per_task: int = 8
     """Starts (groups) per task."""
+    task_starts: dict[str, int] = field(default_factory=dict)
+    """Starts for the tasks named here instead of `starts_per_task`: more where few groups have a
+    spread of real success (the weak tasks: 4 starts a task gave 16 groups there, too few to rank)."""
     data: str = ""
     """Dataset whose held-out episodes give keyframe starts (`keyframes`); empty: fresh scenes' first frames."""
     keyframes: str = "uniform"
@@ -122,6 +125,12 @@ class SignalConfig:
         for name in ("starts_per_task", "group_size", "batch", "workers"):
             if getattr(self, name) < 1:
                 raise ValueError(f"SignalConfig.{name} must be at least 1, got {getattr(self, name)}")
+        for task, count in self.task_starts.items():
+            if count < 1:
+                raise ValueError(f"SignalConfig.task_starts[{task!r}] must be at least 1, got {count}")
+        strangers = sorted(set(self.task_starts) - set(resolve_tasks(self.tasks)))
+        if strangers:
+            raise ValueError(f"SignalConfig.task_starts names {strangers}, not among its tasks ({self.tasks})")
         if self.group_size < 2:
             raise ValueError(f"SignalConfig.group_size must be at least 2 (a group of one ranks nothing), got {self.group_size}")
         if self.batch % self.group_size:
@@ -139,6 +148,10 @@ class SignalConfig:
     @property
     def horizon(self) -> int:
         return max(self.horizons)
+
+    def starts_for(self, task: str) -> int:
+        """Starts (groups) of `task`."""
+        return self.task_starts.get(task, self.starts_per_task)
 
 
 def measure_signal(policy: Policy, world_model: WorldModel, reward: Reward, config: SignalConfig,
@@ -164,7 +177,6 @@ def measure_signal(policy: Policy, world_model: WorldModel, reward: Reward, conf
         group, the real outcome and every readout by horizon).
     """
     from gymnast.envs.factory import EnvFactory
-    from gymnast.envs.tasks import resolve_tasks
     from gymnast.rl.evaluate import replay_actions
     from gymnast.rl.rollout import collect_rollouts
 
@@ -173,7 +185,7 @@ def measure_signal(policy: Policy, world_model: WorldModel, reward: Reward, conf
     env_config = EnvConfig(image_size=world_model.image_size, horizon=config.horizon, cameras=replay_cameras(world_model))
     starts = (heldout_keyframes(Path(config.data), tasks, config, world_model.image_size, model_cameras(world_model))
               if config.data
-              else fresh_starts(tasks, config.starts_per_task, env_config, config.seed))
+              else fresh_starts({task: config.starts_for(task) for task in tasks}, env_config, config.seed))
     rollout_starts = [start for start in starts for _ in range(config.group_size)]  # groups are contiguous
     size = min(config.batch, len(rollout_starts))
     envs = EnvFactory(IMAGINED, policy.chunk_size, env_config, "none", config.workers, world_model,
@@ -239,18 +251,19 @@ def measure_signal(policy: Policy, world_model: WorldModel, reward: Reward, conf
     return report
 
 
-def fresh_starts(tasks: Sequence[str], per_task: int, config: EnvConfig, seed: int) -> list[Start]:
-    """`per_task` new scenes of each task from random data seeds (drawn from `seed`), as `gymnast rl
-    --fresh-scenes` starts its groups: real first frames, rendered by a reset (no interaction)."""
+def fresh_starts(counts: dict[str, int], config: EnvConfig, seed: int) -> list[Start]:
+    """`counts[task]` new scenes of each task from random data seeds (drawn from `seed`, none twice),
+    as `gymnast rl --fresh-scenes` starts its groups: real first frames, rendered by a reset (no
+    interaction)."""
     draw = np.random.default_rng(seed)
-    seeds = draw.choice(DATA_SEEDS.stop - DATA_SEEDS.start, size=per_task * len(tasks), replace=False) + DATA_SEEDS.start
-    return scene_starts([(task, int(seeds[i * per_task + j])) for i, task in enumerate(tasks) for j in range(per_task)],
-                        config)
+    seeds = iter(draw.choice(DATA_SEEDS.stop - DATA_SEEDS.start, size=sum(counts.values()), replace=False)
+                 + DATA_SEEDS.start)
+    return scene_starts([(task, int(next(seeds))) for task, count in counts.items() for _ in range(count)], config)
 
 
 def heldout_keyframes(data: Path, tasks: Sequence[str], config: SignalConfig, image_size: int,
                       cameras: Sequence[str] = ()) -> list[Start]:
-    """`config.starts_per_task` keyframes of each task from the episodes of `data`'s held-out scenes
+    """`config.starts_for(task)` keyframes of each task from the episodes of `data`'s held-out scenes
     (`config.heldout_fraction`, the world models' split: they never trained on them) recorded in the real world, drawn by
     `config.keyframes` from `config.seed`; the frames fitted to `image_size` as the models were
     trained, the views of several `cameras` side by side (default: the dataset's first). A task with
@@ -277,11 +290,11 @@ def heldout_keyframes(data: Path, tasks: Sequence[str], config: SignalConfig, im
         heldout = [i for i in episodes if not config.heldout_fraction or is_heldout(dataset.episodes[i],
                                                                                     config.heldout_fraction)]
         trained = sorted(set(episodes) - set(heldout))
-        chosen = start_episodes(heldout, trained, config.starts_per_task, draw)
+        chosen = start_episodes(heldout, trained, config.starts_for(task), draw)
         lent = sum(i in trained for i in chosen)
         if lent:
             logger.warning("%s: %d held-out episode(s) of %s for %d starts; %d start(s) come from episodes the "
-                           "models trained on", data, len(heldout), task, config.starts_per_task, lent)
+                           "models trained on", data, len(heldout), task, config.starts_for(task), lent)
         # One keyframe per pick: an episode picked twice gives two keyframes (the same one for `first`).
         starts += [dataset_keyframes(dataset, [int(i)], keyframes, seed=config.seed + n)[0] for n, i in enumerate(chosen)]
     return starts
