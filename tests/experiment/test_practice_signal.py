@@ -3,6 +3,7 @@ reference, and one real measurement with the committed models through the comman
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from pathlib import Path
@@ -68,8 +69,10 @@ def test_the_dense_reference_counts_the_maximum_from_the_success_on():
     assert dense_return(rewards, success).tolist() == pytest.approx([(1 + 2 + 10 + 10) / 40, 0.1])
 
 
-def test_a_per_frame_judge_is_read_at_every_horizon_from_one_pass():
+@pytest.mark.parametrize("hold_steps", [1, 3])
+def test_a_per_frame_judge_is_read_at_every_horizon_from_one_pass(hold_steps):
     judge = make_reward(RewardSpec.judge(JUDGE))
+    judge.config = dataclasses.replace(judge.config, hold_steps=hold_steps)  # a run cut by a horizon holds
     frames = torch.randint(0, 256, (2, 11, 96, 96, 3), dtype=torch.uint8)
     readouts = read_out(judge, frames, ["reach the goal"] * 2, (5, 10))
     for h in (5, 10):

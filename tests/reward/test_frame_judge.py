@@ -49,6 +49,37 @@ def test_a_video_succeeds_where_its_most_convincing_frame_does():
         judge.frame_probabilities(videos.float(), ["x"] * 2)
 
 
+def test_a_success_must_hold_for_the_judges_steps_unless_the_video_ends_on_it():
+    from gymnast.reward.judges.frames import held_probability
+
+    p = torch.tensor([[0.0, 0.9, 0.1, 0.1, 0.1, 0.1],    # one frame's flash, denied by those after it
+                      [0.0, 0.1, 0.8, 0.7, 0.9, 0.2],    # three steps in a row, then undone
+                      [0.0, 0.1, 0.1, 0.1, 0.1, 0.6]])   # the last frame: nothing shows it undone
+    assert held_probability(p, 1).tolist() == pytest.approx([0.9, 0.9, 0.6])
+    assert held_probability(p, 3).tolist() == pytest.approx([0.1, 0.7, 0.6])
+    assert held_probability(p, 4).tolist() == pytest.approx([0.1, 0.2, 0.6])
+    loop = [max(min(row[t: t + 3] + [row[-1]] * max(0, t + 3 - len(row))) for t in range(len(row))) for row in p.tolist()]
+    assert held_probability(p, 3).tolist() == pytest.approx(loop)  # against a loop over the windows
+    judge = FrameJudge(JudgeConfig(width=16, image_size=16, hold_steps=3)).eval()
+    videos = torch.randint(0, 255, (2, 6, 16, 16, 3), dtype=torch.uint8)
+    per_frame = judge.frame_probabilities(videos, ["open the drawer"] * 2)
+    assert torch.equal(judge.probability(videos, ["open the drawer"] * 2), held_probability(per_frame, 3))
+    with pytest.raises(ValueError, match="hold_steps must be at least 1"):
+        JudgeConfig(hold_steps=0)
+
+
+def test_a_judge_saved_before_the_hold_rule_believes_one_frame_and_new_ones_hold_their_steps(tiny_dataset, tmp_path):
+    spec = FrameJudge(JudgeConfig(width=16, image_size=16, hold_steps=4)).spec()
+    assert FrameJudge.from_spec(spec).config.hold_steps == 4
+    assert FrameJudge.from_spec({k: v for k, v in spec.items() if k != "hold_steps"}).config.hold_steps == 1
+    train_judge(tiny_dataset, tmp_path / "judge", dataclasses.replace(DEBUG, hold_steps=3), progress=False)
+    assert load_judge(tmp_path / "judge").config.hold_steps == 3
+    # Fine-tuning a judge that held another number of steps: the rule is the new run's, not architecture.
+    tuned = dataclasses.replace(DEBUG, hold_steps=1, init=tmp_path / "judge", steps=2)
+    train_judge(tiny_dataset, tmp_path / "tuned", tuned, progress=False)
+    assert load_judge(tmp_path / "tuned").config.hold_steps == 1
+
+
 def test_a_repeated_frame_gets_the_probability_of_the_frame_it_repeats():
     """Chunk models' videos repeat each frame (and every video its last after the end): judged once."""
     judge = FrameJudge(JudgeConfig(width=16, image_size=16)).eval()
@@ -173,10 +204,11 @@ def test_the_threshold_for_a_true_positive_rate_and_hard_negatives_are_train_jud
     from gymnast.cli import main
 
     main(["train-judge", "--data", str(tiny_dataset), "--out", str(tmp_path / "judge"), "--preset", "debug",
-          "--threshold-tpr", "1.0", "--hard-negatives", "0.5"])
+          "--threshold-tpr", "1.0", "--hard-negatives", "0.5", "--hold-steps", "2"])
     saved = json.loads((tmp_path / "judge" / "config.json").read_text())
     report = json.loads((tmp_path / "judge" / "metrics.json").read_text())
     assert saved["train"]["threshold_tpr"] == 1.0 and saved["train"]["hard_negatives"] == 0.5
+    assert saved["train"]["hold_steps"] == saved["model"]["hold_steps"] == 2
     assert report["validation_tpr"] in (1.0, None)  # None: no validation scene had both outcomes
 
 

@@ -31,6 +31,7 @@ def train_judge(
     fit: Fit | None = None,
     threshold_tpr: float | None = None,
     hard_negatives: float | None = None,
+    hold_steps: int | None = None,
     device: str | None = None,
     keys: Annotated[KeyFlags, tyro.conf.arg(name="")] = KeyFlags(),
 ) -> None:
@@ -59,6 +60,8 @@ def train_judge(
             passes this share of their successes) instead of the most TPR - FPR; e.g. 0.95.
         hard_negatives: share of each batch's negative frames chosen as those the judge rates highest
             of four times as many random ones (its near misses); default 0, all random.
+        hold_steps: steps in a row a per-frame judge must see the task done to call a video a success
+            (a run reaching the video's end counts as held); default 5; 1 believes any single frame.
         device: auto (CUDA when torch sees a GPU, else the CPU), cpu, cuda or cuda:N; --resume may change it.
         keys: which dataset features are the actions and the states (default: LeRobot's action and
             observation.state); saved with the run.
@@ -70,7 +73,7 @@ def train_judge(
         "train-judge", out, resume, JUDGE_PRESETS[preset], inputs={"data": data, "wm": wm}, required=("data",),
         overrides={"steps": steps, "kind": kind, "extra_data": extra_data or None, "init": init, "camera": camera,
                    "cameras": cameras or None, "fit": fit, "threshold_tpr": threshold_tpr,
-                   "hard_negatives": hard_negatives, "device": device, **key_overrides(keys)},
+                   "hard_negatives": hard_negatives, "hold_steps": hold_steps, "device": device, **key_overrides(keys)},
         saved=lambda: (saved_judge_config(out), saved_inputs(out, "data", "wm")))
     report = train(inputs["data"], out, config, wm=inputs["wm"], resume=resume)
     print(json.dumps({k: v for k, v in report.items() if k.startswith(("real", "imagined"))}, indent=2))

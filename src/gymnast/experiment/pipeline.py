@@ -394,9 +394,12 @@ def _as_they_ran(saved: dict) -> dict:
     """`saved` with the settings added since, as the experiment ran without them (not today's
     defaults): before cameras were a setting it recorded the views its collection did, the front
     camera unless it named others; before `judge_rollouts`, its judge learned from none; before
-    `signal_weak_scenes`, the weak tasks took `signal_scenes` starts like the others."""
+    `signal_weak_scenes`, the weak tasks took `signal_scenes` starts like the others; before
+    `hold_steps`, its judges believed a single frame."""
     views = saved.get("collect", {}).get("env", {}).get("cameras", list(EnvConfig().cameras))
-    return {"cameras": views, "judge_rollouts": 0, "signal_weak_scenes": saved.get("signal_scenes", 4), **saved}
+    judge = {"hold_steps": 1, **saved["judge"]} if "judge" in saved else None
+    return {"cameras": views, "judge_rollouts": 0, "signal_weak_scenes": saved.get("signal_scenes", 4), **saved,
+            **({"judge": judge} if judge else {})}
 
 
 def saved_experiment_config(out: Path) -> ExperimentConfig:

@@ -334,7 +334,7 @@ def read_out(reward: Reward, frames: torch.Tensor, instructions: Sequence[str], 
     frame_values = per_frame(frames, instructions)  # (R, T + 1): one pass serves every horizon
     if not reward.binary:  # a progress judge: the mean over the frames after the first, as its score is
         return {SCORE: {h: frame_values[:, 1: h + 1].mean(dim=1) for h in horizons}}
-    best = {h: frame_values[:, : h + 1].max(dim=1).values for h in horizons}  # as FrameJudge.probability
+    best = {h: reward.video_probability(frame_values[:, : h + 1]) for h in horizons}  # as FrameJudge.probability
     return {SCORE: {h: (p >= reward.config.threshold).float() for h, p in best.items()},  # as ThresholdJudge.score
             PROBABILITY: best}
 

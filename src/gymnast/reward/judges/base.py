@@ -27,9 +27,16 @@ class JudgeConfig:
     cameras: tuple[str, ...] = ("front",)
     """The cameras the judge sees, side by side in each frame, the primary first (their names in
     the datasets it was trained on)."""
+    hold_steps: int = 1
+    """Per-frame judge: steps in a row that must show the task done for a video to count as a
+    success, a run reaching the video's last frame counting as held (the scene as it stays). 1
+    believes any single frame (judges saved without this setting); `gymnast train-judge` sets its
+    own (`JudgeTrainConfig.hold_steps`)."""
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "cameras", tuple(self.cameras))  # a list when read back from JSON
+        if self.hold_steps < 1:
+            raise ValueError(f"JudgeConfig.hold_steps must be at least 1, got {self.hold_steps}")
 
 
 class ThresholdJudge:

@@ -7,8 +7,10 @@ episode (tens of thousands of labelled frames where whole-episode labels give a 
 videos), and it can judge a video the way the real world does: a rollout succeeds if the task is
 done at any step. Each frame is judged beside the video's first frame (where the objects and the
 goal started, which a frame alone may hide behind the arm) and the instruction's MiniLM
-embedding; the video's probability of success is the largest of its frames' (the start frame
-excluded: nothing has been done yet).
+embedding; the video's probability of success is that of its most convincing run of
+`JudgeConfig.hold_steps` frames in a row, a run as convincing as its least convincing frame (the
+start frame excluded: nothing has been done yet). With one frame, a single frame that the frames
+around it deny is enough for a false success; Meta-World's successes last.
 
 Several cameras arrive side by side in each frame (`gymnast.utils.images.tile_views`): each
 camera's pair of squares goes through the same encoder alone, and the head reads the V features
@@ -101,8 +103,21 @@ class FrameJudge(ThresholdJudge, nn.Module):
         return torch.cat([torch.zeros(batch, 1), probabilities.gather(1, latest_changed(new))], dim=1)
 
     def probability(self, videos: torch.Tensor, instructions: Sequence[str]) -> torch.Tensor:
-        """(B,) P(success) of each video: that of its most convincing frame."""
-        return self.frame_probabilities(videos, instructions).max(dim=1).values
+        """(B,) P(success) of each video: that of its most convincing run of `hold_steps` frames."""
+        return self.video_probability(self.frame_probabilities(videos, instructions))
+
+    def video_probability(self, frame_probabilities: torch.Tensor) -> torch.Tensor:
+        """(B,) P(success) of videos from their (B, T) `frame_probabilities` (frame 0 at 0)."""
+        return held_probability(frame_probabilities, self.config.hold_steps)
+
+
+def held_probability(frame_probabilities: torch.Tensor, steps: int) -> torch.Tensor:
+    """(B,) the largest over t of the smallest of (B, T) per-frame probabilities over frames t to
+    t + steps - 1; a run cut by the video's end is held by its last frame (nothing shows it undone)."""
+    if steps == 1:
+        return frame_probabilities.max(dim=1).values
+    held = torch.cat([frame_probabilities, frame_probabilities[:, -1:].expand(-1, steps - 1)], dim=1)  # (B, T+steps-1)
+    return held.unfold(1, steps, 1).min(dim=2).values.max(dim=1).values  # windows (B, T, steps)
 
 
 def frame_loss(judge: FrameJudge, first: torch.Tensor, frames: torch.Tensor, text: torch.Tensor, labels: torch.Tensor):

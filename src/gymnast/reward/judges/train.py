@@ -90,6 +90,13 @@ class JudgeTrainConfig:
     """Choose the decision threshold for this true-positive rate on the validation scenes (the
     highest threshold that still passes this share of their successes, so the fewest false
     successes at that rate) instead of the most TPR - FPR: an operating point such as "TPR 0.95"."""
+    hold_steps: int = 5
+    """Per-frame judge: steps in a row that must show the task done for a video to count as a
+    success (a run reaching the video's end counts as held); saved with the judge
+    (`JudgeConfig.hold_steps`), and its threshold is chosen under it. 1 believes any single frame.
+    A judge's false successes on held-out real video are mostly one or two frames that the frames
+    around them deny: over five steps, the three-camera judge of results/judge/cameras passed 2 of
+    the two-camera headline's 55 held-out negatives instead of 7, at the same TPR (docs/rewards.md)."""
     extra_data: tuple[Path, ...] = ()
     """More datasets besides DATA (e.g. a policy's own recorded rollouts), with the same image
     size; each is split by the same scene hashes, and every part (train, validation, held-out)
@@ -131,6 +138,8 @@ class JudgeTrainConfig:
             raise ValueError(f"JudgeTrainConfig.hard_negatives must be in [0, 1], got {self.hard_negatives}")
         if self.threshold_tpr is not None and not 0 < self.threshold_tpr <= 1:
             raise ValueError(f"JudgeTrainConfig.threshold_tpr must be in (0, 1], got {self.threshold_tpr}")
+        if self.hold_steps < 1:
+            raise ValueError(f"JudgeTrainConfig.hold_steps must be at least 1, got {self.hold_steps}")
 
 
 JUDGE_PRESETS = {
@@ -248,7 +257,8 @@ def train_judge(data: Path, out: Path, config: JudgeTrainConfig, wm: Path | None
         if other.camera_shape != datasets[0].camera_shape:
             raise ValueError(f"{other.root}: frames are {other.camera_shape}, but {data} has {datasets[0].camera_shape}")
     size = model_image_size(datasets[0].camera_shape, config.judge.image_size)
-    config = dataclasses.replace(config, judge=dataclasses.replace(config.judge, image_size=size, cameras=datasets[0].cameras))
+    config = dataclasses.replace(config, judge=dataclasses.replace(config.judge, image_size=size, cameras=datasets[0].cameras,
+                                                                   hold_steps=config.hold_steps))
     datasets = [dataset.fitted(size, config.fit) for dataset in datasets]
     parts = [split_scenes(dataset, config) for dataset in datasets]  # per dataset: (train, validation, held-out)
     train_ids, validation_ids, heldout_ids = ([p[k] for p in parts] for k in range(3))
@@ -316,14 +326,14 @@ def build_judge(config: JudgeTrainConfig) -> LearnedJudge | FrameJudge:
     Raises:
         FileNotFoundError: `config.init` has no checkpoint.
         ValueError: `config.init` is another kind of judge or has another architecture (the
-            threshold aside, which training chooses again).
+            threshold and the steps it holds aside, which are this run's).
     """
     torch.manual_seed(config.seed)
     judge = JUDGES[config.kind](config.judge)
     if config.init is None:
         return judge
     source = load_judge(config.init)
-    unthresholded = [dataclasses.replace(model.config, threshold=0.5) for model in (source, judge)]
+    unthresholded = [dataclasses.replace(model.config, threshold=0.5, hold_steps=1) for model in (source, judge)]
     if source.backend != judge.backend or unthresholded[0] != unthresholded[1]:
         raise ValueError(f"--init {config.init}: a {source.backend} judge with {unthresholded[0]}, but this run trains "
                          f"a {judge.backend} judge with {unthresholded[1]}")
@@ -334,8 +344,9 @@ def build_judge(config: JudgeTrainConfig) -> LearnedJudge | FrameJudge:
 
 def saved_judge_config(run: Path) -> JudgeTrainConfig:
     """The settings a run was started with (RUN/config.json), for ``--resume``; runs from before
-    the per-frame judge trained the video judge."""
-    return from_json(JudgeTrainConfig, {"kind": "video", **saved_settings(run, "train")})
+    the per-frame judge trained the video judge, and those from before `hold_steps` believed a
+    single frame."""
+    return from_json(JudgeTrainConfig, {"kind": "video", "hold_steps": 1, **saved_settings(run, "train")})
 
 
 def load_judge(run: Path) -> LearnedJudge | FrameJudge:
