@@ -35,7 +35,7 @@ def test_unknown_repeated_or_no_cameras_are_refused_at_once(cameras):
 
 def test_an_experiment_saved_before_cameras_were_a_setting_resumes_with_the_front_view(tmp_path: Path):
     saved = json.loads(json.dumps(dataclasses.asdict(EXPERIMENT_PRESETS["debug"].resolved())))
-    del saved["cameras"], saved["judge_rollouts"], saved["signal_weak_scenes"]
+    del saved["cameras"], saved["judge_rollouts"], saved["signal_weak_scenes"], saved["judge"]["hold_steps"]
     del saved["collect"]["env"]["cameras"]
     saved["signal_scenes"] = 3
     (tmp_path / "config.json").write_text(json.dumps(saved))
@@ -44,3 +44,4 @@ def test_an_experiment_saved_before_cameras_were_a_setting_resumes_with_the_fron
     assert config.sft.cameras == config.world_model.cameras == config.judge.cameras == ()
     assert config.judge_rollouts == 0  # as it ran: its judge learned from no policy rollouts
     assert config.signal_weak_scenes == 3  # ... and its weak tasks took as many signal starts as the others
+    assert config.judge.hold_steps == 1  # ... and its judge believed a single frame

@@ -397,9 +397,10 @@ def _as_they_ran(saved: dict) -> dict:
     `signal_weak_scenes`, the weak tasks took `signal_scenes` starts like the others; before
     `hold_steps`, its judges believed a single frame."""
     views = saved.get("collect", {}).get("env", {}).get("cameras", list(EnvConfig().cameras))
-    judge = {"hold_steps": 1, **saved["judge"]} if "judge" in saved else None
-    return {"cameras": views, "judge_rollouts": 0, "signal_weak_scenes": saved.get("signal_scenes", 4), **saved,
-            **({"judge": judge} if judge else {})}
+    ran = {"cameras": views, "judge_rollouts": 0, "signal_weak_scenes": saved.get("signal_scenes", 4), **saved}
+    if "judge" in saved:
+        ran["judge"] = {"hold_steps": 1, **saved["judge"]}
+    return ran
 
 
 def saved_experiment_config(out: Path) -> ExperimentConfig:
