@@ -90,7 +90,9 @@ def test_a_progress_judge_is_read_as_its_score_at_every_horizon():
     readouts = read_out(judge, frames, ["push the puck"] * 2, (5, 10))
     assert set(readouts) == {"score"}
     for h in (5, 10):
-        assert torch.allclose(readouts["score"][h], judge.score(frames[:, : h + 1], ["push the puck"] * 2), atol=1e-6)
+        # The cut video is judged in a batch of fewer frames: where bfloat16 is native its convolutions
+        # round differently with the batch (random frames score mid-range, where that shows).
+        assert torch.allclose(readouts["score"][h], judge.score(frames[:, : h + 1], ["push the puck"] * 2), atol=1e-3)
 
 
 def test_a_state_models_reward_head_is_read_as_its_score_and_its_verdict_at_every_horizon():
