@@ -21,11 +21,10 @@ from pathlib import Path
 
 import torch
 
-from gymnast.data.lerobot import EpisodeDataset
 from gymnast.reward.judges.base import ThresholdJudge
 from gymnast.reward.judges.frames import FrameJudge, held_probability
 from gymnast.reward.judges.measure import choose_threshold, evaluate_judge, operating_points
-from gymnast.reward.judges.train import load_judge, saved_judge_config, split_scenes
+from gymnast.reward.judges.train import judge_datasets, load_judge, saved_judge_config, split_scenes
 from gymnast.reward.judges.videos import judge_cases, load_videos
 from gymnast.utils.atomic import read_json, write_json
 
@@ -49,15 +48,11 @@ class HeldJudge(ThresholdJudge):
         return held_probability(self.cache[key], self.config.hold_steps)
 
 
-def run_videos(run: Path, image_size: int, part: int) -> list:
-    """The real videos of the judge run's validation (`part` 1) or held-out (2) scenes, read as it
-    read them, fitted to its `image_size`."""
-    config = saved_judge_config(run)
-    videos = []
-    for path in (read_json(run / "config.json")["data"], *config.extra_data):
-        dataset = EpisodeDataset(path, config.camera, config.cameras or None, keys=config.keys).fitted(image_size, config.fit)
-        videos += load_videos(dataset, split_scenes(dataset, config)[part], None, progress=False)
-    return videos
+def run_videos(run: Path, part: int) -> list:
+    """The real videos of the judge run's validation (`part` 1) or held-out (2) scenes, read as its training read them."""
+    datasets, config = judge_datasets(Path(read_json(run / "config.json")["data"]), saved_judge_config(run))
+    return [video for dataset in datasets for video in load_videos(dataset, split_scenes(dataset, config)[part], None,
+                                                                      progress=False)]
 
 
 def best_tpr_at(scores: torch.Tensor, truth: torch.Tensor, fpr: float) -> float:
@@ -73,7 +68,7 @@ def measure(run: Path, steps: Sequence[int], threshold_tpr: float | None = None)
     if not isinstance(judge, FrameJudge):
         raise ValueError(f"{run}: a {judge.backend}, not a per-frame judge; only those hold a success over steps")
     tpr = threshold_tpr if threshold_tpr is not None else saved_judge_config(run).threshold_tpr
-    validation, heldout = (run_videos(run, judge.config.image_size, part) for part in (1, 2))
+    validation, heldout = (run_videos(run, part) for part in (1, 2))
     cache, rows = {}, []
     for k in steps:
         held = HeldJudge(judge, k, cache)

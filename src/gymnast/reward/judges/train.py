@@ -247,11 +247,15 @@ def _sample(videos: list[Video], batch: int, whole_share: float, ambiguous: int,
     return torch.stack(frames), texts, torch.stack(labels)
 
 
-def train_judge(data: Path, out: Path, config: JudgeTrainConfig, wm: Path | None = None, resume: bool = False,
-                progress: bool = True) -> dict:
-    """Trains the judge in `out`, chooses its threshold on the validation scenes, writes
-    `out/metrics.json` (held-out TPR/FPR) and returns it."""
-    started = time.perf_counter()
+def judge_datasets(data: Path, config: JudgeTrainConfig) -> tuple[list[EpisodeDataset], JudgeTrainConfig]:
+    """The datasets a judge learns from (`data`, then `config.extra_data`), read with its cameras and
+    keys and fitted to the model's image size, and `config` with that size, the cameras and the hold
+    rule filled in; anything that reads a judge run's scenes again (its split: `split_scenes`) reads
+    them with this, as training did.
+
+    Raises:
+        ValueError: the datasets' frames differ in shape.
+    """
     datasets = [EpisodeDataset(path, config.camera, config.cameras or None, keys=config.keys)
                 for path in (data, *config.extra_data)]
     for other in datasets[1:]:
@@ -260,7 +264,15 @@ def train_judge(data: Path, out: Path, config: JudgeTrainConfig, wm: Path | None
     size = model_image_size(datasets[0].camera_shape, config.judge.image_size)
     config = dataclasses.replace(config, judge=dataclasses.replace(config.judge, image_size=size, cameras=datasets[0].cameras,
                                                                    hold_steps=config.hold_steps))
-    datasets = [dataset.fitted(size, config.fit) for dataset in datasets]
+    return [dataset.fitted(size, config.fit) for dataset in datasets], config
+
+
+def train_judge(data: Path, out: Path, config: JudgeTrainConfig, wm: Path | None = None, resume: bool = False,
+                progress: bool = True) -> dict:
+    """Trains the judge in `out`, chooses its threshold on the validation scenes, writes
+    `out/metrics.json` (held-out TPR/FPR) and returns it."""
+    started = time.perf_counter()
+    datasets, config = judge_datasets(data, config)
     parts = [split_scenes(dataset, config) for dataset in datasets]  # per dataset: (train, validation, held-out)
     train_ids, validation_ids, heldout_ids = ([p[k] for p in parts] for k in range(3))
     if not any(train_ids):
