@@ -303,6 +303,49 @@ def test_status_of_a_directory_without_an_experiment_names_it(tmp_path: Path, ca
     assert f"{tmp_path / 'none'} holds no experiment" in capsys.readouterr().err
 
 
+def test_report_of_an_experiment_under_way_gives_its_figures_so_far_and_the_stages_left(experiment: Path, tmp_path: Path,
+                                                                                           capsys):
+    copy = tmp_path / "copy"
+    copy_experiment(experiment, copy, judge_rollouts=True)
+    planned = experiment_plan(copy, saved_experiment_config(copy))
+    open_from = planned.index("arm_rl_wm_judge")
+    for stage in planned[open_from:]:  # as if the run had stopped in world-model RL's training
+        (copy / "stages" / f"{stage}.json").unlink()
+    for written in ("summary.json", "report.md"):
+        (copy / written).unlink()
+    main(["experiment", "--out", str(copy), "--report"])
+    assert f"({len(planned) - open_from} stages still to run)" in capsys.readouterr().out
+    summary = json.loads((copy / "summary.json").read_text())
+    finished = json.loads((experiment / "summary.json").read_text())
+    assert summary["stages_to_run"] == planned[open_from:] and summary["goals"] is None
+    assert summary["arms"] == {} and summary["worldgym_pearson"] is None and summary["robustness"] == {}
+    assert summary["signal"] == finished["signal"] and summary["imagination"] == finished["imagination"]
+    assert summary["judge"] == finished["judge"] and summary["dataset"] == finished["dataset"]
+    assert set(summary["curves"]) == {"rl_sim"}  # trained, not yet evaluated
+    report = (copy / "report.md").read_text()
+    assert "(under way)" in report and "No arm evaluated yet." in report and "`worldgym`" in report
+    assert "Does practice in imagination point the right way?" in report
+    # The SFT policy's evaluation done: it is in the table and the weak tasks' line.
+    shutil.copy(experiment / "stages" / "eval_sft.json", copy / "stages")
+    main(["experiment", "--out", str(copy), "--report"])
+    summary = json.loads((copy / "summary.json").read_text())
+    assert list(summary["arms"]) == ["sft"] and summary["arms"]["sft"] == finished["arms"]["sft"]
+    assert "eval_sft" not in summary["stages_to_run"]
+    assert summary["weak_tasks"] == {**finished["weak_tasks"], "arms": {"sft": finished["weak_tasks"]["arms"]["sft"]}}
+    assert "| SFT" in (copy / "report.md").read_text()
+
+
+def test_report_of_a_finished_experiment_is_the_one_its_last_stage_wrote(experiment: Path, tmp_path: Path, capsys):
+    copy = tmp_path / "copy"
+    copy_experiment(experiment, copy, judge_rollouts=True)
+    (copy / "report.md").unlink()
+    main(["experiment", "--out", str(copy), "--report"])
+    assert capsys.readouterr().out.strip().endswith("report.md")
+    rewritten = json.loads((copy / "summary.json").read_text())
+    assert rewritten["stages_to_run"] == [] and rewritten["goals"] == json.loads((experiment / "summary.json").read_text())["goals"]
+    assert "(under way)" not in (copy / "report.md").read_text() and (copy / "plots" / "per_task.png").is_file()
+
+
 def test_an_experiment_from_before_an_arm_existed_trains_only_that_arm(experiment: Path, tmp_path: Path):
     older = tmp_path / "older"
     copy_experiment(experiment, older, judge_rollouts=False)  # Dyna's refit of the judge reads them: recorded again

@@ -158,6 +158,7 @@ def experiment(
     demos_per_task: int | None = None,
     freeze: tuple[str, ...] | None = None,
     status: bool = False,
+    report: bool = False,
 ) -> None:
     """The headline comparison: data, SFT, world model, judge, state model, eight arms, real-world
     evaluation and the WorldGym check, then OUT/report.md, OUT/summary.json and OUT/plots/.
@@ -189,6 +190,8 @@ def experiment(
             policy's are its own, e.g. model.backbone; none: `--freeze` alone).
         status: print where the experiment in OUT stands (the stages finished with their wall times,
             the one under way with its newest checkpoint, those still to run) and exit; nothing runs.
+        report: write OUT/report.md and OUT/summary.json from the stages finished so far (an
+            experiment under way: its figures so far and the stages still to run) and exit; nothing runs.
     """
     from gymnast.experiment.config import EXPERIMENT_PRESETS
     from gymnast.experiment.pipeline import run_experiment, saved_experiment_config
@@ -199,6 +202,13 @@ def experiment(
         if not (out / "config.json").is_file():
             raise FileNotFoundError(f"--status: {out} holds no experiment (no config.json there)")
         print(format_status(out, experiment_status(out, saved_experiment_config(out))))
+        return
+    if report:
+        from gymnast.experiment.status import report_so_far
+
+        summary = report_so_far(out)
+        left = len(summary["stages_to_run"])
+        print(f"report: {out / 'report.md'}" + (f" ({left} stages still to run)" if left else ""))
         return
     from gymnast.experiment.report.write import format_table
     from gymnast.experiment.stages import parse_reuse

@@ -15,7 +15,7 @@ from pathlib import Path
 from gymnast.experiment.arms import ARMS, PERTURBATIONS, ROBUSTNESS_ARMS
 from gymnast.experiment.config import ExperimentConfig
 from gymnast.experiment.equal_budget import EQUAL_BUDGET_ARMS
-from gymnast.experiment.pipeline import earlier_sft_checkpoints
+from gymnast.experiment.pipeline import earlier_sft_checkpoints, saved_experiment_config
 from gymnast.experiment.stages import Stages
 from gymnast.utils.atomic import read_json
 from gymnast.utils.checkpoint import LAST
@@ -84,6 +84,22 @@ def experiment_status(out: Path, config: ExperimentConfig) -> list[StageStatus]:
             rows.append(StageStatus(name, "to run"))
     recorded = sorted(path.stem for path in (out / "stages").glob("*.json"))
     return rows + [StageStatus(name, "done", stages.record(name).get("wall_s")) for name in recorded if name not in planned]
+
+
+def report_so_far(out: Path) -> dict:
+    """Writes the report of the experiment in `out` from the stages finished (`gymnast experiment
+    --report`), naming those still to run; runs nothing. Returns the summary.
+
+    Raises:
+        FileNotFoundError: `out` holds no experiment.
+    """
+    from gymnast.experiment.report.write import write_report
+
+    if not (out / "config.json").is_file():
+        raise FileNotFoundError(f"--report: {out} holds no experiment (no config.json there)")
+    config = saved_experiment_config(out)
+    to_run = [row.name for row in experiment_status(out, config) if row.state != "done"]
+    return write_report(out, Stages(out), config, to_run)
 
 
 def _trainer_progress(out: Path, name: str) -> dict:

@@ -7,15 +7,23 @@ Every sentence is computed from summary.json; nothing here is written in advance
 
 from __future__ import annotations
 
+from gymnast.experiment.arms import arm
 from gymnast.experiment.formatting import ci, number, pct
 from gymnast.world_model.metrics import measured_step
+
+
+def _missing(summary: dict, stage: str) -> str:
+    """Why a measuring stage's figures are absent: still to run, or an experiment older than the stage."""
+    if stage in summary.get("stages_to_run", ()):
+        return f"Not measured yet (the `{stage}` stage is still to run)."
+    return f"Not measured in this experiment (it predates the `{stage}` stage)."
 
 
 def imagination_section(summary: dict) -> list[str]:
     """The SFT policy's judged imagined rollouts against the same actions replayed in the real world."""
     figures = summary.get("imagination")
     if not figures:
-        return ["Not measured in this experiment (it predates the `imagination` stage).", ""]
+        return [_missing(summary, "imagination"), ""]
 
     def rate(row: dict) -> str:
         return f"{pct(row['success'])} {ci(row)}"
@@ -40,7 +48,7 @@ def signal_section(summary: dict) -> list[str]:
     give, over every task and over the weak ones."""
     figures = summary.get("signal")
     if not figures:
-        return ["Not measured in this experiment (it predates the `signal` stage).", ""]
+        return [_missing(summary, "signal"), ""]
 
     def rows(block: dict) -> list[str]:
         lines = []
@@ -116,7 +124,7 @@ def evidence_section(summary: dict) -> list[str]:
     for name, rows in summary["watch"].items():
         if not rows:
             continue
-        lines += [(f"**Reward-hacking watch, {summary['arms'][name]['title']}**: imagined rollouts replayed action for action "
+        lines += [(f"**Reward-hacking watch, {arm(name).title}**: imagined rollouts replayed action for action "
                   "in the real world."), "",
                   "| step | imagined success | real success of the same actions | agreement | judged successes that failed for real |",
                   "|---|---|---|---|---|"]

@@ -256,19 +256,54 @@ def _sft_regime(summary: dict) -> str:
             "while the world model and the judge learn from the whole dataset)")
 
 
+TITLE = "Headline experiment: practising in a learned world model vs. SFT and a software simulator"
+
+
+def _introduction(summary: dict) -> str:
+    return (f"Tasks: {summary['tasks']}. Every arm starts from the same SFT policy{_sft_regime(summary)}; the RL arms take "
+            f"{summary['rl_steps']} RL steps of {summary['rollouts_per_step']} rollouts each. Every policy is measured in the "
+            f"real world on {summary['eval_episodes_per_task']} evaluation seeds per task (never recorded in any dataset), "
+            "greedy, with 95% Wilson intervals.")
+
+
+def _interactions(summary: dict) -> str:
+    dataset = summary["dataset"]
+    return (f"Real interactions are counted beyond the shared dataset ({dataset['episodes']} episodes, "
+            f"{dataset['real_interactions']:,} real interactions), which every arm uses. Evaluations and the reward-hacking "
+            "watch also act in the real world; they are counted apart.")
+
+
+def _weak_tasks_so_far(summary: dict) -> list[str]:
+    weak = summary.get("weak_tasks")
+    if not weak or not weak["arms"]:
+        return []
+    rows = ", ".join(f"{_short_title(summary, name)} {pct(row['success'])} {ci(row)}" for name, row in weak["arms"].items())
+    return [f"On the weak tasks ({', '.join(task.removesuffix('-v3') for task in weak['tasks'])}): {rows}.", ""]
+
+
+def partial_report_markdown(summary: dict) -> str:
+    """The report of an experiment under way: the arms evaluated so far and the measurements that ran,
+    with the stages still to run; the verdicts, the comparisons and the plots wait for every stage."""
+    to_run = summary["stages_to_run"]
+    arms = [*_arms_table(summary), "", *_weak_tasks_so_far(summary)] if summary["arms"] else ["No arm evaluated yet.", ""]
+    lines = [
+        f"# {TITLE} (under way)", "", _introduction(summary), "",
+        (f"**{len(to_run)} stages still to run** ({', '.join(f'`{name}`' for name in to_run)}): these are the figures of "
+         "the stages finished so far. `gymnast experiment --out RUN --resume` runs the rest; the verdicts on the goals, "
+         "the comparisons and the plots come with the last stage."), "",
+        "## Arms evaluated so far", "", *arms, _interactions(summary), "",
+        "## Imagination under the SFT policy: judged imagined outcomes vs the real world", "", *imagination_section(summary),
+        "## Does practice in imagination point the right way?", "", *signal_section(summary),
+        "## Evidence: where imagination and reality part", "", *evidence_section(summary),
+    ]
+    return "\n".join(lines) + "\n"
+
+
 def report_markdown(summary: dict, plots: dict[str, str]) -> str:
     """The report, from summary.json's content and the plots' paths (relative to the report)."""
-    dataset = summary["dataset"]
     lines = [
-        "# Headline experiment: practising in a learned world model vs. SFT and a software simulator", "",
-        (f"Tasks: {summary['tasks']}. Every arm starts from the same SFT policy{_sft_regime(summary)}; the RL arms take "
-        f"{summary['rl_steps']} RL steps of {summary['rollouts_per_step']} rollouts each. Every policy is measured in the "
-        f"real world on {summary['eval_episodes_per_task']} evaluation seeds per task (never recorded in any dataset), "
-        "greedy, with 95% Wilson intervals."), "",
-        "## Result", "", *_arms_table(summary), "", *verdict_lines(summary), "",
-        (f"Real interactions are counted beyond the shared dataset ({dataset['episodes']} episodes, "
-        f"{dataset['real_interactions']:,} real interactions), which every arm uses. Evaluations and the reward-hacking "
-        "watch also act in the real world; they are counted apart."), "",
+        f"# {TITLE}", "", _introduction(summary), "",
+        "## Result", "", *_arms_table(summary), "", *verdict_lines(summary), "", _interactions(summary), "",
         f"![per-task success]({plots['per_task']})", "",
         f"![learning curves]({plots['curves']})", "",
         "## Per task", "", *_per_task_table(summary), "",

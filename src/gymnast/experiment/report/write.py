@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import logging
+from collections.abc import Sequence
 from pathlib import Path
 
 from gymnast.experiment.arms import ARMS, PERTURBATIONS, ROBUSTNESS_ARMS, WM_ARMS, arm
@@ -105,7 +106,7 @@ def _dyna_against_real_rl(stages: Stages, config: ExperimentConfig) -> dict | No
     spent on training by then (the shape `gymnast dyna` reports in, for its table and plot)."""
     from gymnast.experiment.dyna import real_rl_curve
 
-    if not stages.done("arm_dyna"):
+    if not (stages.done("arm_dyna") and stages.done("arm_rl_real")):
         return None
     dyna = _dyna_summary(stages)
     real = stages.path("arm_rl_real")
@@ -158,18 +159,21 @@ def _equal_budget_setup(stages: Stages, config: ExperimentConfig) -> dict | None
             "real_grpo_steps": stages.record("equal_budget_real_grpo")["steps"], "imagined_rl_steps": config.rl.steps}
 
 
-def build_summary(stages: Stages, config: ExperimentConfig) -> dict:
-    """summary.json's content, from the finished stages."""
+def build_summary(stages: Stages, config: ExperimentConfig, to_run: Sequence[str] = ()) -> dict:
+    """summary.json's content, from the finished stages; `to_run`: the stages still to run, for a
+    report of an experiment under way (its figures so far; the goals wait for every stage)."""
     # An experiment older than an arm (Dyna) reports without it until a rerun has trained it.
     arms = {spec.name: _arm_row(stages, spec.name, spec.title) for spec in ARMS if stages.done(f"eval_{spec.name}")}
     success = {name: row["success"] for name, row in arms.items()}
-    worldgym = stages.record("worldgym")
+    worldgym = stages.record("worldgym") if stages.done("worldgym") else {"pearson": None, "spearman": None, "policies": None}
     judge = stages.record("judge")
     judge_metrics = judge.get("metrics") or _read_json(stages.path("judge") / "metrics.json")
+    evaluated = [name for name in ROBUSTNESS_ARMS if all(stages.done(f"eval_{name}{suffix}") for suffix in
+                                                         ("", *(f"_{p}" for p in PERTURBATIONS), "_heldout"))]
     robustness = {name: {"none": _brief(stages.record(f"eval_{name}")),
-                         **{p: _brief(stages.record(f"eval_{name}_{p}")) for p in PERTURBATIONS}} for name in ROBUSTNESS_ARMS}
+                         **{p: _brief(stages.record(f"eval_{name}_{p}")) for p in PERTURBATIONS}} for name in evaluated}
     language = {name: {"train": robustness[name]["none"], "heldout": _brief(stages.record(f"eval_{name}_heldout"))}
-                for name in ROBUSTNESS_ARMS}
+                for name in evaluated}
     # The SFT policy's judged imagination against the real world (None in experiments older than the stage).
     imagination = _without_bookkeeping(stages.record("imagination")) if stages.done("imagination") else None
     # Over every task and over the weak ones (an experiment older than the weak readout has only the first).
@@ -183,10 +187,10 @@ def build_summary(stages: Stages, config: ExperimentConfig) -> dict:
     summary = {
         "tasks": config.tasks,
         "arms": arms,
-        "wm_rl_over_sft": _ratio(success["rl_wm_judge"], success["sft"]),
-        "wm_rl_over_sim_rl": _ratio(success["rl_wm_judge"], success["rl_sim"]),
-        "wm_rl_verified_over_sft": _ratio(success["rl_wm_verified"], success["sft"]),
-        "wm_rl_verified_over_sim_rl": _ratio(success["rl_wm_verified"], success["rl_sim"]),
+        "wm_rl_over_sft": _ratio(success.get("rl_wm_judge"), success.get("sft")),
+        "wm_rl_over_sim_rl": _ratio(success.get("rl_wm_judge"), success.get("rl_sim")),
+        "wm_rl_verified_over_sft": _ratio(success.get("rl_wm_verified"), success.get("sft")),
+        "wm_rl_verified_over_sim_rl": _ratio(success.get("rl_wm_verified"), success.get("rl_sim")),
         "worldgym_pearson": worldgym["pearson"],
         "worldgym_spearman": worldgym["spearman"],
         "worldgym": worldgym["policies"],
@@ -201,7 +205,7 @@ def build_summary(stages: Stages, config: ExperimentConfig) -> dict:
         "watch_false_success": {name: rows[-1].get("false_success") if rows else None for name, rows in watch.items()},
         "weak_tasks": (weak := _weak_tasks(arms, config)),
         "dyna_real_interactions": arms["dyna"]["real_interactions"] if "dyna" in arms else None,
-        "real_rl_real_interactions": arms["rl_real"]["real_interactions"],
+        "real_rl_real_interactions": arms["rl_real"]["real_interactions"] if "rl_real" in arms else None,
         "dyna": _dyna_against_real_rl(stages, config),
         "equal_budget": (equal_budget := _equal_budget(stages)),
         "equal_budget_setup": _equal_budget_setup(stages, config),
@@ -221,8 +225,10 @@ def build_summary(stages: Stages, config: ExperimentConfig) -> dict:
         "eval_episodes_per_task": config.eval_episodes,
         "stage_wall_s": {path.stem: read_json(path).get("wall_s")
                          for path in sorted((stages.out / "stages").glob("*.json"))},
+        "stages_to_run": list(to_run),
     }
-    summary["goals"] = experiment_goals(arms, weak, worldgym["pearson"], summary["watch_false_success"], equal_budget)
+    summary["goals"] = None if to_run else experiment_goals(arms, weak, worldgym["pearson"],
+                                                            summary["watch_false_success"], equal_budget)
     return summary
 
 
@@ -265,13 +271,18 @@ def _read_json(path: Path) -> dict | None:
     return read_json(path) if path.exists() else None
 
 
-def write_report(out: Path, stages: Stages, config: ExperimentConfig) -> dict:
-    """Writes summary.json, plots/ and report.md in `out`; returns the summary."""
+def write_report(out: Path, stages: Stages, config: ExperimentConfig, to_run: Sequence[str] = ()) -> dict:
+    """Writes summary.json, plots/ and report.md in `out`; returns the summary. With stages still
+    `to_run` (an experiment under way, `gymnast experiment --report`): the figures so far, and no plots."""
     from gymnast.experiment.plots import plot_curves, plot_per_task, plot_worldgym
-    from gymnast.experiment.report.text import report_markdown
+    from gymnast.experiment.report.text import partial_report_markdown, report_markdown
 
-    summary = build_summary(stages, config)
+    summary = build_summary(stages, config, to_run)
     write_json(out / "summary.json", summary)
+    if to_run:
+        write_bytes(out / "report.md", partial_report_markdown(summary).encode())
+        logger.info("report so far (%d stages still to run): %s", len(to_run), out / "report.md")
+        return summary
     plots = {"per_task": plot_per_task(summary, out / "plots" / "per_task.png"),
              "curves": plot_curves(summary, out / "plots" / "learning_curves.png"),
              "worldgym": plot_worldgym(summary, out / "plots" / "worldgym.png")}
