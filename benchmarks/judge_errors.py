@@ -1,0 +1,82 @@
+"""Which held-out real cases a trained judge gets wrong, and how near each was to the other side.
+
+The judge run's held-out scenes are read as its training read them (`judge_datasets`,
+`split_scenes`) and cut into the cases its metrics count (`judge_cases`: each whole episode, and
+each successful one cut halfway to its success and a few steps short of it). Every case the judge
+calls wrongly under its own hold rule and threshold is listed with its dataset, task, behaviour
+and the judge's probability; for the tasks whose success is one distance the recorded state shows
+(`SUCCESS_RADIUS`: Meta-World's own thresholds), also how close the episode came to success
+over the frames the case shows. A false success 2 mm outside the radius is a different problem
+from one 15 cm away.
+
+    python benchmarks/judge_errors.py --judge runs/headline_three/judge \\
+        --out benchmarks/results/judge_errors_headline_three.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from gymnast.reward.judges.train import judge_datasets, load_judge, saved_judge_config, split_scenes
+from gymnast.reward.judges.videos import judge_cases, load_videos
+from gymnast.utils.atomic import read_json, write_json
+
+# Meta-World's 39-d observation: the hand (tool centre) at 0:3, the object at 4:7, the goal at 36:39.
+HAND, OBJECT, GOAL = slice(0, 3), slice(4, 7), slice(36, 39)
+SUCCESS_RADIUS = {"reach-v3": (HAND, 0.05), "push-v3": (OBJECT, 0.05), "pick-place-v3": (OBJECT, 0.07)}
+"""Tasks whose success is one point of the observation within a radius (metres) of the goal."""
+
+
+def closest_approach(task: str, states: np.ndarray) -> dict | None:
+    """The smallest distance to the goal over `states` (T, 39) and the task's success radius, in cm."""
+    if task not in SUCCESS_RADIUS or states.shape[-1] < GOAL.stop:
+        return None
+    point, radius = SUCCESS_RADIUS[task]
+    distance = np.linalg.norm(states[:, point] - states[:, GOAL], axis=1)
+    return {"closest_cm": round(100 * float(distance.min()), 1), "success_radius_cm": round(100 * radius, 1)}
+
+
+def judge_errors(run: Path) -> dict:
+    """Every held-out real case the judge `run` calls wrongly, with the counts it was one of."""
+    judge = load_judge(run)
+    datasets, config = judge_datasets(Path(read_json(run / "config.json")["data"]), saved_judge_config(run))
+    errors, positives, negatives = [], 0, 0
+    for dataset in datasets:
+        ids = split_scenes(dataset, config)[2]
+        for index, video in zip(ids, load_videos(dataset, ids, None, progress=False)):
+            episode = dataset.load(index)
+            for frames, instruction, label, whole, _ in judge_cases([video]):
+                positives, negatives = positives + label, negatives + (not label)
+                with torch.no_grad():
+                    probability = float(judge.probability(frames[None], [instruction])[0])
+                if (probability >= judge.config.threshold) == label:
+                    continue
+                errors.append({"dataset": str(dataset.root), "episode": index, "task": episode.info.task,
+                               "behaviour": episode.info.behaviour, "noise": episode.info.noise,
+                               "case": "whole" if whole else f"first {len(frames)} frames of {len(video.frames)}",
+                               "success": label, "probability": round(probability, 4),
+                               "near": closest_approach(episode.info.task, episode.full_states[:len(frames)])})
+    false_success = [error for error in errors if not error["success"]]
+    return {"judge": str(run), "threshold": judge.config.threshold, "hold_steps": judge.config.hold_steps,
+            "positives": positives, "negatives": negatives, "missed_successes": len(errors) - len(false_success),
+            "false_successes": len(false_success), "errors": errors}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--judge", type=Path, required=True, help="a judge run (gymnast train-judge)")
+    parser.add_argument("--out", type=Path, default=Path("benchmarks/results/judge_errors.json"))
+    args = parser.parse_args()
+    result = judge_errors(args.judge)
+    print(json.dumps(result, indent=2))
+    write_json(args.out, result)
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()
