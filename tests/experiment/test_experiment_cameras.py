@@ -22,9 +22,9 @@ def test_every_stage_is_told_the_experiments_cameras():
     assert alone.sft.cameras == alone.world_model.cameras == alone.judge.cameras == ()
 
 
-def test_every_preset_sees_the_front_and_the_gripper_camera():
+def test_the_presets_see_three_views_and_the_tests_two():
     assert {name: preset.cameras for name, preset in EXPERIMENT_PRESETS.items()} == {
-        name: ("front", "gripper") for name in EXPERIMENT_PRESETS}
+        **{name: ("front", "gripper", "hand") for name in EXPERIMENT_PRESETS}, "debug": ("front", "gripper")}
 
 
 @pytest.mark.parametrize("cameras", [("top",), ("front", "front"), ()])

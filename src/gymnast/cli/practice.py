@@ -179,7 +179,7 @@ def experiment(
         device: where the models train, imagine and judge: auto (CUDA when torch sees a GPU, else the
             CPU), cpu, cuda or cuda:N; --resume may change it.
         cameras: the views recorded and seen side by side by the policy, the world model and the
-            judges, e.g. front or front,gripper,hand (default: the preset's, front,gripper).
+            judges, e.g. front or front,gripper (default: the preset's, front,gripper,hand).
         judge_rollouts: real rollouts per task of the SFT policy, played past any success, that the
             judge also learns from (its near misses; counted in summary.json); default: the preset's.
         demos_per_task: expert demonstrations per task the SFT policy learns from (default: the
