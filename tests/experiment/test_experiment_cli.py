@@ -333,6 +333,14 @@ def test_report_of_an_experiment_under_way_gives_its_figures_so_far_and_the_stag
     assert "eval_sft" not in summary["stages_to_run"]
     assert summary["weak_tasks"] == {**finished["weak_tasks"], "arms": {"sft": finished["weak_tasks"]["arms"]["sft"]}}
     assert "| SFT" in (copy / "report.md").read_text()
+    # Exported under way (no dataset, no report written before): the report says the dataset is not there to count.
+    shared = export_run(copy, tmp_path / "shared").destination
+    (shared / "summary.json").unlink()
+    stages = json.loads((shared / "stages" / "collect.json").read_text())
+    (shared / "stages" / "collect.json").write_text(json.dumps({**stages, "path": str(shared / "data")}))
+    main(["experiment", "--out", str(shared), "--report"])
+    assert json.loads((shared / "summary.json").read_text())["dataset"] is None
+    assert "not here to count" in (shared / "report.md").read_text()
 
 
 def test_report_of_a_finished_experiment_is_the_one_its_last_stage_wrote(experiment: Path, tmp_path: Path, capsys):

@@ -268,6 +268,10 @@ def _introduction(summary: dict) -> str:
 
 def _interactions(summary: dict) -> str:
     dataset = summary["dataset"]
+    if dataset is None:  # an exported experiment under way, its dataset left out and not yet counted by a report
+        return ("Real interactions are counted beyond the shared dataset, which every arm uses (not here to count: "
+                "the experiment was exported without it). Evaluations and the reward-hacking watch also act in the "
+                "real world; they are counted apart.")
     return (f"Real interactions are counted beyond the shared dataset ({dataset['episodes']} episodes, "
             f"{dataset['real_interactions']:,} real interactions), which every arm uses. Evaluations and the reward-hacking "
             "watch also act in the real world; they are counted apart.")

@@ -218,7 +218,7 @@ def build_summary(stages: Stages, config: ExperimentConfig, to_run: Sequence[str
         "imagination": imagination,
         "signal": signal,
         "signal_weak": signal_weak,
-        "dataset": _dataset_brief(stages),
+        "dataset": _dataset_brief(stages, required=not to_run),
         "sft_demonstrations": _sft_demonstrations(stages.path("sft")),
         "rl_steps": config.rl.steps,
         "rollouts_per_step": config.rl.starts_per_step * config.rl.group_size,
@@ -232,9 +232,10 @@ def build_summary(stages: Stages, config: ExperimentConfig, to_run: Sequence[str
     return summary
 
 
-def _dataset_brief(stages: Stages) -> dict:
+def _dataset_brief(stages: Stages, required: bool = True) -> dict | None:
     """The collected dataset's episodes and real interactions: counted in it, or, in an exported
-    experiment, which holds no dataset (experiment.export), as the summary written beside it said."""
+    experiment, which holds no dataset (experiment.export), as the summary written beside it said;
+    None where neither is there and the report is of an experiment under way (not `required`)."""
     from gymnast.data.lerobot import EpisodeDataset
     from gymnast.data.lerobot_v3 import INFO_PATH
 
@@ -245,6 +246,8 @@ def _dataset_brief(stages: Stages) -> dict:
     written = (_read_json(stages.out / "summary.json") or {}).get("dataset")
     if written and written.get("path") == str(path):
         return written
+    if not required:
+        return None
     raise FileNotFoundError(f"{path}: the experiment's dataset is not there and no summary.json of {stages.out} "
                             "counted it; record it again with the collect settings in its config.json")
 
