@@ -1,10 +1,10 @@
-"""What an extra camera costs: rendered environment steps per second with one camera and with two.
+"""What an extra camera costs: rendered environment steps per second with one camera, two and three.
 
 Every step is MuJoCo physics (5 substeps), Meta-World's reward and one RGB render per camera at the
 default image size, with random actions, in one process (environment construction not counted).
-The setups (front alone, gripper alone, front + gripper) take turns for a few rounds, so that load
+The setups (each view alone, front + gripper, and the three) take turns for a few rounds, so that load
 from other processes on the machine hits them alike; each keeps its best and median round. Then one
-episode of the horizon's length is recorded from both cameras and each camera's frames are
+episode of the horizon's length is recorded from the three cameras and each camera's frames are
 encoded with the dataset codec, for the disk cost of a view.
 
     .venv/bin/python benchmarks/render_cameras.py [--steps 600] [--rounds 3] [--task pick-place-v3]
@@ -32,7 +32,8 @@ from gymnast.utils.atomic import write_json
 from gymnast.utils.video import DEFAULT_CODEC, encode_video
 
 RESULTS = Path(__file__).parent / "results" / "render_cameras.json"
-SETUPS = {"front": ("front",), "gripper": ("gripper",), "front+gripper": ("front", "gripper")}
+SETUPS = {"front": ("front",), "gripper": ("gripper",), "hand": ("hand",), "front+gripper": ("front", "gripper"),
+          "front+gripper+hand": ("front", "gripper", "hand")}
 
 
 def steps_per_second(env: MetaWorldEnv, actions: np.ndarray) -> float:
@@ -77,7 +78,7 @@ def main() -> None:
     for _ in range(args.rounds):
         for name, env in envs.items():
             rounds[name].append(steps_per_second(env, actions))
-    encoded = kib_per_frame(envs["front+gripper"], actions)
+    encoded = kib_per_frame(envs["front+gripper+hand"], actions)
     for env in envs.values():
         env.close()
     best = {name: max(values) for name, values in rounds.items()}
@@ -94,6 +95,8 @@ def main() -> None:
         "setups": setups,
         "extra_view_ms_per_step": round(1000 / best["front+gripper"] - 1000 / best["front"], 2),
         "two_cameras_steps_vs_one": round(best["front+gripper"] / best["front"], 2),
+        "three_cameras_steps_vs_one": round(best["front+gripper+hand"] / best["front"], 2),
+        "three_cameras_steps_vs_two": round(best["front+gripper+hand"] / best["front+gripper"], 2),
         "encoded_kib_per_frame": encoded,
         "task": args.task,
         "image_size": args.image_size,
