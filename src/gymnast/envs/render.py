@@ -49,9 +49,10 @@ def drop_unseen_geoms(scene: mujoco.MjvScene, aspect: float) -> int:
     frustum of its camera; returns how many. Returns 0 and changes nothing for a stereo,
     orthographic or explicitly sized frustum.
 
-    Meta-World's robot is ~67,000 triangles, and Mesa's software rasteriser spends about 75 ns on
-    each whether it lands in the image or not: a camera that sees part of the scene (the gripper
-    view, or the hand view) spends most of its time on geometry it does not show. A geom wholly
+    Meta-World's robot is ~67,000 triangles, most of a render's time with Mesa's software
+    rasteriser (docs/environment.md), which spends it on a triangle whether it lands in the image or
+    not: a camera that sees part of the scene (the gripper view) spends most of its time on geometry
+    it does not show. A geom wholly
     outside the frustum draws no pixel and, with shadows and reflections off, lights none, so the
     image is bit for bit the one the whole scene gives (tests/envs/test_render_culling.py); the
     kept geoms keep their order, which decides ties in the depth test. Decorations, markers and
