@@ -3,28 +3,18 @@
 from __future__ import annotations
 
 import dataclasses
-import importlib.util
 import json
-from pathlib import Path
 
 import numpy as np
+from benchmark_scripts import benchmark_script
 
 from gymnast.reward.judges.train import JUDGE_PRESETS, train_judge
-
-ROOT = Path(__file__).resolve().parents[2]
-
-
-def _script():
-    spec = importlib.util.spec_from_file_location("judge_errors", ROOT / "benchmarks" / "judge_errors.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def test_the_errors_listed_are_the_ones_the_training_metrics_counted(tiny_dataset, tmp_path):
     config = dataclasses.replace(JUDGE_PRESETS["debug"], heldout_fraction=0.25, validation_fraction=0.3, hold_steps=3)
     reported = train_judge(tiny_dataset, tmp_path / "judge", config, progress=False)
-    result = _script().judge_errors(tmp_path / "judge")
+    result = benchmark_script("judge_errors").judge_errors(tmp_path / "judge")
     assert (result["positives"], result["negatives"]) == (reported["real_positives"], reported["real_negatives"])
     assert result["missed_successes"] == round((1 - reported["real_tpr"]) * reported["real_positives"])
     assert result["false_successes"] == round(reported["real_fpr"] * reported["real_negatives"])
@@ -35,7 +25,7 @@ def test_the_errors_listed_are_the_ones_the_training_metrics_counted(tiny_datase
 
 
 def test_the_closest_approach_is_the_distance_the_task_succeeds_by():
-    script = _script()
+    script = benchmark_script("judge_errors")
     states = np.zeros((3, 39))
     states[:, 36:39] = [0.0, 0.8, 0.1]  # the goal
     states[:, 0:3] = [[0.0, 0.6, 0.1], [0.0, 0.74, 0.1], [0.0, 0.7, 0.1]]  # the hand: 20, 6 and 10 cm away

@@ -4,28 +4,18 @@ the figures its training reported."""
 from __future__ import annotations
 
 import dataclasses
-import importlib.util
 import json
-from pathlib import Path
 
 import pytest
+from benchmark_scripts import benchmark_script
 
 from gymnast.reward.judges.train import JUDGE_PRESETS, train_judge
-
-ROOT = Path(__file__).resolve().parents[2]
-
-
-def _script():
-    spec = importlib.util.spec_from_file_location("judge_hold", ROOT / "benchmarks" / "judge_hold.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def test_each_rule_chooses_its_threshold_and_the_judges_own_rule_gives_its_reported_figures(tiny_dataset, tmp_path):
     config = dataclasses.replace(JUDGE_PRESETS["debug"], heldout_fraction=0.25, validation_fraction=0.3, hold_steps=3)
     reported = train_judge(tiny_dataset, tmp_path / "judge", config, progress=False)
-    result = _script().measure(tmp_path / "judge", [1, 3, 6])
+    result = benchmark_script("judge_hold").measure(tmp_path / "judge", [1, 3, 6])
     assert result["trained_hold_steps"] == 3 and [row["hold_steps"] for row in result["rows"]] == [1, 3, 6]
     own = result["rows"][1]
     assert own["threshold"] == pytest.approx(reported["validation_threshold"])
@@ -38,4 +28,4 @@ def test_a_judge_of_whole_videos_is_refused(tiny_dataset, tmp_path):
     config = dataclasses.replace(JUDGE_PRESETS["debug"], kind="video")
     train_judge(tiny_dataset, tmp_path / "video", config, progress=False)
     with pytest.raises(ValueError, match="not a per-frame judge"):
-        _script().measure(tmp_path / "video", [1])
+        benchmark_script("judge_hold").measure(tmp_path / "video", [1])
