@@ -23,7 +23,7 @@ import numpy as np
 import torch
 
 from gymnast.reward.judges.train import judge_datasets, load_judge, saved_judge_config, split_scenes
-from gymnast.reward.judges.videos import judge_cases, load_videos
+from gymnast.reward.judges.videos import judge_cases, real_video
 from gymnast.utils.atomic import read_json, write_json
 
 # Meta-World's 39-d observation: the hand (tool centre) at 0:3, the object at 4:7, the goal at 36:39.
@@ -47,9 +47,9 @@ def judge_errors(run: Path) -> dict:
     datasets, config = judge_datasets(Path(read_json(run / "config.json")["data"]), saved_judge_config(run))
     errors, positives, negatives = [], 0, 0
     for dataset in datasets:
-        ids = split_scenes(dataset, config)[2]
-        for index, video in zip(ids, load_videos(dataset, ids, None, progress=False)):
+        for index in split_scenes(dataset, config)[2]:
             episode = dataset.load(index)
+            video = real_video(episode)
             for frames, instruction, label, whole, _ in judge_cases([video]):
                 positives, negatives = positives + label, negatives + (not label)
                 with torch.no_grad():

@@ -85,16 +85,25 @@ def _grounded_verdict(arms: dict) -> list[str]:
              f"({_significance(grounded, sft)} with SFT).")]
 
 
+def _task_names(weak: dict) -> str:
+    return ", ".join(task.removesuffix("-v3") for task in weak["tasks"])
+
+
+def _pooled(summary: dict, pooled: dict, intervals: bool = False) -> str:
+    """Each arm's success pooled over the weak tasks, in words (with its interval)."""
+    return ", ".join(f"{_short_title(summary, name)} {pct(row['success'])}" + (f" {ci(row)}" if intervals else "")
+                     for name, row in pooled.items())
+
+
 def _weak_tasks_verdict(summary: dict) -> list[str]:
     weak = summary.get("weak_tasks")  # None in experiments from before the field, or without weak tasks
     if not weak:
         return []
     pooled = weak["arms"]
     ahead = pooled["rl_wm_judge"]["success"] >= GOAL_OVER_SFT * pooled["sft"]["success"]
-    rows = ", ".join(f"{_short_title(summary, name)} {pct(row['success'])}" for name, row in pooled.items())
-    return [(f"- On the weak tasks ({', '.join(task.removesuffix('-v3') for task in weak['tasks'])}; "
-             f"{pooled['sft']['episodes']} episodes per arm): {rows}. World-model RL (judge) at least 2x SFT with separate "
-             f"intervals: **{goal_in_words(summary['goals']['wm_rl_2x_sft_on_weak_tasks'], ahead)}**.")]
+    return [(f"- On the weak tasks ({_task_names(weak)}; "
+             f"{pooled['sft']['episodes']} episodes per arm): {_pooled(summary, pooled)}. World-model RL (judge) at "
+             f"least 2x SFT with separate intervals: **{goal_in_words(summary['goals']['wm_rl_2x_sft_on_weak_tasks'], ahead)}**.")]
 
 
 def _dyna_verdict(summary: dict) -> list[str]:
@@ -268,21 +277,18 @@ def _introduction(summary: dict) -> str:
 
 def _interactions(summary: dict) -> str:
     dataset = summary["dataset"]
-    if dataset is None:  # an exported experiment under way, its dataset left out and not yet counted by a report
-        return ("Real interactions are counted beyond the shared dataset, which every arm uses (not here to count: "
-                "the experiment was exported without it). Evaluations and the reward-hacking watch also act in the "
-                "real world; they are counted apart.")
-    return (f"Real interactions are counted beyond the shared dataset ({dataset['episodes']} episodes, "
-            f"{dataset['real_interactions']:,} real interactions), which every arm uses. Evaluations and the reward-hacking "
-            "watch also act in the real world; they are counted apart.")
+    # None: an exported experiment under way, its dataset left out and not yet counted by a report.
+    counted = ("not here to count: the experiment was exported without it" if dataset is None else
+               f"{dataset['episodes']} episodes, {dataset['real_interactions']:,} real interactions")
+    return (f"Real interactions are counted beyond the shared dataset ({counted}), which every arm uses. Evaluations "
+            "and the reward-hacking watch also act in the real world; they are counted apart.")
 
 
 def _weak_tasks_so_far(summary: dict) -> list[str]:
     weak = summary.get("weak_tasks")
     if not weak or not weak["arms"]:
         return []
-    rows = ", ".join(f"{_short_title(summary, name)} {pct(row['success'])} {ci(row)}" for name, row in weak["arms"].items())
-    return [f"On the weak tasks ({', '.join(task.removesuffix('-v3') for task in weak['tasks'])}): {rows}.", ""]
+    return [f"On the weak tasks ({_task_names(weak)}): {_pooled(summary, weak['arms'], intervals=True)}.", ""]
 
 
 def partial_report_markdown(summary: dict) -> str:

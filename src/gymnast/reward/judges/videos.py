@@ -14,6 +14,7 @@ import torch
 from tqdm import tqdm
 
 from gymnast.data.lerobot import EpisodeDataset
+from gymnast.data.schema import Episode
 from gymnast.reward.judges.progress import progress_targets
 from gymnast.world_model.base import load_world_model, rollout
 from gymnast.world_model.data import split_episodes
@@ -48,6 +49,14 @@ class Video:
 IMAGINE_BATCH = 32  # episodes re-imagined together: one world-model call per step for all of them
 
 
+def real_video(episode: Episode) -> Video:
+    """A recorded episode as a judge sees it: every camera read, side by side, with its successes."""
+    frames = torch.from_numpy(episode.observed_frames)
+    shows = torch.cat([torch.zeros(1, dtype=torch.bool), torch.from_numpy(episode.successes).bool()])
+    return Video(frames, shows.cummax(0).values, shows, episode.info.instruction, imagined=False,
+                 progress=progress_targets(episode.rewards))
+
+
 def load_videos(dataset: EpisodeDataset, indices: list[int], wm: Path | None, progress: bool,
                 device: torch.device | None = None) -> list[Video]:
     """Real videos of the episodes, plus their re-imaginings under the real actions with a world
@@ -55,10 +64,7 @@ def load_videos(dataset: EpisodeDataset, indices: list[int], wm: Path | None, pr
     videos, episodes = [], []
     for i in tqdm(indices, desc="loading episodes", disable=not progress):
         episode = dataset.load(i)
-        frames = torch.from_numpy(episode.observed_frames)  # every camera read, side by side
-        shows = torch.cat([torch.zeros(1, dtype=torch.bool), torch.from_numpy(episode.successes).bool()])
-        videos.append(Video(frames, shows.cummax(0).values, shows, episode.info.instruction, imagined=False,
-                            progress=progress_targets(episode.rewards)))
+        videos.append(real_video(episode))
         episodes.append(torch.from_numpy(episode.actions).float())
     if wm is None:
         return videos
