@@ -7,11 +7,15 @@ datasets and rollout records stay on the host, and batches are copied over as th
 
 bfloat16 autocast, which the configs ask for by default, is used only where the hardware computes
 bfloat16 natively (`bf16_autocast`): elsewhere torch emulates it and it is slower than float32.
+``GYMNAST_CPU_BF16=off`` in the environment makes a CPU that computes it natively run float32 as
+one that emulates it would: the same numbers on every CPU, and a native CPU's measure of what the
+float32 path costs (the make-demo time of docs/experiment.md).
 """
 
 from __future__ import annotations
 
 import functools
+import os
 from contextlib import AbstractContextManager
 from typing import Literal
 
@@ -19,6 +23,8 @@ import torch
 
 DeviceName = Literal["auto", "cpu", "cuda"]
 DEVICE_NAMES: tuple[str, ...] = ("auto", "cpu", "cuda")
+CPU_BF16_VARIABLE = "GYMNAST_CPU_BF16"
+"""Environment variable: ``off`` runs float32 on the CPU even where it computes bfloat16 natively."""
 
 
 def resolve_device(name: str = "auto") -> torch.device:
@@ -49,6 +55,19 @@ def to_device(tensor: torch.Tensor, device: torch.device) -> torch.Tensor:
     return tensor.to(device, non_blocking=device.type == "cuda")
 
 
+def cpu_bf16_turned_off() -> bool:
+    """Whether ``GYMNAST_CPU_BF16=off`` asks for float32 on the CPU (`CPU_BF16_VARIABLE`).
+
+    Raises:
+        ValueError: the variable holds something other than auto or off.
+    """
+    wanted = os.environ.get(CPU_BF16_VARIABLE, "auto").strip().lower()
+    if wanted not in ("auto", "off"):
+        raise ValueError(f"{CPU_BF16_VARIABLE}={wanted!r}: use auto (bfloat16 where the CPU computes it natively) "
+                         "or off (float32 always)")
+    return wanted == "off"
+
+
 @functools.cache
 def bf16_is_native(device_type: str) -> bool:
     """Whether `device_type` ("cpu" or "cuda") computes bfloat16 natively: a CUDA GPU that supports
@@ -64,17 +83,24 @@ def bf16_is_native(device_type: str) -> bool:
     return False
 
 
+def bf16_used(device_type: str) -> bool:
+    """Whether bfloat16 autocast runs on `device_type`: where it is native, unless turned off on the CPU."""
+    return bf16_is_native(device_type) and not (device_type == "cpu" and cpu_bf16_turned_off())
+
+
 def bf16_autocast(device: torch.device | str, wanted: bool = True) -> AbstractContextManager:
     """bfloat16 autocast on `device` when `wanted` and the device computes bfloat16 natively
-    (`bf16_is_native`); otherwise a disabled context, so the code inside runs in float32."""
+    (`bf16_used`); otherwise a disabled context, so the code inside runs in float32."""
     device_type = torch.device(device).type
-    return torch.autocast(device_type, dtype=torch.bfloat16, enabled=wanted and bf16_is_native(device_type))
+    return torch.autocast(device_type, dtype=torch.bfloat16, enabled=wanted and bf16_used(device_type))
 
 
 def bf16_status() -> str:
     """One line for `gymnast doctor`: whether this machine's CPU (and GPU, if any) runs bf16 natively."""
     def said(device_type: str) -> str:
-        return "native, used" if bf16_is_native(device_type) else "emulated, float32 used instead"
+        if not bf16_is_native(device_type):
+            return "emulated, float32 used instead"
+        return "native, used" if bf16_used(device_type) else f"native, float32 used instead ({CPU_BF16_VARIABLE}=off)"
 
     line = f"bf16 autocast: CPU {said('cpu')} ({torch.backends.cpu.get_cpu_capability()})"
     return line + (f"; GPU {said('cuda')}" if torch.cuda.is_available() else "")
