@@ -5,7 +5,8 @@ For each number of steps the threshold is chosen again on the run's own validati
 its `threshold_tpr` rule, as `gymnast train-judge` chose it), then the held-out real videos are
 judged: TPR, FPR, and the ROC readouts that no threshold decides (AUC, the lowest FPR at TPR 0.95,
 the best TPR at FPR 0.03). The per-frame probabilities are computed once and reused by every rule.
-`--threshold-tpr` chooses every threshold for that validation TPR instead.
+`--threshold-tpr` chooses every threshold for that validation TPR instead; `--checkpoint` measures
+an earlier checkpoint of the run (its step), as if training had stopped there.
 
     python benchmarks/judge_hold.py --judge runs/headline/judge --steps 1 3 5 8 \\
         --out benchmarks/results/judge_hold.json
@@ -27,6 +28,7 @@ from gymnast.reward.judges.measure import choose_threshold, evaluate_judge, oper
 from gymnast.reward.judges.train import judge_datasets, load_judge, saved_judge_config, split_scenes
 from gymnast.reward.judges.videos import judge_cases, load_videos
 from gymnast.utils.atomic import read_json, write_json
+from gymnast.utils.checkpoint import checkpoint_at
 
 GOAL_FPR = 0.03
 
@@ -62,9 +64,10 @@ def best_tpr_at(scores: torch.Tensor, truth: torch.Tensor, fpr: float) -> float:
     return round(eligible.max().item(), 4) if len(eligible) else 0.0
 
 
-def measure(run: Path, steps: Sequence[int], threshold_tpr: float | None = None) -> dict:
-    """Each rule of `steps` on the judge `run`, its threshold chosen with `threshold_tpr` (default: the run's rule)."""
-    judge = load_judge(run)
+def measure(run: Path, steps: Sequence[int], threshold_tpr: float | None = None, checkpoint: int | None = None) -> dict:
+    """Each rule of `steps` on the judge `run` (its newest checkpoint, or that of step `checkpoint`),
+    its threshold chosen with `threshold_tpr` (default: the run's rule)."""
+    judge = load_judge(run if checkpoint is None else checkpoint_at(run, checkpoint))
     if not isinstance(judge, FrameJudge):
         raise ValueError(f"{run}: a {judge.backend}, not a per-frame judge; only those hold a success over steps")
     tpr = threshold_tpr if threshold_tpr is not None else saved_judge_config(run).threshold_tpr
@@ -84,7 +87,7 @@ def measure(run: Path, steps: Sequence[int], threshold_tpr: float | None = None)
                      "real_auc": report["real_roc"]["auc"], "real_lowest_fpr_at_tpr_0.95": report["real_roc"]["lowest_fpr"],
                      f"real_best_tpr_at_fpr_{GOAL_FPR}": best_tpr_at(scores, truth, GOAL_FPR)})
         print(json.dumps(rows[-1]))
-    return {"judge": str(run), "trained_hold_steps": judge.config.hold_steps, "threshold_tpr": tpr,
+    return {"judge": str(run), **({} if checkpoint is None else {"checkpoint": checkpoint}), "trained_hold_steps": judge.config.hold_steps, "threshold_tpr": tpr,
             "validation_episodes": len(validation),
             "heldout_episodes": len(heldout), "rows": rows}
 
@@ -95,9 +98,10 @@ def main() -> None:
     parser.add_argument("--steps", type=int, nargs="+", default=[1, 3, 5, 8], help="hold rules to measure")
     parser.add_argument("--threshold-tpr", type=float, default=None,
                         help="choose each threshold for this validation TPR (default: the run's rule)")
+    parser.add_argument("--checkpoint", type=int, default=None, help="the step of an earlier checkpoint to measure")
     parser.add_argument("--out", type=Path, default=Path("benchmarks/results/judge_hold.json"))
     args = parser.parse_args()
-    write_json(args.out, measure(args.judge, args.steps, args.threshold_tpr))
+    write_json(args.out, measure(args.judge, args.steps, args.threshold_tpr, args.checkpoint))
     print(f"wrote {args.out}")
 
 

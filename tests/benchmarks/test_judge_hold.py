@@ -29,3 +29,13 @@ def test_a_judge_of_whole_videos_is_refused(tiny_dataset, tmp_path):
     train_judge(tiny_dataset, tmp_path / "video", config, progress=False)
     with pytest.raises(ValueError, match="not a per-frame judge"):
         benchmark_script("judge_hold").measure(tmp_path / "video", [1])
+
+
+def test_an_earlier_checkpoint_is_measured_as_if_training_had_stopped_there(tiny_dataset, tmp_path):
+    config = dataclasses.replace(JUDGE_PRESETS["debug"], heldout_fraction=0.25, validation_fraction=0.3, hold_steps=3)
+    train_judge(tiny_dataset, tmp_path / "judge", config, progress=False)
+    steps = sorted(int(path.name) for path in (tmp_path / "judge" / "checkpoints").glob("[0-9]*"))
+    newest = benchmark_script("judge_hold").measure(tmp_path / "judge", [3])
+    assert benchmark_script("judge_hold").measure(tmp_path / "judge", [3], checkpoint=steps[-1])["rows"] == newest["rows"]
+    with pytest.raises(FileNotFoundError, match="999999"):
+        benchmark_script("judge_hold").measure(tmp_path / "judge", [3], checkpoint=999999)

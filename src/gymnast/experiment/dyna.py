@@ -44,6 +44,7 @@ from gymnast.envs.workers import parse_runner
 from gymnast.experiment.stages import Stages
 from gymnast.rl.config import RL_PRESETS, RLConfig
 from gymnast.utils.atomic import read_json
+from gymnast.utils.checkpoint import has_checkpoint
 from gymnast.utils.settings import from_json, saved_settings
 
 logger = logging.getLogger(__name__)
@@ -231,7 +232,7 @@ def run_round(k: int, config: DynaConfig, inputs: DynaInputs, policy: Path, wm: 
     rl_run, rollouts, new_wm, new_reward = here / "rl", here / "rollouts", here / "world_model", here / kind
     starts = recorded[-1] if config.practice_from_rollouts and recorded else inputs.data
     spec = RLRun(str(policy), IMAGINED, RewardSpec(kind, run=Path(reward)), wm=str(wm), data=_str(starts))
-    trained = stages.run("rl", lambda: _rl_record(train_rl(spec, rl_run, config.rl, resume=_started(rl_run),
+    trained = stages.run("rl", lambda: _rl_record(train_rl(spec, rl_run, config.rl, resume=has_checkpoint(rl_run),
                                                            progress=progress)), rl_run)
     row = {"round": k, "rl_steps": k * config.rl.steps, "rl": trained}
     if k < config.rounds:  # the last round's rollouts could no longer change the policy: none are taken
@@ -285,7 +286,7 @@ def fine_tune_world_model(original: Path, current: Path, recorded: list[Path], s
 
     settings = _fine_tuning(saved_train_config(original), steps, current, recorded, validate_every=steps,
                             video_every=steps)
-    checkpoint = train_world_model(Path(saved_settings(original)["data"]), out, settings, resume=_started(out),
+    checkpoint = train_world_model(Path(saved_settings(original)["data"]), out, settings, resume=has_checkpoint(out),
                                    progress=progress)
     return {"checkpoint": str(checkpoint)}
 
@@ -298,7 +299,7 @@ def fine_tune_judge(original: Path, current: Path, wm: Path, recorded: list[Path
 
     saved = saved_settings(original)
     settings = _fine_tuning(saved_judge_config(original), steps, current, recorded)
-    return train_judge(Path(saved["data"]), out, settings, wm=wm if saved.get("wm") else None, resume=_started(out),
+    return train_judge(Path(saved["data"]), out, settings, wm=wm if saved.get("wm") else None, resume=has_checkpoint(out),
                        progress=progress)
 
 
@@ -321,7 +322,7 @@ def fine_tune_state_model(original: Path, current: Path, recorded: list[Path], s
         base = from_json(StateTrainConfig, saved["train"])
         settings = dataclasses.replace(base, steps=steps, checkpoint_every=min(base.checkpoint_every, steps),
                                        init=last, extra_data=(*base.extra_data, *recorded))
-        train_state_model(Path(saved["data"]), member, settings, resume=_started(member), progress=progress)
+        train_state_model(Path(saved["data"]), member, settings, resume=has_checkpoint(member), progress=progress)
         evaluation = member / "eval.json"
         reports[member.name] = read_json(evaluation) if evaluation.is_file() else None
         members.append(member)
@@ -346,7 +347,7 @@ def run_real_rl(config: DynaConfig, inputs: DynaInputs, out: Path, progress: boo
     from gymnast.rl.train import train_rl
 
     spec = RLRun(str(inputs.policy), REAL, RewardSpec.parse(config.real_reward), data=_str(inputs.data))
-    summary = train_rl(spec, out, config.real_rl_config, resume=_started(out), progress=progress)
+    summary = train_rl(spec, out, config.real_rl_config, resume=has_checkpoint(out), progress=progress)
     return {"curve": real_rl_curve(out, summary["curve"]), "real_interactions": summary["real_interactions"],
             "eval_real_interactions": summary["eval_real_interactions"], "wall_s": summary["wall_s"]}
 
@@ -403,11 +404,6 @@ def _rl_record(summary: dict) -> dict:
     return {"imagined_start": summary.get("start_success"), "imagined_end": summary.get("end_success"),
             "check_real_interactions": summary["eval_real_interactions"] + summary["watch_real_interactions"],
             "wall_s": summary["wall_s"]}
-
-
-def _started(run: Path) -> bool:
-    """Whether a trainer was cut short in `run` after a checkpoint, and should resume from it."""
-    return (run / "checkpoints" / "last").exists()
 
 
 def _str(path: Path | None) -> str | None:

@@ -29,6 +29,7 @@ from pathlib import Path
 
 from gymnast.experiment.config import EqualBudgetConfig, ExperimentConfig
 from gymnast.experiment.stages import Stages
+from gymnast.utils.checkpoint import has_checkpoint
 
 logger = logging.getLogger(__name__)
 
@@ -109,7 +110,7 @@ def _real_grpo(config: ExperimentConfig, budget: Budget, sft: Path, data: Path, 
     settings = dataclasses.replace(config.rl, steps=budget.grpo_steps, starts_per_step=budget.grpo_starts,
                                    max_rounds=1, fresh_scenes=True, watch_every=0, eval_every=budget.grpo_steps)
     run = RLRun(str(sft), REAL, RewardSpec(arm("rl_real").reward), data=str(data))
-    summary = train_rl(run, out, settings, resume=(out / "checkpoints" / "last").exists(), progress=progress)
+    summary = train_rl(run, out, settings, resume=has_checkpoint(out), progress=progress)
     summary.pop("curve")
     return summary
 
@@ -136,7 +137,7 @@ def _imagined(config: ExperimentConfig, sft: Path, wm: Path, judge: Path, data: 
     # along the way would only repeat it.
     rl = dataclasses.replace(config.rl, fresh_scenes=False, real_eval=False, eval_every=config.rl.steps)
     target = out / "rl"
-    summary = train_rl(run, target, rl, resume=(target / "checkpoints" / "last").exists(), progress=progress)
+    summary = train_rl(run, target, rl, resume=has_checkpoint(target), progress=progress)
     summary.pop("curve")
     return summary
 

@@ -21,6 +21,7 @@ from tqdm import tqdm
 from gymnast.experiment.config import ExperimentConfig
 from gymnast.policy.sft import DemoSet
 from gymnast.rl.rollout import Rollouts, dataset_starts
+from gymnast.utils.checkpoint import has_checkpoint
 
 logger = logging.getLogger(__name__)
 
@@ -108,5 +109,5 @@ def fine_tune_on_successes(policy_run: Path, data: Path, samples: DemoSet | None
     sft = dataclasses.replace(config.sft, steps=config.iter_sft.steps, lr=config.iter_sft.lr,
                               warmup_steps=min(config.sft.warmup_steps, config.iter_sft.steps // 10),
                               checkpoint_every=config.iter_sft.steps)
-    train_sft(data, out, sft, resume=(out / "checkpoints" / "last").exists(), progress=progress, init=policy_run,
+    train_sft(data, out, sft, resume=has_checkpoint(out), progress=progress, init=policy_run,
               extra=samples)

@@ -21,6 +21,7 @@ from pathlib import Path
 from gymnast.eval.stats import wilson_interval
 from gymnast.rl.config import RLConfig, RLRun
 from gymnast.utils.atomic import read_json
+from gymnast.utils.checkpoint import has_checkpoint
 
 Scene = tuple[str, int]
 """A task and the data seed of its scene."""
@@ -52,7 +53,7 @@ def practise(run_spec: RLRun, settings: RLConfig, scenes: list[Scene], out: Path
         run = out / f"{task}_{seed}"
         if not (run / "summary.json").exists():
             train_rl(run_spec, run, dataclasses.replace(settings, scenes=f"{task}:{seed}"),
-                     resume=(run / "checkpoints" / "last").exists(), progress=progress)
+                     resume=has_checkpoint(run), progress=progress)
         rows.append(measure(task, seed, run))
     return rows
 

@@ -39,6 +39,7 @@ from gymnast.experiment.stages import Stages
 from gymnast.reward.spec import RewardSpec
 from gymnast.rl.evaluate import shared_evaluations
 from gymnast.utils.atomic import read_json, write_json
+from gymnast.utils.checkpoint import has_checkpoint
 from gymnast.utils.device import resolve_device
 from gymnast.utils.settings import from_json, saved_settings
 
@@ -123,7 +124,7 @@ def _models(stages: Stages, config: ExperimentConfig, out: Path, progress: bool
         if config.judge_rollouts:
             rollouts = _judge_rollouts(stages.path("sft"), config, recorded, progress)
             settings = dataclasses.replace(settings, extra_data=(*settings.extra_data, recorded))
-        report = train_judge(data, target, settings, wm=wm, resume=_has_checkpoint(target), progress=progress)
+        report = train_judge(data, target, settings, wm=wm, resume=has_checkpoint(target), progress=progress)
         return {"metrics": {k: v for k, v in report.items() if k.startswith(("real", "imagined"))}, "rollouts": rollouts}
 
     stages.run("judge", judge_stage, out / "judge")
@@ -260,12 +261,8 @@ def _signal(sft: Path, wm: Path, reward: RewardSpec, data: Path, config: Experim
 
 def _trained(train, data: Path, target: Path, settings, progress: bool) -> dict:
     """Runs a trainer that resumes from its own checkpoint when a previous attempt left one."""
-    checkpoint = train(data, target, settings, resume=_has_checkpoint(target), progress=progress)
+    checkpoint = train(data, target, settings, resume=has_checkpoint(target), progress=progress)
     return {"checkpoint": str(checkpoint)}
-
-
-def _has_checkpoint(run: Path) -> bool:
-    return (run / "checkpoints" / "last").exists()
 
 
 def _train_arm(stages: Stages, name: str, config: ExperimentConfig, out: Path, sft: Path, wm: Path, judge: Path,
@@ -284,7 +281,7 @@ def _train_arm(stages: Stages, name: str, config: ExperimentConfig, out: Path, s
         if not spec.is_rl:
             return {"imagined": train_iter_sft(sft, wm, judge, data, target, config, progress), "real_interactions": 0}
         run, rl = rl_setup(spec, config, sft, wm, judge, data, state)
-        summary = train_rl(run, target, rl, resume=_has_checkpoint(target), progress=progress)
+        summary = train_rl(run, target, rl, resume=has_checkpoint(target), progress=progress)
         summary.pop("curve")
         return summary
 

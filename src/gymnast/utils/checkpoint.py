@@ -43,9 +43,9 @@ def save_checkpoint(
     `extra` names further state dicts saved beside the model (``NAME.pt``; `load_extra` reads one),
     such as a second network a trainer fits with its own optimizer.
     """
-    root = Path(run) / "checkpoints"
+    final = checkpoint_at(run, step)
+    root = final.parent
     root.mkdir(parents=True, exist_ok=True)
-    final = root / f"{step:06d}"
     # A rerun of the same step (e.g. after a resume) replaces it.
     with atomic_directory(final, replace=True) as staging:
         # Weights are saved from the host, so a checkpoint written on a GPU loads on any machine.
@@ -60,6 +60,16 @@ def save_checkpoint(
             torch.save(state, staging / f"{name}.pt")
     write_bytes(root / LAST, final.name.encode())
     return final
+
+
+def checkpoint_at(run: Path, step: int) -> Path:
+    """Where `run` keeps (or would keep) its checkpoint of `step`."""
+    return Path(run) / "checkpoints" / f"{step:06d}"
+
+
+def has_checkpoint(run: Path) -> bool:
+    """Whether `run` has saved a checkpoint (a trainer given it resumes rather than starts)."""
+    return (Path(run) / "checkpoints" / LAST).exists()
 
 
 def resolve_checkpoint(path: Path) -> Path:
