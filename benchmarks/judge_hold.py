@@ -25,9 +25,9 @@ import torch
 from gymnast.reward.judges.base import ThresholdJudge
 from gymnast.reward.judges.frames import FrameJudge, held_probability
 from gymnast.reward.judges.measure import choose_threshold, evaluate_judge, operating_points
-from gymnast.reward.judges.train import judge_datasets, load_judge, saved_judge_config, split_scenes
-from gymnast.reward.judges.videos import judge_cases, load_videos
-from gymnast.utils.atomic import read_json, write_json
+from gymnast.reward.judges.train import load_judge, run_scene_videos, saved_judge_config
+from gymnast.reward.judges.videos import judge_cases
+from gymnast.utils.atomic import write_json
 from gymnast.utils.checkpoint import checkpoint_at
 
 GOAL_FPR = 0.03
@@ -50,13 +50,6 @@ class HeldJudge(ThresholdJudge):
         return held_probability(self.cache[key], self.config.hold_steps)
 
 
-def run_videos(run: Path, part: int) -> list:
-    """The real videos of the judge run's validation (`part` 1) or held-out (2) scenes, read as its training read them."""
-    datasets, config = judge_datasets(Path(read_json(run / "config.json")["data"]), saved_judge_config(run))
-    return [video for dataset in datasets for video in load_videos(dataset, split_scenes(dataset, config)[part], None,
-                                                                      progress=False)]
-
-
 def best_tpr_at(scores: torch.Tensor, truth: torch.Tensor, fpr: float) -> float:
     """The highest TPR any threshold gives on these cases at FPR <= `fpr` (0: a failure scores highest)."""
     _, passed, failed = operating_points(scores, truth)
@@ -71,7 +64,7 @@ def measure(run: Path, steps: Sequence[int], threshold_tpr: float | None = None,
     if not isinstance(judge, FrameJudge):
         raise ValueError(f"{run}: a {judge.backend}, not a per-frame judge; only those hold a success over steps")
     tpr = threshold_tpr if threshold_tpr is not None else saved_judge_config(run).threshold_tpr
-    validation, heldout = (run_videos(run, part) for part in (1, 2))
+    validation, heldout = (run_scene_videos(run, part) for part in (1, 2))
     cache, rows = {}, []
     for k in steps:
         held = HeldJudge(judge, k, cache)

@@ -10,7 +10,7 @@ import tyro
 
 import gymnast  # noqa: F401  (sets MUJOCO_GL before anything imports mujoco)
 from gymnast.cli.data import collect, contact_sheet, gap_report, inspect, tasks
-from gymnast.cli.judge import eval_judge, serve_judge, train_judge
+from gymnast.cli.judge import calibrate_judge, eval_judge, serve_judge, train_judge
 from gymnast.cli.measure import imagination, practice_summary, rl_signal, worldgym
 from gymnast.cli.policy import evaluate_command, sft
 from gymnast.cli.practice import dyna, experiment, rl
@@ -63,6 +63,7 @@ COMMANDS = {
     "make-ensemble": make_ensemble,
     "object-fidelity": object_fidelity,
     "train-judge": train_judge,
+    "calibrate-judge": calibrate_judge,
     "serve-judge": serve_judge,
     "eval-judge": eval_judge,
     "rl": rl,

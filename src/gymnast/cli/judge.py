@@ -80,6 +80,40 @@ def train_judge(
     print(f"judge: {out}")
 
 
+def calibrate_judge(
+    judge: Path,
+    data: tuple[Path, ...],
+    out: Path,
+    max_fpr: float = 0.02,
+    hold_steps: tuple[int, ...] = (),
+    checkpoints: tuple[int, ...] = (),
+) -> None:
+    """Choose a per-frame judge's threshold, and optionally its hold rule and checkpoint, on labelled
+    real episodes it never saw (more than its validation scenes), then measure the chosen judge on
+    the run's held-out real videos. Writes a judge run that --reward judge:OUT loads.
+
+    Args:
+        judge: a per-frame judge run, from `gymnast train-judge`.
+        data: datasets of real episodes recorded apart from the judge's (`gymnast collect` with
+            another --first-seed, a policy's rollouts with --policy), with the judge's cameras.
+        out: the calibrated judge run: its checkpoint, config.json, calibration.json (every option
+            tried) and metrics.json (the held-out real TPR/FPR).
+        max_fpr: the share of the calibration failures the threshold may pass as successes; the
+            lowest threshold within it is chosen (the most successes passed).
+        hold_steps: hold rules to try (e.g. 5 8 12); default: the judge's own.
+        checkpoints: steps of the run's earlier checkpoints to try besides its newest (e.g. 1000 1500).
+    """
+    from gymnast.reward.judges.calibrate import CalibrationConfig
+    from gymnast.reward.judges.calibrate import calibrate_judge as calibrate
+
+    report = calibrate(judge, data, out, CalibrationConfig(max_fpr, hold_steps, checkpoints))
+    chosen = {key: report[f"calibration_{key}"] for key in ("checkpoint", "hold_steps", "threshold", "tpr", "fpr")}
+    print(json.dumps({"chosen on the calibration episodes": chosen,
+                      "held-out real": {key: report[key] for key in ("real_tpr", "real_fpr", "real_positives", "real_negatives")}},
+                     indent=2))
+    print(f"judge: {out}")
+
+
 def serve_judge(
     judge: Path,
     port: int = 8000,

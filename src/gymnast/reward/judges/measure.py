@@ -37,10 +37,27 @@ def choose_threshold(judge: Reward, videos: list[Video], tpr: float | None = Non
         first, last = int(best[0]), int(best[-1])
     else:  # the share passed falls as the threshold rises: the last candidate still at the rate
         first = last = int(torch.nonzero(passed >= tpr - 1e-9).flatten()[-1])
+    return _operating_point(scores, truth, candidates, first, last) | {"cases": len(cases)}
+
+
+def threshold_at_fpr(scores: torch.Tensor, truth: torch.Tensor, max_fpr: float) -> dict:
+    """The threshold on (N,) `scores` of cases labelled (N,) `truth` (both labels present) that
+    passes the most successes while passing at most `max_fpr` of the failures: the lowest whose FPR
+    is within it, placed in the gap below its score. Returns ``threshold``, ``tpr`` and ``fpr``."""
+    candidates, _, failed = operating_points(scores, truth)
+    within = torch.nonzero(failed <= max_fpr + 1e-9).flatten()
+    if not len(within):  # the highest score is a failure's and max_fpr allows none: pass nothing
+        return {"threshold": float(candidates[-1]) + 1e-6, "tpr": 0.0, "fpr": 0.0}
+    first = int(within[0])
+    return _operating_point(scores, truth, candidates, first, first)
+
+
+def _operating_point(scores: torch.Tensor, truth: torch.Tensor, candidates: torch.Tensor, first: int, last: int) -> dict:
+    """The threshold midway between the candidate below `first` and candidate `last` (so that it sits
+    between scores rather than on one), with the TPR and FPR it gives."""
     low = candidates[first - 1] if first > 0 else torch.tensor(0.0, dtype=torch.float64)
     threshold = float((low + candidates[last]) / 2)
-    return {"threshold": threshold, "tpr": _rate(scores >= threshold, truth), "fpr": _rate(scores >= threshold, ~truth),
-            "cases": len(cases)}
+    return {"threshold": threshold, "tpr": _rate(scores >= threshold, truth), "fpr": _rate(scores >= threshold, ~truth)}
 
 
 def operating_points(scores: torch.Tensor, truth: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:

@@ -38,7 +38,7 @@ from gymnast.reward.judges.measure import choose_threshold, evaluate_judge
 from gymnast.reward.judges.progress import ProgressJudge, evaluate_progress, progress_loss
 from gymnast.reward.judges.video import LearnedJudge, judge_loss, judged_frame_indices
 from gymnast.reward.judges.videos import Video, load_videos
-from gymnast.utils.atomic import write_json
+from gymnast.utils.atomic import read_json, write_json
 from gymnast.utils.checkpoint import begin_training, load_model, save_training, write_run_config
 from gymnast.utils.device import resolve_device
 from gymnast.utils.optim import gradient_step, warmup_cosine
@@ -265,6 +265,13 @@ def judge_datasets(data: Path, config: JudgeTrainConfig) -> tuple[list[EpisodeDa
     config = dataclasses.replace(config, judge=dataclasses.replace(config.judge, image_size=size, cameras=datasets[0].cameras,
                                                                    hold_steps=config.hold_steps))
     return [dataset.fitted(size, config.fit) for dataset in datasets], config
+
+
+def run_scene_videos(run: Path, part: int) -> list[Video]:
+    """The real videos of a judge run's training (`part` 0), validation (1) or held-out (2) scenes,
+    read as its training read them."""
+    datasets, config = judge_datasets(Path(read_json(run / "config.json")["data"]), saved_judge_config(run))
+    return [video for dataset in datasets for video in load_videos(dataset, split_scenes(dataset, config)[part], None, False)]
 
 
 def train_judge(data: Path, out: Path, config: JudgeTrainConfig, wm: Path | None = None, resume: bool = False,
