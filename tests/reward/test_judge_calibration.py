@@ -81,5 +81,7 @@ def test_what_cannot_be_calibrated_is_named(judge_run, calibration_data, tiny_da
         calibrate_judge(video_judge, [calibration_data], tmp_path / "b", progress=False)
     with pytest.raises(ValueError, match="max_fpr"):
         CalibrationConfig(max_fpr=1.0)
+    with pytest.raises(ValueError, match="not a calibrated judge"):
+        calibrate_judge(judge_run, [calibration_data], judge_run, progress=False)
     assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
     assert isinstance(load_judge(judge_run), FrameJudge)

@@ -57,11 +57,14 @@ def calibrate_judge(run: Path, data: Sequence[Path], out: Path, config: Calibrat
     held-out real videos judged by it) and returns the metrics.
 
     Raises:
-        ValueError: `run` is not a per-frame judge, or `data` lacks successes or failures.
+        ValueError: `run` is not a per-frame judge, `data` lacks successes or failures, or `out`
+            holds something other than an earlier calibration (the run itself, say).
         FileNotFoundError: an asked-for checkpoint is not in `run`.
     """
     started = time.perf_counter()
     run, out = Path(run), Path(out)
+    if out.resolve() == run.resolve() or (out.exists() and not (out / "calibration.json").exists()):
+        raise ValueError(f"{out} exists and is not a calibrated judge (it would be replaced); give another --out")
     newest = resolve_checkpoint(run)
     earlier = [checkpoint_at(run, step) for step in config.checkpoints]
     judges = {_step(path): _frame_judge(path) for path in [*earlier, newest]}  # a missing step is named here
