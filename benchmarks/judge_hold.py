@@ -80,9 +80,9 @@ def measure(run: Path, steps: Sequence[int], threshold_tpr: float | None = None,
                      "real_auc": report["real_roc"]["auc"], "real_lowest_fpr_at_tpr_0.95": report["real_roc"]["lowest_fpr"],
                      f"real_best_tpr_at_fpr_{GOAL_FPR}": best_tpr_at(scores, truth, GOAL_FPR)})
         print(json.dumps(rows[-1]))
-    return {"judge": str(run), **({} if checkpoint is None else {"checkpoint": checkpoint}), "trained_hold_steps": judge.config.hold_steps, "threshold_tpr": tpr,
-            "validation_episodes": len(validation),
-            "heldout_episodes": len(heldout), "rows": rows}
+    measured = {"judge": str(run)} | ({} if checkpoint is None else {"checkpoint": checkpoint})
+    return measured | {"trained_hold_steps": judge.config.hold_steps, "threshold_tpr": tpr,
+                       "validation_episodes": len(validation), "heldout_episodes": len(heldout), "rows": rows}
 
 
 def main() -> None:

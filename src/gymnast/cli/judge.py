@@ -108,9 +108,8 @@ def calibrate_judge(
 
     report = calibrate(judge, data, out, CalibrationConfig(max_fpr, hold_steps, checkpoints))
     chosen = {key: report[f"calibration_{key}"] for key in ("checkpoint", "hold_steps", "threshold", "tpr", "fpr")}
-    print(json.dumps({"chosen on the calibration episodes": chosen,
-                      "held-out real": {key: report[key] for key in ("real_tpr", "real_fpr", "real_positives", "real_negatives")}},
-                     indent=2))
+    heldout = {key: report[key] for key in ("real_tpr", "real_fpr", "real_positives", "real_negatives")}
+    print(json.dumps({"chosen on the calibration episodes": chosen, "held-out real": heldout}, indent=2))
     print(f"judge: {out}")
 
 

@@ -65,10 +65,10 @@ def calibrate_judge(run: Path, data: Sequence[Path], out: Path, config: Calibrat
     run, out = Path(run), Path(out)
     if out.resolve() == run.resolve() or (out.exists() and not (out / "calibration.json").exists()):
         raise ValueError(f"{out} exists and is not a calibrated judge (it would be replaced); give another --out")
-    newest = resolve_checkpoint(run)
-    earlier = [checkpoint_at(run, step) for step in config.checkpoints]
-    judges = {_step(path): _frame_judge(path) for path in [*earlier, newest]}  # a missing step is named here
-    holds = config.hold_steps or (judges[_step(newest)].config.hold_steps,)
+    newest = _step(resolve_checkpoint(run))
+    steps = [*config.checkpoints, newest]
+    judges = {step: _frame_judge(checkpoint_at(run, step)) for step in steps}  # a missing step is named here
+    holds = config.hold_steps or (judges[newest].config.hold_steps,)
     cases, truth = _calibration_cases(run, data, progress)
     options = []
     for step, judge in tqdm(sorted(judges.items()), desc="calibrating checkpoints", disable=not progress):
@@ -84,7 +84,8 @@ def calibrate_judge(run: Path, data: Sequence[Path], out: Path, config: Calibrat
     report = evaluate_judge(judge, run_scene_videos(run, 2))
     report |= {"kind": "frames", "calibrated_from": str(run), "calibration_data": [str(path) for path in data],
                "calibration_max_fpr": config.max_fpr, "calibration_cases": len(truth),
-               "calibration_positives": int(truth.sum()), **{f"calibration_{key}": value for key, value in chosen.items()},
+               "calibration_positives": int(truth.sum()),
+               **{f"calibration_{key}": value for key, value in chosen.items()},
                "seconds": round(time.perf_counter() - started, 1)}
     settings = read_json(run / "config.json") | {"model": judge.spec(), "calibration": {
         "from": str(run), "data": [str(path) for path in data], **dataclasses.asdict(config)}}
