@@ -60,12 +60,12 @@ def test_the_calibrated_judge_is_a_run_measured_on_the_held_out_scenes(judge_run
 
 
 def test_a_case_cut_from_a_video_reads_the_first_frames_judged_with_the_whole_video(judge_run, calibration_data):
-    from gymnast.reward.judges.calibrate import _calibration_cases, _case_frame_probabilities
+    from gymnast.reward.judges.calibrate import calibration_cases, case_frame_probabilities
 
     judge = load_judge(judge_run)
-    cases, truth = _calibration_cases(judge_run, [calibration_data], progress=False)
+    cases, truth = calibration_cases(judge_run, [calibration_data], progress=False)
     assert len(cases) > len({id(video) for video, _ in cases})  # successes are cut short too
-    shortcut = _case_frame_probabilities(judge, cases)
+    shortcut = case_frame_probabilities(judge, cases)
     for (video, length), probabilities in zip(cases, shortcut):
         alone = judge.frame_probabilities(video.frames[None, :length], [video.instruction])[0]
         assert torch.allclose(probabilities, alone, atol=1e-3)
@@ -85,3 +85,19 @@ def test_what_cannot_be_calibrated_is_named(judge_run, calibration_data, tiny_da
         calibrate_judge(judge_run, [calibration_data], judge_run, progress=False)
     assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
     assert isinstance(load_judge(judge_run), FrameJudge)
+
+
+def test_the_checkpoint_mean_benchmark_of_one_checkpoint_is_the_calibration(judge_run, calibration_data, tmp_path):
+    from benchmark_scripts import benchmark_script
+
+    config = CalibrationConfig(max_fpr=0.5, hold_steps=(1, 3))
+    report = calibrate_judge(judge_run, [calibration_data], tmp_path / "calibrated", config, progress=False)
+    result = benchmark_script("judge_checkpoint_mean").measure(judge_run, [calibration_data], [3, DEBUG.steps],
+                                                              holds=[1, 3], max_fpr=[0.5])
+    assert [row["checkpoints"] for row in result["rows"]] == [[3], [DEBUG.steps], [3, DEBUG.steps]]
+    newest = result["rows"][1]
+    assert (newest["hold_steps"], newest["calibration_tpr"], newest["calibration_fpr"]) == (
+        report["calibration_hold_steps"], report["calibration_tpr"], report["calibration_fpr"])
+    assert newest["threshold"] == pytest.approx(report["calibration_threshold"])
+    assert (newest["heldout_tpr"], newest["heldout_fpr"]) == (report["real_tpr"], report["real_fpr"])
+    assert result["heldout_cases"] == report["real_positives"] + report["real_negatives"]

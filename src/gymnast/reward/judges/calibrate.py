@@ -67,12 +67,12 @@ def calibrate_judge(run: Path, data: Sequence[Path], out: Path, config: Calibrat
         raise ValueError(f"{out} exists and is not a calibrated judge (it would be replaced); give another --out")
     newest = _step(resolve_checkpoint(run))
     steps = [*config.checkpoints, newest]
-    judges = {step: _frame_judge(checkpoint_at(run, step)) for step in steps}  # a missing step is named here
+    judges = {step: frame_judge(checkpoint_at(run, step)) for step in steps}  # a missing step is named here
     holds = config.hold_steps or (judges[newest].config.hold_steps,)
-    cases, truth = _calibration_cases(run, data, progress)
+    cases, truth = calibration_cases(run, data, progress)
     options = []
     for step, judge in tqdm(sorted(judges.items()), desc="calibrating checkpoints", disable=not progress):
-        frames = _case_frame_probabilities(judge, cases)
+        frames = case_frame_probabilities(judge, cases)
         for hold in holds:
             scores = torch.stack([held_probability(p[None], hold)[0] for p in frames]).double()
             options.append({"checkpoint": step, "hold_steps": hold, **threshold_at_fpr(scores, truth, config.max_fpr),
@@ -101,7 +101,8 @@ def _step(checkpoint: Path) -> int:
     return int(read_json(resolve_checkpoint(checkpoint) / "trainer.json")["step"])
 
 
-def _frame_judge(path: Path) -> FrameJudge:
+def frame_judge(path: Path) -> FrameJudge:
+    """The per-frame judge of the run or checkpoint at `path`; any other judge is refused."""
     judge = load_judge(path)
     if not isinstance(judge, FrameJudge):
         raise ValueError(f"{path}: a {judge.backend}, not a per-frame judge; only those are calibrated "
@@ -109,7 +110,7 @@ def _frame_judge(path: Path) -> FrameJudge:
     return judge
 
 
-def _calibration_cases(run: Path, data: Sequence[Path], progress: bool) -> tuple[list[tuple[Video, int]], torch.Tensor]:
+def calibration_cases(run: Path, data: Sequence[Path], progress: bool) -> tuple[list[tuple[Video, int]], torch.Tensor]:
     """Every case of the real episodes of `data`, read with the judge run's cameras and size: (the
     video, how many of its frames the case shows), and (N,) bool labels."""
     if not data:
@@ -129,7 +130,7 @@ def _calibration_cases(run: Path, data: Sequence[Path], progress: bool) -> tuple
     return cases, truth
 
 
-def _case_frame_probabilities(judge: FrameJudge, cases: list[tuple[Video, int]]) -> list[torch.Tensor]:
+def case_frame_probabilities(judge: FrameJudge, cases: list[tuple[Video, int]]) -> list[torch.Tensor]:
     """(T,) per-frame probabilities of each case: a video's frames are judged once, and a case cut
     from it reads its first ones (each frame is judged beside the video's first frame alone)."""
     whole: dict[int, torch.Tensor] = {}
