@@ -290,6 +290,9 @@ def test_frozen_parts_of_the_policy_stay_as_they_were_while_the_rest_learns(tmp_
     changed = {name for name in before if not torch.equal(before[name], after[name])}
     assert changed and not any(name.startswith("vision.") for name in changed)
     assert json.loads((out / "config.json").read_text())["rl"]["freeze"] == ["vision"]
+    # The frozen encoder's tokens of the rollouts' observations served the update again.
+    reused = [line["train/vision_reused"] for line in read_metrics(out) if "train/vision_reused" in line]
+    assert reused and all(share >= 0.5 for share in reused)
 
 
 def test_a_part_to_freeze_that_the_policy_lacks_is_named_with_the_parts_it_has():

@@ -33,6 +33,7 @@ import torch
 from torch import nn
 
 from gymnast.config import CAMERAS
+from gymnast.policy.frozen_vision import VisionMemory
 from gymnast.policy.text import EMBEDDING_DIM, InstructionEncoder
 from gymnast.policy.vision import make_vision_encoder, to_float_image
 from gymnast.utils.images import split_views
@@ -122,6 +123,7 @@ class ObservationConditioned(nn.Module):
         self.text_film = nn.Linear(EMBEDDING_DIM, 2 * width)
         self.text_token = nn.Linear(EMBEDDING_DIM, width)
         self.text = InstructionEncoder()
+        self.vision_memory: VisionMemory | None = None  # set by `remembered_vision` while an RL step runs
 
     def embed_instructions(self, instructions: Sequence[str], batch: int) -> torch.Tensor:
         """(B, 384) instruction embeddings for a batch of `batch` images."""
@@ -149,8 +151,15 @@ class ObservationConditioned(nn.Module):
         if tuple(images.shape[1:]) != self.observed_shape:
             raise ValueError(f"images must be (B, {', '.join(map(str, self.observed_shape))}), got {tuple(images.shape)}")
         images = to_device(images, self.vision_position.device)  # the camera's frames live on the host
-        with bf16_autocast(images.device, bf16_vision):
-            tokens = self.vision(to_float_image(split_views(images, self.views)))  # (B*V, P, D)
+
+        def encode(batch: torch.Tensor) -> torch.Tensor:  # (b, H, V*W, 3) -> (b*V, P, D)
+            with bf16_autocast(batch.device, bf16_vision):
+                return self.vision(to_float_image(split_views(batch, self.views)))
+
+        if self.vision_memory is not None and images.device.type == "cpu":  # inside `remembered_vision`
+            tokens = self.vision_memory.encode(images, bf16_vision, encode)
+        else:
+            tokens = encode(images)
         tokens = tokens.float().reshape(len(images), -1, tokens.shape[-1]) + self.vision_position  # (B, V*P, D)
         scale, shift = self.text_film(text).unsqueeze(1).chunk(2, dim=-1)
         tokens = tokens * (1 + scale) + shift

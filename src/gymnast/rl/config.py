@@ -115,6 +115,10 @@ class RLConfig:
     the embedded policies' image encoder, about half of their weights; VLA-RFT trains only its
     action head): RL then changes how the policy acts on what it sees, not how it sees. Empty: every
     parameter learns."""
+    remember_vision: bool = True
+    """With the image encoder frozen, encode each observation once per step (when the policy samples)
+    and reuse its tokens in the update and the reference's KL (`gymnast.policy.frozen_vision`; the
+    same tokens, so the same results). False: encode every time, as before."""
     lr: float = 1e-5
     """Peak learning rate (AdamW; linear warm-up, then constant)."""
     warmup_steps: int = 5

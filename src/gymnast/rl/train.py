@@ -42,6 +42,7 @@ from gymnast.data.keyframes import KeyframeConfig
 from gymnast.envs.starts import Start, StartSampler, evaluation_starts, own_instruction, scene_starts
 from gymnast.envs.tasks import parse_scenes, resolve_tasks
 from gymnast.policy.base import state_inputs
+from gymnast.policy.frozen_vision import remembered_vision
 from gymnast.policy.lerobot_policy import LeRobotPolicy
 from gymnast.reward.base import Reward, StepReward, check_fits
 from gymnast.rl import grpo
@@ -254,9 +255,13 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
             # no others), it holds that frame for the chunk's actions, as a frame-per-chunk world model
             # imagines it. Rendering every frame of every rollout for one group's video made such a
             # step 2.9 times as long (410 s against 140 s in the two-camera headline's simulator arm).
-            batch, scores, values = rl_step(envs.train(config.starts_per_step * config.group_size), policy, reward,
-                                            draw_starts, config, sampler, actions, optimizer, schedule, reference,
-                                            anchor, critic, every_frame=reward.needs.video)
+            with remembered_vision(*([policy, reference] if config.remember_vision else [])) as memories:
+                batch, scores, values = rl_step(envs.train(config.starts_per_step * config.group_size), policy,
+                                                reward, draw_starts, config, sampler, actions, optimizer, schedule,
+                                                reference, anchor, critic, every_frame=reward.needs.video)
+            encoded = sum(memory.hits + memory.misses for memory in memories)
+            if encoded:  # the share of the images a policy read whose tokens were already computed
+                values["train/vision_reused"] = sum(memory.hits for memory in memories) / encoded
             interactions = int(values.pop("rollout/interactions"))
             if env.real_interactions:
                 state["real_interactions"] += interactions
