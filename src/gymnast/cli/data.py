@@ -19,9 +19,11 @@ def collect(
     policy: Path | None = None,
     temperature: float = 0.0,
     imagine_with: Path | None = None,
+    replay: Path | None = None,
 ) -> None:
     """Record scripted episodes (experts, noisy experts, failures), or a learned policy's own
-    rollouts, into a LeRobot v3.0 dataset.
+    rollouts, into a LeRobot v3.0 dataset; or replay a recorded dataset's episodes in other
+    cameras or at another image size.
 
     Rerunning the same command resumes: episodes already in OUT are skipped.
 
@@ -35,8 +37,18 @@ def collect(
             it from the scene's first frame and the real world executes the plan, so that every
             episode labels an imagined rollout with its real outcome (judge data for
             `gymnast train-judge --wm` on the same world model).
+        replay: a dataset gymnast recorded: execute each of its episodes' actions again from the
+            same scene and record what --cameras and --env.image-size show (the same episodes,
+            checked step by step; its tasks, seeds, horizon and end at success are kept).
     """
-    if policy is not None:
+    if replay is not None:
+        if policy is not None or temperature or imagine_with:
+            raise ValueError("--replay records the episodes of a dataset again; it takes no --policy, "
+                             "--temperature or --imagine-with")
+        from gymnast.data.replay import replay_dataset
+
+        table = replay_dataset(replay, out, config)
+    elif policy is not None:
         from gymnast.eval.record import record_policy
 
         table = record_policy(policy, config, out, temperature=temperature, imagine_with=imagine_with)

@@ -26,6 +26,7 @@ import json
 import logging
 import math
 from collections import defaultdict
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
@@ -238,13 +239,22 @@ def collect(
         ValueError: `out` holds a dataset recorded with other environment settings.
     """
     out = Path(out)
-    _check_settings(out, config)
-    writer = LeRobotWriter(out, fps=MetaWorldEnv.metadata["render_fps"], cameras=config.env.cameras)
+    check_settings(out, config)
     plan = plan_episodes(config, None if make_actor is None else make_actor.behaviour)
+    record = record_episode if make_actor is None else functools.partial(record_episode, make_actor=make_actor)
+    return record_plan(plan, record, out, config, progress)
+
+
+def record_plan(plan: list[EpisodeJob], record: Callable[[EpisodeJob], Episode], out: Path, config: CollectConfig,
+                progress: bool = True) -> dict:
+    """Records every job of `plan` not yet in `out` with `record` (in `config.workers` processes),
+    staging each episode as it arrives; returns `success_table` of the dataset.
+
+    The settings file of `out` must already have been checked (`check_settings`)."""
+    writer = LeRobotWriter(out, fps=MetaWorldEnv.metadata["render_fps"], cameras=config.env.cameras)
     done = writer.keys()
     todo = [job for job in plan if job.key not in done]
     logger.info("%d episodes planned, %d of them already in %s", len(plan), len(plan) - len(todo), out)
-    record = record_episode if make_actor is None else functools.partial(record_episode, make_actor=make_actor)
     bar = tqdm(total=len(todo), desc="collect", unit="ep", disable=not progress)
     recorded = successes = 0
     try:
@@ -272,7 +282,12 @@ def success_table(episodes: list[EpisodeInfo]) -> dict:
     return {task: dict(row) for task, row in table.items()}
 
 
-def _check_settings(out: Path, config: CollectConfig) -> None:
+def check_settings(out: Path, config: CollectConfig) -> None:
+    """Writes the environment settings beside a new dataset, or checks a dataset's against them.
+
+    Raises:
+        ValueError: `out` was recorded with other settings (the message names the field).
+    """
     settings = {"env": dataclasses.asdict(config.env), "gap": config.gap}
     if config.env.cameras == EnvConfig().cameras:
         # Written as before cameras were a setting: one-camera datasets keep their bytes, and those
