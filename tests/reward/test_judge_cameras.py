@@ -10,10 +10,12 @@ import pytest
 import torch
 
 from gymnast.cli import main
+from gymnast.data.lerobot import EpisodeDataset
 from gymnast.reward.judges.frames import FrameJudge
 from gymnast.reward.judges.base import JudgeConfig
 from gymnast.reward.judges.video import LearnedJudge
 from gymnast.reward.judges.train import load_judge
+from gymnast.reward.judges.videos import heldout_videos
 
 WORLD_MODEL = Path(__file__).resolve().parents[2] / "results" / "world_model" / "wm"
 
@@ -53,3 +55,10 @@ def test_train_judge_on_two_cameras_then_eval_judge_reads_them_again(two_camera_
         main(["train-judge", "--data", str(two_camera_demos), "--out", str(tmp_path / "with_wm"), "--preset", "debug",
               "--cameras", "front,gripper", "--wm", str(WORLD_MODEL)])
     assert "but the world model" in (err := capsys.readouterr().err) and "imagines one camera" in err
+
+
+def test_a_held_out_fraction_of_one_judges_every_episode_of_new_scenes(two_camera_demos):
+    dataset = EpisodeDataset(two_camera_demos, cameras=TWO)
+    every = heldout_videos(dataset, 1.0)
+    assert [video.instruction for video in every] == [info.instruction for info in dataset.episodes]
+    assert heldout_videos(dataset, 0.0) == []

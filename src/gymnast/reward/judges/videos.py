@@ -93,8 +93,10 @@ def load_videos(dataset: EpisodeDataset, indices: list[int], wm: Path | None, pr
 
 def heldout_videos(dataset: EpisodeDataset, fraction: float, wm: Path | None = None,
                    device: torch.device | None = None) -> list[Video]:
-    """The videos of the held-out scenes' episodes (and their re-imaginings with a world model on `device`)."""
-    return load_videos(dataset, split_episodes(dataset.episodes, fraction)[1], wm, progress=False, device=device)
+    """The videos of the held-out scenes' episodes (and their re-imaginings with a world model on `device`);
+    at `fraction` 1 every episode's, for a dataset of scenes recorded apart from everything trained."""
+    chosen = list(range(len(dataset))) if fraction == 1 else split_episodes(dataset.episodes, fraction)[1]
+    return load_videos(dataset, chosen, wm, progress=False, device=device)
 
 
 def judge_cases(videos: list[Video]) -> list[tuple[torch.Tensor, str, bool, bool, bool]]:
