@@ -3,6 +3,7 @@ cameras the judge was trained on, and what cannot see several cameras says so.""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -11,6 +12,7 @@ import torch
 
 from gymnast.cli import main
 from gymnast.data.lerobot import EpisodeDataset
+from gymnast.envs.tasks import eval_seed
 from gymnast.reward.judges.frames import FrameJudge
 from gymnast.reward.judges.base import JudgeConfig
 from gymnast.reward.judges.video import LearnedJudge
@@ -62,3 +64,10 @@ def test_a_held_out_fraction_of_one_judges_every_episode_of_new_scenes(two_camer
     every = heldout_videos(dataset, 1.0)
     assert [video.instruction for video in every] == [info.instruction for info in dataset.episodes]
     assert heldout_videos(dataset, 0.0) == []
+
+
+def test_a_held_out_fraction_of_one_still_leaves_out_episodes_of_evaluation_seeds(two_camera_demos):
+    dataset = EpisodeDataset(two_camera_demos, cameras=TWO)
+    dataset.episodes[0] = dataclasses.replace(dataset.episodes[0], seed=eval_seed(0))  # recorded elsewhere
+    every = heldout_videos(dataset, 1.0)
+    assert len(every) == len(dataset.episodes) - 1

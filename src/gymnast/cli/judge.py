@@ -162,7 +162,7 @@ def eval_judge(
         out: report JSON.
         wm: world-model run whose imagined videos are judged too.
         heldout_fraction: the held-out share of scenes (the world model's, so its videos are unseen); 1 judges
-            every episode, for a dataset of new scenes (`gymnast collect --first-seed`).
+            every episode (but those of evaluation seeds), for a dataset of new scenes (`gymnast collect --first-seed`).
         device: where a learned judge and the world model run: auto (CUDA when torch sees a GPU), cpu, cuda or cuda:N.
         camera: the dataset camera to judge, by name (front: observation.images.front) or by feature key
             (image, observation.images.top); default: its first video (else image) feature.

@@ -31,13 +31,20 @@ def is_heldout(info: EpisodeInfo, fraction: float) -> bool:
     return zlib.crc32(f"{info.task}/{info.seed}".encode()) % 10_000 < fraction * 10_000
 
 
+def usable_episodes(infos: Sequence[EpisodeInfo]) -> list[int]:
+    """The indices of the episodes not recorded on evaluation seeds: nothing may learn from or
+    tune on the scenes the policies are finally judged in."""
+    usable = [i for i, info in enumerate(infos) if info.seed not in EVAL_SEEDS]
+    if len(usable) < len(infos):
+        logger.warning("ignoring %d episodes recorded on evaluation seeds", len(infos) - len(usable))
+    return usable
+
+
 def split_episodes(infos: Sequence[EpisodeInfo], fraction: float) -> tuple[list[int], list[int]]:
     """(train, held-out) episode indices; episodes recorded on evaluation seeds are in neither."""
     if not 0 <= fraction < 1:
         raise ValueError(f"the held-out fraction must be in [0, 1), got {fraction}")
-    usable = [i for i, info in enumerate(infos) if info.seed not in EVAL_SEEDS]
-    if len(usable) < len(infos):
-        logger.warning("ignoring %d episodes recorded on evaluation seeds", len(infos) - len(usable))
+    usable = usable_episodes(infos)
     heldout = [i for i in usable if is_heldout(infos[i], fraction)]
     return [i for i in usable if i not in set(heldout)], heldout
 

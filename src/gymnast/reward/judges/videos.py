@@ -17,7 +17,7 @@ from gymnast.data.lerobot import EpisodeDataset
 from gymnast.data.schema import Episode
 from gymnast.reward.judges.progress import progress_targets
 from gymnast.world_model.base import load_world_model, rollout
-from gymnast.world_model.data import split_episodes
+from gymnast.world_model.data import split_episodes, usable_episodes
 from gymnast.world_model.views import model_cameras
 
 NEAR_MISS_STEPS = 10  # a held-out negative: a successful episode cut this many steps before its success
@@ -94,8 +94,9 @@ def load_videos(dataset: EpisodeDataset, indices: list[int], wm: Path | None, pr
 def heldout_videos(dataset: EpisodeDataset, fraction: float, wm: Path | None = None,
                    device: torch.device | None = None) -> list[Video]:
     """The videos of the held-out scenes' episodes (and their re-imaginings with a world model on `device`);
-    at `fraction` 1 every episode's, for a dataset of scenes recorded apart from everything trained."""
-    chosen = list(range(len(dataset))) if fraction == 1 else split_episodes(dataset.episodes, fraction)[1]
+    at `fraction` 1 every episode's, for a dataset of scenes recorded apart from everything trained
+    (except those on evaluation seeds, as everywhere)."""
+    chosen = usable_episodes(dataset.episodes) if fraction == 1 else split_episodes(dataset.episodes, fraction)[1]
     return load_videos(dataset, chosen, wm, progress=False, device=device)
 
 
