@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from gymnast.data.replay import STATE_TOLERANCE
 from gymnast.data.schema import Episode, EpisodeColumns
 from gymnast.envs.metaworld import MetaWorldEnv
 from gymnast.reward.judges.train import judge_datasets, load_judge, saved_judge_config, split_scenes
@@ -36,8 +37,6 @@ TOOL_CENTRE = "tool centre"
 SUCCESS_RADIUS = {"reach-v3": (TOOL_CENTRE, 0.05), "push-v3": (OBJECT, 0.05), "pick-place-v3": (OBJECT, 0.07)}
 """Tasks whose success is one point within a radius (metres) of the goal: the point as a slice of the
 observation, or the tool centre, which the observation lacks."""
-REPLAY_TOLERANCE = 1e-4
-"""Largest difference from the recorded observation a replay may show (metres; float32 records)."""
 
 
 def tool_centre_path(episode: Episode | EpisodeColumns) -> np.ndarray:
@@ -55,7 +54,7 @@ def tool_centre_path(episode: Episode | EpisodeColumns) -> np.ndarray:
         path = [env.hand_position]
         for step, action in enumerate(episode.actions, start=1):
             env.step(action, observe=False)
-            if np.abs(env.env_state - episode.full_states[step]).max() > REPLAY_TOLERANCE:
+            if np.abs(env.env_state - episode.full_states[step]).max() > STATE_TOLERANCE:  # as `collect --replay`
                 raise ValueError(f"{info.task} seed {info.seed} departs from its recording at step {step} when replayed")
             path.append(env.hand_position)
     finally:
