@@ -18,6 +18,7 @@ import argparse
 import json
 import os
 import platform
+import sys
 from pathlib import Path
 
 import torch
@@ -42,7 +43,8 @@ def main() -> None:
     args = parser.parse_args()
     cameras = tuple(args.cameras.split(","))
     texts = ["open the drawer"] * args.videos
-    result = {"videos": args.videos, "frames": args.frames, "cameras": list(cameras)}
+    result = {"command": " ".join(["benchmarks/judge.py", *sys.argv[1:]]), "videos": args.videos, "frames": args.frames,
+              "cameras": list(cameras)}
     for size in args.image_sizes:
         torch.manual_seed(0)
         videos = torch.randint(0, 256, (args.videos, args.frames, size, len(cameras) * size, 3), dtype=torch.uint8)

@@ -49,8 +49,9 @@ class Rollouts:
         tokens: (R, S, N) int64 sampled action tokens (greedy rollouts: the argmax tokens).
         logp: (R, S, N) float32 their log-probabilities at the sampling temperature (0 if greedy).
         token_mask: (R, S, N) bool tokens whose action was executed (False after the end).
-        frames: (R, T + 1, H, W, 3) uint8 the start frame, then one frame per action; after a
-            rollout's end its last frame repeats.
+        rendered: the frames as kept: (R, T + 1, H, W, 3) uint8 the start frame, then one frame
+            per action; with `hold` K, (R, 1 + T / K, H, W, 3), the start frame, then each chunk's
+            last frame alone (read `frames` for one frame per action).
         actions: (R, T, A) float32 the actions executed (0 after the end).
         lengths: (R,) int64 actions each rollout executed.
         success: (R,) bool the simulator's verdict, or None (a world model has none).
@@ -59,6 +60,10 @@ class Rollouts:
             (NaN after the end), or None (simulators and single world models report none).
         states: (R, S, D) float32 the robot state the policy was given at each call (a
             simulator's), or None (a world model imagines none).
+        hold: the actions each kept frame after the first stands for: 1, or K where every frame
+            inside a chunk was its last one repeated (a simulator that rendered only the frames the
+            policy reads), kept once: about a K-th of the memory (the frames are most of a real RL
+            step's: 2 GB a round of 160 three-view rollouts of 150 actions, one per action).
     """
 
     starts: tuple[Start, ...]
@@ -66,13 +71,23 @@ class Rollouts:
     tokens: torch.Tensor
     logp: torch.Tensor
     token_mask: torch.Tensor
-    frames: torch.Tensor
+    rendered: torch.Tensor
     actions: torch.Tensor
     lengths: torch.Tensor
     success: torch.Tensor | None
     env_rewards: torch.Tensor | None
     disagreement: torch.Tensor | None = None
     states: torch.Tensor | None = None
+    hold: int = 1
+
+    @property
+    def frames(self) -> torch.Tensor:
+        """(R, T + 1, H, W, 3) uint8 the start frame, then one frame per action; after a rollout's
+        end its last frame repeats. With `hold` > 1 each call builds it anew: `select` the rollouts
+        to read first."""
+        if self.hold == 1:
+            return self.rendered
+        return torch.cat([self.rendered[:, :1], self.rendered[:, 1:].repeat_interleave(self.hold, dim=1)], dim=1)
 
     @property
     def instructions(self) -> list[str]:
@@ -84,8 +99,8 @@ class Rollouts:
         optional = {name: None if getattr(self, name) is None else getattr(self, name)[index]
                     for name in ("success", "env_rewards", "disagreement", "states")}
         return Rollouts(tuple(self.starts[i] for i in pick), self.observations[index], self.tokens[index],
-                        self.logp[index], self.token_mask[index], self.frames[index], self.actions[index],
-                        self.lengths[index], **optional)
+                        self.logp[index], self.token_mask[index], self.rendered[index], self.actions[index],
+                        self.lengths[index], **optional, hold=self.hold)
 
 
 def collect_rollouts(
@@ -112,8 +127,8 @@ def collect_rollouts(
             successes), so rollouts of one env always have the same shape.
         timer: if given, ``policy_s`` (time spent sampling actions) is added to it.
         every_frame: False when nothing reads the frames inside a chunk (an evaluation that counts
-            successes): a simulator renders each chunk's last frame alone and repeats it in
-            ``frames`` (rendering is most of a simulator step's cost).
+            successes): a simulator renders each chunk's last frame alone (rendering is most of a
+            simulator step's cost), and the rollouts keep it once (`Rollouts.hold`).
     """
     if env.num_envs != len(starts):
         raise ValueError(f"the env runs {env.num_envs} rollouts but {len(starts)} starts were given")
@@ -129,16 +144,20 @@ def collect_rollouts(
         return samples[-1].actions.numpy()
 
     seen, states, masks, frames, actions, rewards, disagreement, success = [], [], [], [], [], [], [], None
+    held, kept_once = True, [False]  # whether every chunk's frames are its last one repeated, and which were
     for result in run_batch(env, act, start_options(starts) | {"every_frame": every_frame}, seed):
         image, new = torch.from_numpy(result.observation), torch.from_numpy(result.frames)  # new: (R, k, H, W, 3)
         if not frames:
             frames.append(image[:, None])  # (R, 1, H, W, 3) the start frame
+        repeated = not every_frame and new.shape[1] == chunk and bool((new == new[:, -1:]).all())
+        held &= repeated
         valid = torch.arange(chunk)[None] < torch.from_numpy(result.executed)[:, None]  # (R, K) actions really executed
         seen.append(image)
         if result.states is not None:
             states.append(torch.from_numpy(result.states).float())
         masks.append(valid.repeat_interleave(action_dim, dim=1))  # (R, N), tokens are chunk-major
-        frames.append(new)
+        frames.append(new[:, -1:] if repeated else new)
+        kept_once.append(repeated)
         actions.append(torch.from_numpy(result.actions)[:, : new.shape[1]].float() * valid[:, : new.shape[1], None])
         if result.rewards is not None:
             rewards.append(torch.from_numpy(result.rewards))
@@ -155,11 +174,14 @@ def collect_rollouts(
         tokens.append(torch.zeros_like(tokens[-1]))
         logp.append(torch.zeros_like(logp[-1]))
         masks.append(torch.zeros_like(masks[-1]))
-        frames.append(frames[-1][:, -1:].expand(-1, chunk, -1, -1, -1))
+        frames.append(frames[-1][:, -1:].expand(-1, 1 if held else chunk, -1, -1, -1))
+        kept_once.append(held)
         actions.append(torch.zeros(count, chunk, action_dim))
         for padded in (rewards, disagreement):
             if padded:
                 padded.append(torch.full((count, chunk), float("nan")))
+    if not held:  # some chunk showed more than its last frame: every chunk gets its K frames back
+        frames = [f.expand(-1, chunk, -1, -1, -1) if once else f for f, once in zip(frames, kept_once)]
     mask = torch.stack(masks, dim=1)  # (R, S, N)
     return Rollouts(
         starts=tuple(starts),
@@ -167,13 +189,14 @@ def collect_rollouts(
         tokens=torch.stack(tokens, dim=1),
         logp=torch.stack(logp, dim=1),
         token_mask=mask,
-        frames=torch.cat(frames, dim=1),
+        rendered=torch.cat(frames, dim=1),
         actions=torch.cat(actions, dim=1),
         lengths=mask[:, :, ::action_dim].sum(dim=(1, 2)),
         success=success,
         env_rewards=torch.cat(rewards, dim=1) if rewards else None,
         disagreement=torch.cat(disagreement, dim=1) if disagreement else None,
         states=torch.stack(states, dim=1) if states else None,
+        hold=chunk if held else 1,
     )
 
 
@@ -217,13 +240,15 @@ def reward_context(rollouts: Rollouts) -> RewardContext:
 
 
 def concat_rollouts(parts: list[Rollouts]) -> Rollouts:
-    """One `Rollouts` of the parts in order (rollouts of one env share their shapes)."""
-    tensors = {}
+    """One `Rollouts` of the parts in order (rollouts of one env share their shapes; parts that keep
+    their frames differently are given one frame per action)."""
+    hold = parts[0].hold if all(part.hold == parts[0].hold for part in parts) else 1
+    tensors = {"rendered": torch.cat([part.rendered if hold > 1 else part.frames for part in parts])}
     for field in dataclasses.fields(Rollouts):
-        values = [getattr(part, field.name) for part in parts]
-        if field.name != "starts":
+        if field.name not in ("starts", "rendered", "hold"):
+            values = [getattr(part, field.name) for part in parts]
             tensors[field.name] = None if values[0] is None else torch.cat(values)
-    return Rollouts(starts=tuple(start for part in parts for start in part.starts), **tensors)
+    return Rollouts(starts=tuple(start for part in parts for start in part.starts), **tensors, hold=hold)
 
 
 def recorded_elsewhere(data: Path, keys: FeatureKeys = FeatureKeys()) -> bool:

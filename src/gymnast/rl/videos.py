@@ -38,7 +38,7 @@ def captioned(frames: np.ndarray, text: str, scale: int = SCALE) -> np.ndarray:
 
 def write_group_video(path: Path, rollouts: Rollouts, scores: torch.Tensor, group_size: int) -> Path:
     """Writes the first group's rollouts side by side, captioned with their rewards; returns `path`."""
-    frames = rollouts.frames[:group_size].numpy()  # (G, T, H, W, 3)
+    frames = rollouts.select(torch.arange(group_size)).frames.numpy()  # (G, T, H, W, 3)
     tiles = [captioned(video, f"r={score:.2f}") for video, score in zip(frames, scores[:group_size].tolist())]
     grid = np.concatenate(tiles, axis=2)  # (T, H, G * W, 3)
     path = Path(path)
