@@ -144,13 +144,12 @@ def collect_rollouts(
         return samples[-1].actions.numpy()
 
     seen, states, masks, frames, actions, rewards, disagreement, success = [], [], [], [], [], [], [], None
-    held, kept_once = True, [False]  # whether every chunk's frames are its last one repeated, and which were
+    kept_once = [False]  # for each entry of `frames`: a chunk kept as its last frame alone (the start frame is not)
     for result in run_batch(env, act, start_options(starts) | {"every_frame": every_frame}, seed):
         image, new = torch.from_numpy(result.observation), torch.from_numpy(result.frames)  # new: (R, k, H, W, 3)
         if not frames:
             frames.append(image[:, None])  # (R, 1, H, W, 3) the start frame
         repeated = not every_frame and new.shape[1] == chunk and bool((new == new[:, -1:]).all())
-        held &= repeated
         valid = torch.arange(chunk)[None] < torch.from_numpy(result.executed)[:, None]  # (R, K) actions really executed
         seen.append(image)
         if result.states is not None:
@@ -174,12 +173,13 @@ def collect_rollouts(
         tokens.append(torch.zeros_like(tokens[-1]))
         logp.append(torch.zeros_like(logp[-1]))
         masks.append(torch.zeros_like(masks[-1]))
-        frames.append(frames[-1][:, -1:].expand(-1, 1 if held else chunk, -1, -1, -1))
-        kept_once.append(held)
+        frames.append(frames[-1][:, -1:])  # the last frame, held for the chunk
+        kept_once.append(True)
         actions.append(torch.zeros(count, chunk, action_dim))
         for padded in (rewards, disagreement):
             if padded:
                 padded.append(torch.full((count, chunk), float("nan")))
+    held = all(kept_once[1:])
     if not held:  # some chunk showed more than its last frame: every chunk gets its K frames back
         frames = [f.expand(-1, chunk, -1, -1, -1) if once else f for f, once in zip(frames, kept_once)]
     mask = torch.stack(masks, dim=1)  # (R, S, N)
