@@ -62,12 +62,13 @@ def main() -> None:
     if args.report_only:
         chosen = []
     results = {"command": " ".join(sys.argv), "arms": {}}
-    common = ["--policy", "results/sft/policy", "--env", "imagined", "--wm", args.wm, "--reward",
-              "judge:results/judge/judge", "--data", "data/mt10", "--tasks", "reach-v3", "--steps", str(args.steps),
-              "--starts-per-step", "4", "--group-size", "8", "--lr", str(args.lr), "--max-rounds", "1",
-              "--eval-every", "0", "--eval-episodes", str(args.eval_episodes), "--watch-every", "1",
-              "--watch-rollouts", "16", "--video-every", str(args.steps), "--checkpoint-every", str(args.steps),
-              "--workers", "2", "--real-eval" if args.real_eval else "--no-real-eval"]
+    common = ["--policy", "results/sft/policy", "--env", "imagined", "--wm", args.wm,
+              "--reward", "judge:results/judge/one_camera/judge", "--data", "data/mt10", "--tasks", "reach-v3",
+              "--steps", str(args.steps), "--starts-per-step", "4", "--group-size", "8", "--lr", str(args.lr),
+              "--max-rounds", "1", "--eval-every", "0", "--eval-episodes", str(args.eval_episodes),
+              "--watch-every", "1", "--watch-rollouts", "16", "--video-every", str(args.steps),
+              "--checkpoint-every", str(args.steps), "--workers", "2",
+              "--real-eval" if args.real_eval else "--no-real-eval"]
     if "none" in chosen:
         results["arms"]["none"] = train("none", [], common, args.out, args.results)
     elif (args.out / "none" / "summary.json").exists():

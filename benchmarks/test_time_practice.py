@@ -37,7 +37,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--policy", default="results/sft/policy")
     parser.add_argument("--wm", default="results/world_model/wm")
-    parser.add_argument("--reward", default="judge:results/judge/judge")
+    parser.add_argument("--reward", default="judge:results/judge/one_camera/judge")
     parser.add_argument("--tasks", default=WEAK_TASKS)
     parser.add_argument("--scenes-per-task", type=int, default=5)
     parser.add_argument("--steps", type=int, default=8)
