@@ -16,6 +16,7 @@ from gymnast.envs.kinds import REAL
 from gymnast.envs.starts import evaluation_starts
 from gymnast.experiment.imagination import ImaginationConfig, measure_imagination
 from gymnast.policy.load import load_policy
+from gymnast.reward.base import RewardNeeds
 from gymnast.reward.select import make_reward
 from gymnast.reward.spec import RewardSpec
 from gymnast.rl.evaluate import replay_actions
@@ -27,7 +28,7 @@ pytestmark = pytest.mark.slow
 RESULTS = Path(__file__).resolve().parents[2] / "results"
 POLICY = RESULTS / "sft" / "policy"
 WORLD_MODEL = RESULTS / "world_model" / "wm"
-JUDGE = RESULTS / "judge" / "judge"
+JUDGE = RESULTS / "judge" / "one_camera" / "judge"
 CONFIG = ImaginationConfig(tasks="reach-v3", episodes=2, horizon=20, batch=2, videos=2)
 
 
@@ -35,6 +36,7 @@ class SpyReward:
     """The judge, recording the shape of every video it scores and its scores."""
 
     binary = True
+    needs = RewardNeeds()
 
     def __init__(self, judge) -> None:
         self.judge, self.calls = judge, []
@@ -49,6 +51,7 @@ class SaysSuccess:
     """A binary reward that calls every video a success: every replay failure is a false success."""
 
     binary = True
+    needs = RewardNeeds()
 
     def score(self, frames, instructions, context):
         return torch.ones(frames.shape[0])
@@ -56,6 +59,7 @@ class SaysSuccess:
 
 class Dense:
     binary = False
+    needs = RewardNeeds()
 
     def score(self, frames, instructions, context):
         return torch.full((frames.shape[0],), 0.5)

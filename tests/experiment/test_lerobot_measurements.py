@@ -11,7 +11,7 @@ from gymnast.cli import main
 
 RESULTS = Path(__file__).resolve().parents[2] / "results"
 WORLD_MODEL = RESULTS / "world_model" / "wm"
-JUDGE = RESULTS / "judge" / "judge"
+JUDGE = RESULTS / "judge" / "one_camera" / "judge"
 STATE_ENSEMBLE = RESULTS / "world_model" / "state_v5"
 
 

@@ -19,7 +19,7 @@ from gymnast.reward.select import make_reward
 from gymnast.reward.spec import RewardSpec
 
 RESULTS = Path(__file__).resolve().parents[2] / "results"
-JUDGE = RESULTS / "judge" / "judge"
+JUDGE = RESULTS / "judge" / "one_camera" / "judge"
 READOUTS = ("score", "probability", "score, real video (reference)", "probability, real video (reference)",
             "real dense reward (reference)")
 

@@ -15,7 +15,8 @@ from gymnast.experiment.worldgym import DEFAULT_NOISE, format_rows, json_noise, 
 from gymnast.policy.noisy import NoisyPolicy
 
 RESULTS = Path(__file__).resolve().parents[2] / "results"
-POLICY, WORLD_MODEL, JUDGE = RESULTS / "sft" / "policy", RESULTS / "world_model" / "wm", RESULTS / "judge" / "judge"
+POLICY, WORLD_MODEL = RESULTS / "sft" / "policy", RESULTS / "world_model" / "wm"
+JUDGE = RESULTS / "judge" / "one_camera" / "judge"
 ROW_KEYS = {"policy", "path", "noise", "imagined", "real", "imagined_ci", "real_ci", "imagined_episodes", "real_episodes"}
 
 

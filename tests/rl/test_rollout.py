@@ -11,7 +11,8 @@ from gymnast.config import EnvConfig
 from gymnast.envs.imagined import BatchedImaginedEnv
 from gymnast.envs.sim_vector import SimVectorEnv
 from gymnast.policy.load import load_policy
-from gymnast.rl.rollout import collect_rollouts, concat_rollouts, dataset_starts
+from gymnast.reward.sim import SimDense, SimSuccess
+from gymnast.rl.rollout import collect_rollouts, concat_rollouts, dataset_starts, score_groups
 from gymnast.world_model.base import load_world_model
 
 
@@ -80,6 +81,24 @@ def test_simulator_rollouts_without_frames_inside_chunks_keep_each_chunk_once_an
     both = concat_rollouts([bare, full])
     assert both.hold == 1 and torch.equal(both.frames, torch.cat([bare.frames, full.frames]))
     assert concat_rollouts([bare, bare]).hold == chunk
+    # The simulator's rewards read no video: they are handed the frames as kept, and score as before.
+    success, dense, blocks = _FrameCounting(), SimDense(), math.ceil(len(starts) / 2)
+    assert torch.equal(score_groups(success, bare, 2), score_groups(success, full, 2))
+    assert success.frame_counts == [1 + 8] * blocks + [1 + 8 * chunk] * blocks
+    assert torch.equal(score_groups(dense, bare, 2), score_groups(dense, full, 2))
+    torch.testing.assert_close(score_groups(dense, bare, 2, per_step=True), score_groups(dense, full, 2, per_step=True),
+                               equal_nan=True)
+
+
+class _FrameCounting(SimSuccess):
+    """The simulator's success, noting how many frames of each rollout it was handed."""
+
+    def __init__(self) -> None:
+        self.frame_counts = []
+
+    def score(self, frames, instructions, context):
+        self.frame_counts.append(frames.shape[1])
+        return super().score(frames, instructions, context)
 
 
 def test_imagined_rollouts_asked_for_no_frames_inside_chunks_keep_every_frame(rl_dataset):

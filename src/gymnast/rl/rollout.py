@@ -214,10 +214,12 @@ def score_groups(reward: Reward, rollouts: Rollouts, size: int, per_step: bool =
     """(R,) scores, reward called once per block of `size` rollouts that share a start state; with
     `per_step`, (R, T) rewards of every action (the reward must be a `StepReward`)."""
     scores = []
+    score = reward.step_rewards if per_step else reward.score
     for first in range(0, len(rollouts.starts), size):
         block = rollouts.select(torch.arange(first, min(first + size, len(rollouts.starts))))
-        score = reward.step_rewards if per_step else reward.score
-        scored = score(block.frames, block.instructions, reward_context(block)).float()
+        # A reward that reads no video is handed the frames as kept, not one copy per action.
+        frames = block.frames if reward.needs.video else block.rendered
+        scored = score(frames, block.instructions, reward_context(block)).float()
         scores.append(scored if per_step else scored.reshape(-1))
     return torch.cat(scores)
 
