@@ -128,7 +128,9 @@ class RLConfig:
     minibatches: int = 1
     """Optimizer steps per RL step (1: on-policy, the ratio is 1 and clipping is inert)."""
     micro_batch: int = 256
-    """Policy calls per forward/backward pass (gradients accumulate; results do not depend on it)."""
+    """Policy calls per forward/backward pass (gradients accumulate; results do not depend on it).
+    Fewer keep fewer activations for the backward pass, for more time: with three cameras 64 took
+    about 1 GiB less than 256 and twice the update's time (BENCHMARKS.md)."""
     gap: str = "mild"
     """Sim-to-real gap of the software simulator (``--env sim``)."""
     workers: int = 2
