@@ -1,6 +1,6 @@
 """RL on a policy of several cameras: the real world renders its views, a world model of the same
-cameras imagines them, and a world model of other cameras refuses it; LeRobot's policies of
-several cameras (one ``observation.images.<camera>`` feature each) too."""
+cameras imagines them, and a world model or a judge of other cameras refuses it; LeRobot's
+policies of several cameras (one ``observation.images.<camera>`` feature each) too."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from gymnast.config import EnvConfig
 from gymnast.policy.load import load_policy, policy_env_config
 from gymnast.rl.train import LEROBOT_EXPORT
 
-from rl_helpers import WORLD_MODEL
+from rl_helpers import POLICY, RESULTS, WORLD_MODEL
 
 
 @pytest.mark.slow
@@ -33,6 +33,25 @@ def test_rl_practises_a_two_camera_policy_for_real_and_in_a_world_model_of_its_c
     with pytest.raises(SystemExit):
         main([*common, "--env", "imagined", "--wm", str(WORLD_MODEL), "--reward", "verified", "--out", str(tmp_path / "one")])
     assert "sees front,gripper side by side, but the world model" in capsys.readouterr().err
+
+
+def test_a_judge_of_other_views_is_refused_before_anything_runs(rl_dataset, tmp_path, capsys):
+    # The committed one-camera policy at 96 px, and the default judge: three cameras at 128 px.
+    judge = RESULTS / "judge" / "judge"
+    commands = {
+        "rl": ["rl", "--policy", str(POLICY), "--env", "imagined", "--wm", str(WORLD_MODEL), "--preset", "debug",
+               "--data", str(rl_dataset)],
+        "imagination": ["imagination", "--policy", str(POLICY), "--wm", str(WORLD_MODEL), "--tasks", "reach-v3"],
+        "rl-signal": ["rl-signal", "--policy", str(POLICY), "--wm", str(WORLD_MODEL), "--tasks", "reach-v3",
+                      "--data", str(rl_dataset)],
+    }
+    for name, command in commands.items():
+        with pytest.raises(SystemExit):
+            main([*command, "--reward", f"judge:{judge}", "--out", str(tmp_path / name)])
+        error = capsys.readouterr().err
+        assert f"the judge {judge} scores front,gripper,hand at 128 px, but the policy {POLICY} shows one camera at " \
+               "96 px" in error, name
+        assert not (tmp_path / name).exists() or not any((tmp_path / name).iterdir()), name
 
 
 @pytest.mark.slow

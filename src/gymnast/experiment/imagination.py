@@ -154,23 +154,26 @@ def measure_imagination_runs(policy: str | Path, wm: str | Path, reward: RewardS
 
     world_model = load_world_model(wm)
     judge = make_reward(reward, world_model)
-    loaded, state, labels = measured_policy(policy, world_model, wm, reward, robot_state)
+    loaded, state, labels = measured_policy(policy, world_model, wm, reward, judge, robot_state)
     return measure_imagination(loaded, world_model, judge, config, out, progress, labels, state)
 
 
-def measured_policy(policy: str | Path, world_model: WorldModel, wm: str | Path, reward: RewardSpec,
+def measured_policy(policy: str | Path, world_model: WorldModel, wm: str | Path, reward: RewardSpec, judge: Reward,
                     robot_state: str | Path | None):
     """A saved policy as the measurements of imagination take it (`measure_imagination_runs`,
     `gymnast.experiment.practice_signal.measure_signal_runs`): loaded and checked to see the world
-    model's cameras; what imagines its robot state, if it reads one (``--robot-state``,
+    model's cameras, which `judge` (the reward `reward` made) must see too; what imagines its robot state, if it reads one (``--robot-state``,
     `gymnast.world_model.robot_state.robot_state_in_imagination`); and the labels the report records."""
     from gymnast.policy.load import load_policy
+    from gymnast.reward.judges.base import check_judge_sees
     from gymnast.world_model.base import grounded_state_dim
     from gymnast.world_model.robot_state import robot_state_in_imagination
     from gymnast.world_model.views import check_policy_views
 
     loaded = load_policy(policy)
-    check_policy_views(getattr(loaded.config, "cameras", ()), world_model, policy, wm)
+    cameras = getattr(loaded.config, "cameras", ())
+    check_policy_views(cameras, world_model, policy, wm)
+    check_judge_sees(judge, cameras, loaded.config.image_size, reward.run, f"the policy {policy}")
     state = robot_state_in_imagination(getattr(loaded, "state_dim", 0), robot_state, policy, wm,
                                        grounded_state_dim(world_model))
     labels = {"policy": str(policy), "wm": str(wm), "reward": str(reward)}

@@ -390,5 +390,5 @@ def measure_signal_runs(policy: str | Path, wm: str | Path, reward: RewardSpec, 
                          "(judge:RUN or vlm:MODEL@BASE_URL) or a state model's reward head (state:RUN)")
     world_model = load_world_model(wm)
     judge = make_reward(reward, world_model)
-    loaded, state, labels = measured_policy(policy, world_model, wm, reward, robot_state)
+    loaded, state, labels = measured_policy(policy, world_model, wm, reward, judge, robot_state)
     return measure_signal(loaded, world_model, judge, config, out, progress, labels, state)

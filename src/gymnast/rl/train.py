@@ -96,6 +96,7 @@ def robot_state_for(state_dim: int, env: EnvKind, run_spec: RLRun, world_model=N
 def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False, progress: bool = True) -> dict:
     """Trains (or resumes) an RL run in `out`; returns the summary (also RUN/summary.json)."""
     from gymnast.policy.load import load_policy, policy_env_config
+    from gymnast.reward.judges.base import check_judge_sees
     from gymnast.reward.select import make_reward
     from gymnast.world_model.base import load_world_model
     from gymnast.world_model.ensemble import EnsembleWorldModel
@@ -119,6 +120,7 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
         raise ValueError(f"{levers[0]} needs a world-model ensemble to disagree (gymnast "
                          f"make-ensemble); {run_spec.wm} is a single world model")
     reward = make_reward(run_spec.reward, world_model)
+    check_judge_sees(reward, cameras, policy.config.image_size, run_spec.reward.run, f"the policy {run_spec.policy}")
     if isinstance(reward, torch.nn.Module):  # a learned judge
         reward.to(device)
     from_dataset = not config.fresh_scenes and config.scenes is None

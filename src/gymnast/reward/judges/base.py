@@ -65,6 +65,25 @@ class ThresholdJudge:
         return cls(JudgeConfig(**{k: v for k, v in spec.items() if k != "backend"}))
 
 
+def check_judge_sees(reward, cameras: Sequence[str], image_size: int, judge: str, source: str) -> None:
+    """Raises ValueError unless a learned judge scores what `source` shows: the views of `cameras`
+    side by side (() or one name: one camera, whatever its name), each `image_size` pixels square.
+
+    Said before a run starts rather than at its first video; a reward other than a learned judge
+    (a VLM, the simulator's, the verified reward) is not checked here.
+    """
+    if not isinstance(reward, ThresholdJudge):
+        return
+    judged, config = reward.config.cameras, reward.config
+    several = tuple(cameras) if len(cameras) > 1 else ()
+    if several != (judged if len(judged) > 1 else ()) or image_size != config.image_size:
+        def views(names: Sequence[str], size: int) -> str:
+            return f"{','.join(names) if len(names) > 1 else 'one camera'} at {size} px"
+        raise ValueError(f"the judge {judge} scores {views(judged, config.image_size)}, but {source} shows "
+                         f"{views(several, image_size)}; train a judge on those views (`gymnast train-judge "
+                         "--cameras` on a dataset recorded at that size) or give another --reward")
+
+
 def check_videos(videos: torch.Tensor, instructions: Sequence[str]) -> None:
     """Raises ValueError unless `videos` is (B, T, H, W, 3) uint8 with B instructions."""
     if videos.ndim != 5 or videos.dtype != torch.uint8 or videos.shape[-1] != 3:
