@@ -34,18 +34,20 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def sampled_run(command: list[str], every_s: float = 0.2) -> dict:
     """Runs `command`, sampling the resident memory of its process and of the whole process tree."""
-    process = psutil.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
-    peak_main = peak_tree = 0
-    while process.poll() is None:
-        try:
-            main = process.memory_info().rss
-            children = sum(child.memory_info().rss for child in process.children(recursive=True))
-        except psutil.Error:  # it or a child ended between the calls
-            continue
-        peak_main, peak_tree = max(peak_main, main), max(peak_tree, main + children)
-        time.sleep(every_s)
-    if process.returncode:
-        raise RuntimeError(f"{' '.join(command)} failed ({process.returncode}):\n{process.stderr.read()[-3000:]}")
+    with tempfile.TemporaryFile("w+") as log:  # a file, not a pipe nobody reads while it runs
+        process = psutil.Popen(command, stdout=subprocess.DEVNULL, stderr=log)
+        peak_main = peak_tree = 0
+        while process.poll() is None:
+            try:
+                main = process.memory_info().rss
+                children = sum(child.memory_info().rss for child in process.children(recursive=True))
+            except psutil.Error:  # it or a child ended between the calls
+                continue
+            peak_main, peak_tree = max(peak_main, main), max(peak_tree, main + children)
+            time.sleep(every_s)
+        if process.returncode:
+            log.seek(0)
+            raise RuntimeError(f"{' '.join(command)} failed ({process.returncode}):\n{log.read()[-3000:]}")
     return {"peak_rss_gib": peak_main / 2**30, "peak_tree_rss_gib": peak_tree / 2**30}
 
 
