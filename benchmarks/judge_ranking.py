@@ -4,7 +4,9 @@ For `--scenes` new scenes of each task, `--group` rollouts of the policy sampled
 are played in the real world for the whole horizon, on past a success as `gymnast rl-signal`'s real
 replays and imagined rollouts go (or, with `--stop-at-success`, ending at it as RL's real episodes
 do), with every camera the judges need rendered (the policy sees its own cameras,
-`gymnast.eval.actors.PolicyActor.seen`).
+`gymnast.eval.actors.PolicyActor.seen`), at the policy's image size; a judge of another size sees
+the same rollouts replayed at its own (the same actions from the same scene: the same states,
+rewards and successes, checked).
 Each judge scores the real videos through its own cameras, and its GRPO advantages within each
 group are held against those of the real success and of the real dense return
 (`gymnast.experiment.signal_report.signal_figures`, as `gymnast rl-signal` reports its
@@ -30,7 +32,7 @@ import torch
 
 import gymnast  # noqa: F401  (sets MUJOCO_GL)
 from gymnast.config import EnvConfig
-from gymnast.envs.engine import play_episode
+from gymnast.envs.engine import ReplayActor, play_episode
 from gymnast.envs.parallel import cached_env, parallel_map
 from gymnast.envs.tasks import DATA_SEEDS
 from gymnast.eval.actors import PolicyActor, load_run_policy
@@ -52,15 +54,20 @@ def play_and_judge(job: tuple) -> dict:
     """One rollout of the policy in the real world, scored by every judge: (task, scene, member,
     policy, judges {name: run}, cameras, temperature, stop at success) -> its record."""
     task, scene, member, policy, judges, cameras, temperature, stop = job
-    env = cached_env(task, EnvConfig(cameras=cameras, terminate_on_success=stop))
-    actor = PolicyActor(load_run_policy(policy), temperature=temperature, seed=zlib.crc32(f"{task}/{scene}/{member}".encode()))
+    loaded = load_run_policy(policy)
+    size = loaded.config.image_size
+    env = cached_env(task, EnvConfig(image_size=size, cameras=cameras, terminate_on_success=stop))
+    actor = PolicyActor(loaded, temperature=temperature, seed=zlib.crc32(f"{task}/{scene}/{member}".encode()))
     run = play_episode(env, actor, scene, record=("frames", "rewards", "successes"))
-    frames = torch.from_numpy(np.stack(run.frames))  # (T+1, H, V*W, 3): the env's cameras side by side
-    size = frames.shape[1]
+    # (T+1, H, V*W, 3) the env's cameras side by side, at the policy's size and at every other size a judge sees
+    frames = {size: torch.from_numpy(np.stack(run.frames))}
+    for other in {_judge(path).config.image_size for path in judges.values()} - {size}:
+        frames[other] = _replayed_frames(run, task, scene, EnvConfig(image_size=other, cameras=cameras,
+                                                                     terminate_on_success=stop))
     scores = {}
     for name, path in judges.items():
         judge = _judge(path)
-        seen = torch.cat([frames[:, :, cameras.index(c) * size:(cameras.index(c) + 1) * size] for c in judge.config.cameras], dim=2)
+        seen = _views(frames[judge.config.image_size], cameras, judge.config.cameras)
         with torch.no_grad():
             probability = float(judge.probability(seen[None], [env.instruction])[0])
         scores[name] = {"probability": probability, "verdict": float(probability >= judge.config.threshold)}
@@ -68,6 +75,22 @@ def play_and_judge(job: tuple) -> dict:
     success_by_step = torch.tensor(run.successes)[None].cummax(1).values
     return {"task": task, "scene": scene, "member": member, "success": bool(run.success),
             "return": float(dense_return(rewards, success_by_step)[0]), "steps": run.steps, "scores": scores}
+
+
+def _views(frames: torch.Tensor, cameras: tuple[str, ...], wanted: tuple[str, ...]) -> torch.Tensor:
+    """(T+1, H, V'*H, 3) the `wanted` cameras side by side, cut from frames of `cameras` side by side."""
+    size = frames.shape[1]
+    return torch.cat([frames[:, :, cameras.index(c) * size:(cameras.index(c) + 1) * size] for c in wanted], dim=2)
+
+
+def _replayed_frames(run, task: str, scene: int, config: EnvConfig) -> torch.Tensor:
+    """The frames of `run` rendered under `config` (another image size): its actions replayed from the
+    same scene, which gives the same states, rewards and successes (checked), seen at that size."""
+    replay = play_episode(cached_env(task, config), ReplayActor(np.stack(run.actions)), scene,
+                          record=("frames", "rewards", "successes"))
+    if replay.rewards != run.rewards or replay.successes != run.successes:
+        raise RuntimeError(f"{task} scene {scene}: replaying the rollout at {config.image_size} px did not repeat it")
+    return torch.from_numpy(np.stack(replay.frames))
 
 
 def figures(records: list[dict], group: int, judges: dict[str, str]) -> dict:
