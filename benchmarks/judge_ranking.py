@@ -13,7 +13,7 @@ group are held against those of the real success and of the real dense return
 `real_video` readout): no world model is involved, so this is the judge's own ranking.
 
     .venv/bin/python benchmarks/judge_ranking.py --judge front=RUN --judge both=RUN \
-        [--policy results/sft/policy] [--tasks ...] [--scenes 6] [--group 8] [--stop-at-success] [--out JSON]
+        [--policy results/sft/policy] [--tasks ...] [--scenes 6] [--group 8] [--stop-at-success] [--out JSON] [--resume]
 
 Prints and writes --out (default benchmarks/results/judge_ranking.json).
 """
@@ -39,7 +39,7 @@ from gymnast.eval.actors import PolicyActor, load_run_policy
 from gymnast.experiment.practice_signal import dense_return
 from gymnast.experiment.signal_report import signal_figures
 from gymnast.reward.judges.train import load_judge
-from gymnast.utils.atomic import write_json
+from gymnast.utils.atomic import write_bytes, write_json
 
 RESULTS = Path(__file__).parent / "results" / "judge_ranking.json"
 WEAK_TASKS = "reach-v3,push-v3,pick-place-v3,peg-insert-side-v3"
@@ -119,6 +119,8 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--out", type=Path, default=RESULTS)
+    parser.add_argument("--resume", action="store_true",
+                        help="keep the rollouts an interrupted run logged beside --out (.rollouts.jsonl) and play the rest")
     args = parser.parse_args()
     judges = dict(item.split("=", 1) for item in args.judge)
     cameras = tuple(dict.fromkeys(c for path in judges.values() for c in load_judge(Path(path)).config.cameras))
@@ -129,11 +131,13 @@ def main() -> None:
               for task in tasks}  # far from the data seeds the datasets were recorded on
     jobs = [(task, scene, member, args.policy, judges, cameras, args.temperature, args.stop_at_success)
             for task in tasks for scene in scenes[task] for member in range(args.group)]
+    settings = {**{k: (str(v) if isinstance(v, Path) else v) for k, v in vars(args).items() if k != "resume"},
+                "cameras": list(cameras), "judges": judges, "scenes": scenes}
     started = time.perf_counter()
-    records = sorted(parallel_map(play_and_judge, jobs, args.workers), key=lambda r: (tasks.index(r["task"]), r["scene"], r["member"]))
+    records = _played(jobs, settings, args.out.with_suffix(".rollouts.jsonl"), args.resume, args.workers)
+    records.sort(key=lambda r: (tasks.index(r["task"]), r["scene"], r["member"]))
     result = {
-        "settings": {**{k: (str(v) if isinstance(v, Path) else v) for k, v in vars(args).items()}, "cameras": list(cameras),
-                     "judges": judges, "scenes": scenes},
+        "settings": settings,
         "overall": figures(records, args.group, judges),
         "per_task": {task: figures([r for r in records if r["task"] == task], args.group, judges) for task in tasks},
         "real_success": float(np.mean([r["success"] for r in records])),
@@ -146,6 +150,31 @@ def main() -> None:
              for name, row in result["overall"].items()}
     print(json.dumps(brief, indent=2))
     write_json(args.out, result)
+    args.out.with_suffix(".rollouts.jsonl").unlink()  # every rollout is in --out now
+
+
+def _played(jobs: list[tuple], settings: dict, log: Path, resume: bool, workers: int) -> list[dict]:
+    """Every job's record, each appended to `log` (JSON lines after a line of the settings) as it
+    finishes; with `resume`, the records `log` already holds are kept and their jobs not played again."""
+    records = []
+    if resume and log.exists():
+        lines = log.read_text().splitlines()
+        if not lines or json.loads(lines[0]) != settings:
+            raise SystemExit(f"{log} holds rollouts of other settings; rerun without --resume to start again")
+        for line in lines[1:]:
+            try:
+                records.append(json.loads(line))
+            except json.JSONDecodeError:  # the line being written when the run was stopped
+                break
+    done = {(r["task"], r["scene"], r["member"]) for r in records}
+    # Rewritten whole, and atomically, before anything is added: a line cut off above is dropped.
+    write_bytes(log, (json.dumps(settings) + "\n" + "".join(json.dumps(r) + "\n" for r in records)).encode())
+    with log.open("a") as file:
+        for record in parallel_map(play_and_judge, [job for job in jobs if job[:3] not in done], workers):
+            file.write(json.dumps(record) + "\n")
+            file.flush()
+            records.append(record)
+    return records
 
 
 if __name__ == "__main__":
