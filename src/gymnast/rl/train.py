@@ -281,6 +281,7 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
                 values |= watched | {"eval/watch_real_interactions": state["watch_real_interactions"]}
             if batch is not None and video_due:
                 write_group_video(out / "videos" / f"step_{done:06d}.mp4", batch, scores, config.group_size)
+            del batch, scores  # not held through the evaluation and the next step's rollouts
             log(done, values)
             bar.set_postfix(reward=f"{values.get('reward/mean', float('nan')):.2f}", step_s=f"{values['time/step_s']:.1f}")
             state["wall_s"] += time.perf_counter() - started
@@ -379,11 +380,15 @@ def rl_step(env: VectorEnv, policy, reward: Reward, draw_starts: Callable[[int, 
             kept_scores.append(scores[index])
             if per_call:
                 kept_steps.append(steps[index])
+        # The kept groups are copies: the round's frames (gigabytes with several cameras) go now,
+        # not when the next round's are already collected beside them.
+        del rollouts
         if len(kept) == groups:
             break
     values |= {"rollout/kept_groups": len(kept), "rollout/rounds": round_ + 1}
 
     batch, scores = (concat_rollouts(kept), torch.cat(kept_scores)) if kept else (None, None)
+    kept.clear()  # the batch is a copy of them: one set of frames through the update
     updated = time.perf_counter()
     if batch is not None:
         rewards = scores  # the verdicts above (dynamic sampling, the watch) stay the reward's own
