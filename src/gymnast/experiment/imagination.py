@@ -162,7 +162,8 @@ def measured_policy(policy: str | Path, world_model: WorldModel, wm: str | Path,
                     robot_state: str | Path | None):
     """A saved policy as the measurements of imagination take it (`measure_imagination_runs`,
     `gymnast.experiment.practice_signal.measure_signal_runs`): loaded and checked to see the world
-    model's cameras, which `judge` (the reward `reward` made) must see too; what imagines its robot state, if it reads one (``--robot-state``,
+    model's cameras, which `judge` (the reward `reward` made) must see too; what imagines its robot
+    state, if it reads one (``--robot-state``,
     `gymnast.world_model.robot_state.robot_state_in_imagination`); and the labels the report records."""
     from gymnast.policy.load import load_policy
     from gymnast.reward.judges.base import check_judge_sees

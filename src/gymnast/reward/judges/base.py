@@ -74,14 +74,20 @@ def check_judge_sees(reward, cameras: Sequence[str], image_size: int, judge: str
     """
     if not isinstance(reward, ThresholdJudge):
         return
-    judged, config = reward.config.cameras, reward.config
-    several = tuple(cameras) if len(cameras) > 1 else ()
-    if several != (judged if len(judged) > 1 else ()) or image_size != config.image_size:
-        def views(names: Sequence[str], size: int) -> str:
-            return f"{','.join(names) if len(names) > 1 else 'one camera'} at {size} px"
-        raise ValueError(f"the judge {judge} scores {views(judged, config.image_size)}, but {source} shows "
-                         f"{views(several, image_size)}; train a judge on those views (`gymnast train-judge "
+    config = reward.config
+    if _several(cameras) != _several(config.cameras) or image_size != config.image_size:
+        raise ValueError(f"the judge {judge} scores {_views(config.cameras, config.image_size)}, but {source} shows "
+                         f"{_views(cameras, image_size)}; train a judge on those views (`gymnast train-judge "
                          "--cameras` on a dataset recorded at that size) or give another --reward")
+
+
+def _several(cameras: Sequence[str]) -> tuple[str, ...]:
+    """The cameras by name where there are several; () for one camera, whatever its name."""
+    return tuple(cameras) if len(cameras) > 1 else ()
+
+
+def _views(cameras: Sequence[str], size: int) -> str:
+    return f"{','.join(cameras) if len(cameras) > 1 else 'one camera'} at {size} px"
 
 
 def check_videos(videos: torch.Tensor, instructions: Sequence[str]) -> None:
