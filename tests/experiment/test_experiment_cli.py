@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
 import shutil
@@ -384,20 +385,44 @@ def test_a_finished_experiment_copied_without_its_judge_rollouts_does_not_record
 
 
 def test_an_exported_experiment_put_back_where_it_ran_skips_every_stage(experiment: Path, tmp_path: Path, capsys):
-    export_run(experiment, tmp_path / "export")  # no datasets, the newest checkpoints, no optimizer states
-    assert not list((tmp_path / "export").rglob("meta/info.json"))
     records = {path.name: path.read_text() for path in (experiment / "stages").glob("*.json")}
     written = {name: (experiment / name).read_text() for name in ("summary.json", "report.md")}
-    aside = tmp_path / "aside"
-    experiment.rename(aside)
-    try:
-        (tmp_path / "export").rename(experiment)
+    with exported_in_place(experiment, tmp_path):
+        assert not list(experiment.rglob("meta/info.json"))  # no datasets, the newest checkpoints, no optimizer states
         capsys.readouterr()
         main(["experiment", "--out", str(experiment), "--resume"])
         assert "WorldGym Pearson r" in capsys.readouterr().out
         assert {path.name: path.read_text() for path in (experiment / "stages").glob("*.json")} == records
         assert {name: (experiment / name).read_text() for name in written} == written  # the dataset's count included
         assert not list(experiment.rglob("meta/info.json"))  # no stage left to run reads a dataset: none recorded
+
+
+def test_an_exported_experiment_records_its_dataset_again_only_for_a_stage_that_reads_it(experiment: Path,
+                                                                                         tmp_path: Path):
+    first = EpisodeDataset(experiment / "data")
+    with exported_in_place(experiment, tmp_path):
+        (experiment / "stages" / "eval_sft.json").unlink()  # an evaluation reads only the dataset's frame size
+        main(["experiment", "--out", str(experiment), "--resume"])
+        assert (experiment / "stages" / "eval_sft.json").is_file() and not (experiment / "data").exists()
+        for stage in ("equal_budget_iter_sft", "eval_equal_budget_iter_sft"):  # Iter-SFT learns from its demos
+            (experiment / "stages" / f"{stage}.json").unlink()
+        shutil.rmtree(experiment / "equal_budget" / "iter_sft")
+        main(["experiment", "--out", str(experiment), "--resume"])
+        again = EpisodeDataset(experiment / "data")
+        assert [info.seed for info in again.episodes] == [info.seed for info in first.episodes]
+        assert all(np.array_equal(again.load(i).actions, first.load(i).actions) for i in range(len(first)))
+        assert (experiment / "stages" / "equal_budget_iter_sft.json").is_file()
+
+
+@contextlib.contextmanager
+def exported_in_place(experiment: Path, tmp_path: Path):
+    """`experiment` exported (`gymnast export`) and put where it ran, for the body; then as it was."""
+    export_run(experiment, tmp_path / "export")
+    aside = tmp_path / "aside"
+    experiment.rename(aside)
+    try:
+        (tmp_path / "export").rename(experiment)
+        yield
     finally:
         shutil.rmtree(experiment, ignore_errors=True)
         aside.rename(experiment)

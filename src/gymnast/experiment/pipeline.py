@@ -31,6 +31,7 @@ from pathlib import Path
 
 from gymnast.config import EnvConfig
 from gymnast.data.lerobot import EpisodeDataset
+from gymnast.data.lerobot_v3 import INFO_PATH
 from gymnast.envs.parallel import kept_workers
 from gymnast.envs.sim_vector import shared_simulator_processes
 from gymnast.experiment.arms import ARMS, PERTURBATIONS, ROBUSTNESS_ARMS, arm, dyna_setup, rl_setup
@@ -82,9 +83,8 @@ def _run_experiment(config: ExperimentConfig, out: Path, reuse: dict[str, Path] 
     if config.new_scenes.scenes_per_task:
         stages.run("new_scenes", lambda: _new_scenes(sft, wm, judge, config, out / "new_scenes", progress),
                    out / "new_scenes")
-    # The real world as the dataset saw it (a reused dataset may have its own image size), read only
-    # by an evaluation still to run: an exported experiment holds no dataset (experiment.export).
-    env = functools.cache(lambda: EnvConfig(image_size=EpisodeDataset(data).image_shape[0],
+    # The real world as the dataset saw it, read only by an evaluation still to run.
+    env = functools.cache(lambda: EnvConfig(image_size=_dataset_image_size(stages, config),
                                             horizon=config.rl.evaluation_horizon))
     # The arms are trained: their evaluations share one set of simulator processes.
     with kept_workers(config.workers, config.runner):
@@ -111,7 +111,13 @@ def _models(stages: Stages, config: ExperimentConfig, out: Path, progress: bool
     from gymnast.world_model.train import train_world_model
     from gymnast.world_model.train_state import train_state_model
 
-    stages.run("collect", lambda: {"success": collect(config.collect, out / "data", progress)}, out / "data")
+    def record() -> dict:
+        return {"success": collect(config.collect, out / "data", progress)}
+
+    stages.restore_dataset("collect", out / "data", lambda: success_totals(record()["success"]),
+                           stages.pending(_dataset_readers(config)), "the experiment's dataset",
+                           lambda stage: success_totals(stage["success"]))
+    stages.run("collect", record, out / "data")
     data = stages.path("collect")
     stages.run("sft", lambda: _trained(train_sft, data, out / "sft", config.sft, progress), out / "sft")
     _check_freeze(stages.path("sft"), config.rl.freeze)
@@ -133,6 +139,34 @@ def _models(stages: Stages, config: ExperimentConfig, out: Path, progress: bool
                                                progress), out / "state_model")
     stages.run("world_model_eval", lambda: _world_model_fidelity(wm, data, out, progress, config.device), out / "world_model_eval.json")
     return data, stages.path("sft"), wm, stages.path("judge"), stages.path("state_model")
+
+
+def _dataset_readers(config: ExperimentConfig) -> list[str]:
+    """The stages that read the collected dataset (the models', the signals' starts, the arms'
+    keyframes and demonstrations, the equal budgets'); the evaluations and WorldGym after them
+    read only its image size (`_dataset_image_size`), so an exported experiment resumed there
+    does not record it again."""
+    readers = ["world_model", "judge", "state_model", "world_model_eval", "signal", "signal_state",
+               *(f"arm_{spec.name}" for spec in ARMS[1:])]
+    if config.equal_budget.rollouts_per_task:
+        readers += ["equal_budget_real_grpo", "equal_budget_imagined", "equal_budget_iter_sft"]
+    return readers
+
+
+def success_totals(table: dict) -> dict:
+    """A collection's success table (task -> behaviour -> [successes, episodes]) as totals."""
+    cells = [cell for behaviours in table.values() for cell in behaviours.values()]
+    return {"episodes": sum(episodes for _, episodes in cells), "successes": sum(successes for successes, _ in cells)}
+
+
+def _dataset_image_size(stages: Stages, config: ExperimentConfig) -> int:
+    """The frame size of the collected dataset: read in it (a reused dataset may have its own), or,
+    in an exported experiment, which holds no dataset (experiment.export), the size its own
+    collection was set to record."""
+    path = stages.path("collect")
+    if (path / INFO_PATH).is_file() or stages.record("collect")["reused"]:
+        return EpisodeDataset(path).image_shape[0]
+    return config.collect.env.image_size
 
 
 def _restore_judge_rollouts(stages: Stages, config: ExperimentConfig, recorded: Path, progress: bool) -> None:
