@@ -114,9 +114,9 @@ def _models(stages: Stages, config: ExperimentConfig, out: Path, progress: bool
     def record() -> dict:
         return {"success": collect(config.collect, out / "data", progress)}
 
-    stages.restore_dataset("collect", out / "data", lambda: success_totals(record()["success"]),
+    stages.restore_dataset("collect", out / "data", lambda: _success_totals(record()["success"]),
                            stages.pending(_dataset_readers(config)), "the experiment's dataset",
-                           lambda stage: success_totals(stage["success"]))
+                           lambda stage: _success_totals(stage["success"]))
     stages.run("collect", record, out / "data")
     data = stages.path("collect")
     stages.run("sft", lambda: _trained(train_sft, data, out / "sft", config.sft, progress), out / "sft")
@@ -153,7 +153,7 @@ def _dataset_readers(config: ExperimentConfig) -> list[str]:
     return readers
 
 
-def success_totals(table: dict) -> dict:
+def _success_totals(table: dict) -> dict:
     """A collection's success table (task -> behaviour -> [successes, episodes]) as totals."""
     cells = [cell for behaviours in table.values() for cell in behaviours.values()]
     return {"episodes": sum(episodes for _, episodes in cells), "successes": sum(successes for successes, _ in cells)}
