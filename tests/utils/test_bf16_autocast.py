@@ -41,7 +41,9 @@ def test_auto_leaves_the_choice_to_the_hardware(monkeypatch):
         assert torch.nn.Linear(4, 4)(torch.ones(2, 4)).dtype == torch.bfloat16
 
 
-def test_an_unknown_setting_is_named(monkeypatch):
+@pytest.mark.parametrize("native", [True, False])
+def test_an_unknown_setting_is_named_whatever_the_cpu(monkeypatch, native):
+    monkeypatch.setattr(device_module, "bf16_is_native", lambda device_type: native)
     monkeypatch.setenv(device_module.CPU_BF16_VARIABLE, "fast")
     with pytest.raises(ValueError, match="GYMNAST_CPU_BF16='fast'"):
         bf16_autocast(torch.device("cpu"))

@@ -85,7 +85,8 @@ def bf16_is_native(device_type: str) -> bool:
 
 def bf16_used(device_type: str) -> bool:
     """Whether bfloat16 autocast runs on `device_type`: where it is native, unless turned off on the CPU."""
-    return bf16_is_native(device_type) and not (device_type == "cpu" and cpu_bf16_turned_off())
+    turned_off = device_type == "cpu" and cpu_bf16_turned_off()  # read first: a mistyped setting is named on every CPU
+    return bf16_is_native(device_type) and not turned_off
 
 
 def bf16_autocast(device: torch.device | str, wanted: bool = True) -> AbstractContextManager:
