@@ -32,10 +32,11 @@ from gymnast.utils.metrics import read_metrics
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def sampled_run(command: list[str], every_s: float = 0.2) -> dict:
-    """Runs `command`, sampling the resident memory of its process and of the whole process tree."""
+def sampled_run(command: list[str], every_s: float = 0.2, env: dict[str, str] | None = None) -> dict:
+    """Runs `command` (in `env`, default this process's), sampling the resident memory of its
+    process and of the whole process tree."""
     with tempfile.TemporaryFile("w+") as log:  # a file, not a pipe nobody reads while it runs
-        process = psutil.Popen(command, stdout=subprocess.DEVNULL, stderr=log)
+        process = psutil.Popen(command, stdout=subprocess.DEVNULL, stderr=log, env=env)
         peak_main = peak_tree = 0
         while process.poll() is None:
             try:

@@ -23,7 +23,7 @@ from gymnast.envs.metaworld import MetaWorldEnv
 from gymnast.envs.sim_vector import _Episodes
 from gymnast.envs.tasks import resolve_tasks
 from gymnast.utils.atomic import write_json
-from gymnast.utils.memory import _malloc_trim, release_freed_memory
+from gymnast.utils.memory import _libc_function, release_freed_memory
 
 
 def resident_gb() -> float:
@@ -57,10 +57,10 @@ def main() -> None:
         env.close()
     episodes._envs.clear()
     episodes._episodes = []
-    _malloc_trim()(0)
+    _libc_function("malloc_trim")(0)
     figures["closed_heap_trimmed_gb"] = resident_gb()
     gc.collect()
-    _malloc_trim()(0)
+    _libc_function("malloc_trim")(0)
     figures["closed_cycles_collected_and_trimmed_gb"] = resident_gb()
     gc.enable()
     print(figures)

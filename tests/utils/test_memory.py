@@ -3,13 +3,15 @@
 from __future__ import annotations
 
 import gc
+import os
+import subprocess
 import sys
 
 import numpy as np
 import pytest
 from process_memory import resident_bytes
 
-from gymnast.utils.memory import release_freed_memory
+from gymnast.utils.memory import GLIBC_VARIABLES, HEAP_REUSE_VARIABLE, release_freed_memory, reuse_large_blocks
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="malloc_trim is glibc's")
@@ -46,3 +48,40 @@ def test_memory_held_in_reference_cycles_is_released_too():
         del pinned
     finally:
         gc.enable()
+
+
+# A process that takes a 64 MB block from the C heap, gives it back and takes it again: the page
+# faults of the second time, after the heap is set up as the `gymnast` command sets it.
+_SECOND_ALLOCATION = """
+import ctypes, resource
+from gymnast.utils.memory import _libc_function, reuse_large_blocks
+print(reuse_large_blocks())
+malloc, free = _libc_function("malloc"), _libc_function("free")
+malloc.restype, free.argtypes = ctypes.c_void_p, [ctypes.c_void_p]
+free(ctypes.memset(malloc(2**26), 1, 2**26))
+before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+ctypes.memset(malloc(2**26), 1, 2**26)
+print(resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before)
+"""
+
+
+def _second_allocation(**variables: str) -> tuple[str, int]:
+    environment = {key: value for key, value in os.environ.items() if key not in GLIBC_VARIABLES}
+    done = subprocess.run([sys.executable, "-c", _SECOND_ALLOCATION], env={**environment, **variables},
+                          capture_output=True, text=True, check=True)
+    reused, faults = done.stdout.split()
+    return reused, int(faults)
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="mallopt is glibc's")
+def test_a_freed_large_block_serves_the_next_one_without_the_kernel_faulting_its_pages_again():
+    assert _second_allocation()[0] == "True"
+    assert _second_allocation()[1] < 100  # 64 MB is 16,384 pages of 4 KB
+    assert _second_allocation(GYMNAST_HEAP_REUSE="off") == ("False", pytest.approx(16_384, rel=0.05))
+    assert _second_allocation(MALLOC_MMAP_THRESHOLD_="131072")[0] == "False"  # the user's own setting stands
+
+
+def test_an_unknown_heap_setting_is_named(monkeypatch):
+    monkeypatch.setenv(HEAP_REUSE_VARIABLE, "always")
+    with pytest.raises(ValueError, match="GYMNAST_HEAP_REUSE='always'"):
+        reuse_large_blocks()

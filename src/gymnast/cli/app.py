@@ -15,6 +15,7 @@ from gymnast.cli.measure import imagination, practice_summary, rl_signal, worldg
 from gymnast.cli.policy import evaluate_command, sft
 from gymnast.cli.practice import dyna, experiment, rl
 from gymnast.cli.world_model import eval_wm, make_ensemble, object_fidelity, train_state, train_wm
+from gymnast.utils.memory import reuse_large_blocks
 
 
 def doctor() -> None:
@@ -86,6 +87,7 @@ def main(argv: list[str] | None = None) -> None:
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     logging.getLogger("OpenGL").setLevel(logging.WARNING)
     try:
+        reuse_large_blocks()  # every subcommand runs torch on the CPU somewhere (utils.memory)
         tyro.extras.subcommand_cli_from_dict(COMMANDS, args=sys.argv[1:] if argv is None else argv,
                                              prog="gymnast", description=__doc__)
     except (ValueError, FileNotFoundError, FileExistsError) as error:
