@@ -26,6 +26,7 @@ from typing import NamedTuple
 import av
 import numpy as np
 from av.video.frame import PictureType
+from av.video.reformatter import VideoReformatter
 
 logger = logging.getLogger(__name__)
 
@@ -192,6 +193,9 @@ def _decode_range(container, stream, rate: Fraction, first: int, stop: int | Non
     if first > 0:
         container.seek(int(first / rate / stream.time_base), stream=stream)
     frames: list[np.ndarray] = []
+    # One converter for the whole range: `frame.to_ndarray(format=...)` builds a fresh swscale
+    # context for every frame, 4x the cost of decoding it (2.3 against 0.5 ms a 96x96 frame).
+    to_rgb = VideoReformatter()
     for frame in container.decode(stream):
         if frame.pts is None:
             raise ValueError(f"{path}: a decoded frame has no timestamp")
@@ -207,7 +211,7 @@ def _decode_range(container, stream, rate: Fraction, first: int, stop: int | Non
                 container.seek(0, stream=stream)
                 return _decode_range(container, stream, rate, 0, stop, path)[first:]
             raise ValueError(f"{path}: frame {first + len(frames)} is missing (next decoded is {index})")
-        frames.append(frame.to_ndarray(format="rgb24"))
+        frames.append(to_rgb.reformat(frame, format="rgb24").to_ndarray())
     return frames
 
 
