@@ -297,19 +297,22 @@ def _demo() -> ExperimentConfig:
     # numbers show the pipeline, not the method). Two cameras cost most stages 1.5-2x one camera's
     # time (10.3 -> about 16 min on an AVX2 CPU), won back by the trims marked "two cameras" below (the
     # values before them in brackets); the third view costs 1.6x again (6.5 -> 10.2 min on an
-    # AVX512-BF16 CPU, docs/experiment.md "make demo's time").
+    # AVX512-BF16 CPU, docs/experiment.md "make demo's time"). Three views took 16.7 min on a 2-core
+    # AVX2 CPU, won back by the trims marked "three cameras" (the values before them in brackets).
     return ExperimentConfig(
         tasks="drawer-open-v3,reach-v3",
         collect=CollectConfig(episodes_per_task=8),
         # Two cameras: 250 steps (300) of 32 samples (64), the demo's largest cost on a CPU without
         # native bfloat16: SFT took 153 s of its 16.8 min there at 64, 88 s of 15.6 at 32; Iter-SFT's too.
-        sft=dataclasses.replace(SFT_PRESETS["demo"], demos_per_task=6, steps=250, batch_size=32, checkpoint_every=125),
+        # Three cameras: 150 steps (250), SFT's 118 s the largest stage of the 16.7 min.
+        sft=dataclasses.replace(SFT_PRESETS["demo"], demos_per_task=6, steps=150, batch_size=32, checkpoint_every=75),
         # One imagined frame per chunk of the policy's 5 actions (docs/world_model.md): a training
         # step 3.4x and imagination 2.1x cheaper, ranking as well as a frame per action from scratch;
-        # clips of 20 future actions (4 imagined frames), not 32.
-        world_model=dataclasses.replace(WM_PRESETS["demo"], steps=250, future=20, video_every=250, validate_every=125,
+        # clips of 20 future actions (4 imagined frames), not 32. Three cameras: 150 steps (250), and
+        # the judge 100 (150).
+        world_model=dataclasses.replace(WM_PRESETS["demo"], steps=150, future=20, video_every=150, validate_every=75,
                                         model=EmbeddedWorldModelConfig(actions_per_frame=5)),
-        judge=dataclasses.replace(JUDGE_PRESETS["demo"], steps=150),
+        judge=dataclasses.replace(JUDGE_PRESETS["demo"], steps=100),
         judge_rollouts=1,
         state_model=StateTrainConfig(steps=200, batch_size=64, checkpoint_every=200),
         # Most of an arm's minutes here were its learning curve's two real evaluations, not its two
@@ -320,12 +323,14 @@ def _demo() -> ExperimentConfig:
         # rollouts to the 15 minutes).
         rl=RLConfig(steps=2, starts_per_step=2, group_size=4, max_rounds=1, lr=3e-5, kl_coef=0.1, freeze=("vision",),
                     eval_every=2, eval_episodes=1, watch_every=2, watch_rollouts=4, video_every=2, checkpoint_every=2),
-        iter_sft=IterSFTConfig(group_size=2, steps=50),
-        dyna=DynaArmConfig(rounds=2, rollouts_per_task=2, wm_steps=10, judge_steps=10),
+        # Three cameras: 30 Iter-SFT steps (50), Dyna's 1 real rollout per task between rounds (2), 4
+        # evaluation episodes per task (6).
+        iter_sft=IterSFTConfig(group_size=2, steps=30),
+        dyna=DynaArmConfig(rounds=2, rollouts_per_task=1, wm_steps=10, judge_steps=10),
         equal_budget=EqualBudgetConfig(rollouts_per_task=2, wm_steps=10, judge_steps=10),
         # Practice on new scenes is left out: about a minute a scene would overrun the 15 minutes.
         new_scenes=NewScenesConfig(scenes_per_task=0),
-        eval_episodes=6,
+        eval_episodes=4,
         robustness_episodes=1,
         worldgym_episodes=1,
         signal_scenes=1,
