@@ -304,8 +304,9 @@ def _demo() -> ExperimentConfig:
         collect=CollectConfig(episodes_per_task=8),
         # Two cameras: 250 steps (300) of 32 samples (64), the demo's largest cost on a CPU without
         # native bfloat16: SFT took 153 s of its 16.8 min there at 64, 88 s of 15.6 at 32; Iter-SFT's too.
-        # Three cameras: 150 steps (250), SFT's 118 s the largest stage of the 16.7 min.
-        sft=dataclasses.replace(SFT_PRESETS["demo"], demos_per_task=6, steps=150, batch_size=32, checkpoint_every=75),
+        # Not trimmed for three cameras: at 150 steps the policy failed every episode of both tasks (0 of 8
+        # each), and so did every arm from it; at 250 it opens the drawer.
+        sft=dataclasses.replace(SFT_PRESETS["demo"], demos_per_task=6, steps=250, batch_size=32, checkpoint_every=125),
         # One imagined frame per chunk of the policy's 5 actions (docs/world_model.md): a training
         # step 3.4x and imagination 2.1x cheaper, ranking as well as a frame per action from scratch;
         # clips of 20 future actions (4 imagined frames), not 32. Three cameras: 150 steps (250), and
