@@ -13,7 +13,7 @@ from gymnast.cli.data import collect, contact_sheet, gap_report, inspect, tasks
 from gymnast.cli.judge import calibrate_judge, eval_judge, serve_judge, train_judge
 from gymnast.cli.measure import imagination, practice_summary, rl_signal, worldgym
 from gymnast.cli.policy import evaluate_command, sft
-from gymnast.cli.practice import dyna, experiment, rl
+from gymnast.cli.practice import dyna, experiment, ladder, rl
 from gymnast.cli.world_model import eval_wm, make_ensemble, object_fidelity, train_state, train_wm
 from gymnast.utils.memory import reuse_large_blocks
 
@@ -70,6 +70,7 @@ COMMANDS = {
     "rl": rl,
     "experiment": experiment,
     "dyna": dyna,
+    "ladder": ladder,
     "imagination": imagination,
     "rl-signal": rl_signal,
     "practice-summary": practice_summary,

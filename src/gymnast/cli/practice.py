@@ -5,7 +5,7 @@ from __future__ import annotations
 import dataclasses
 import json
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Literal
 
 import tyro
 
@@ -25,6 +25,7 @@ def rl(
     wm: Path | None = None,
     data: Path | None = None,
     robot_state: Path | None = None,
+    reward_sees: Literal["own", "real", "imagined", "sim"] | None = None,
     preset: GPUPreset = "full",
     resume: bool = False,
     config: Annotated[RLFlags, tyro.conf.arg(name="")] = RLFlags(),
@@ -40,12 +41,16 @@ def rl(
         data: dataset whose scenes are the start states (default: the one the policy was trained on).
         robot_state: with --env imagined, a state model (or ensemble) run stepped beside the world
             model, whose imagined robot state is given to a policy that reads one (observation.state).
+        reward_sees: what the reward reads: own (the rollouts' own video; the default), or the same
+            actions from the same starts replayed in another world: real (the real world's verdict
+            on imagined actions, counted as real interactions) or imagined (the world model's
+            re-imagining of real actions, --wm); one rung of `gymnast ladder`.
         preset: debug (seconds), demo (minutes), full or gpu (400 steps of 256 rollouts; docs/gpu.md).
         resume: continue the run in OUT from its last checkpoint, with the settings, policy, env,
             reward, world model and data saved there.
         config: the GRPO settings; each one left out keeps the preset's value.
     """
-    from gymnast.rl.config import RLRun, saved_rl_settings
+    from gymnast.rl.config import RLRun, reward_sight, saved_rl_settings
     from gymnast.rl.inputs import with_tasks_from_data
     from gymnast.rl.train import train_rl
 
@@ -58,7 +63,7 @@ def rl(
         "rl", out, resume, RL_PRESETS[preset], overrides=dataclasses.asdict(config), saved=saved,
         inputs={"policy": policy, "env": None if env is None else env_kind(env),
                 "reward": None if reward is None else RewardSpec.parse(reward), "wm": wm, "data": data,
-                "robot_state": robot_state},
+                "robot_state": robot_state, "reward_sees": None if reward_sees is None else reward_sight(reward_sees)},
         required=("policy", "env", "reward"))
     run_spec = RLRun(**{name: str(value) if isinstance(value, Path) else value for name, value in inputs.items()})
     if not resume and config.tasks is None:  # the preset's tasks may not be in the data
@@ -66,6 +71,64 @@ def rl(
     summary = train_rl(run_spec, out, settings, resume=resume)
     summary.pop("curve")
     print(json.dumps(summary, indent=2))
+
+
+def ladder(
+    out: Path,
+    policy: Path | None = None,
+    wm: Path | None = None,
+    judge: Path | None = None,
+    state: Path | None = None,
+    rungs: str = "all",
+    index: Path | None = None,
+    preset: Literal["debug", "full"] = "full",
+    resume: bool = False,
+    config: Annotated[RLFlags, tyro.conf.arg(name="")] = RLFlags(),
+) -> None:
+    """Where learning dies between reality and imagination: the same GRPO recipe once per rung, each
+    rung swapping one part (what the policy sees, what steps the rollout, who rewards, what the
+    reward sees), every rung evaluated in the real world, with its reward's agreement with the real
+    outcome at every step. Writes OUT/<rung>/ (each an RL run), OUT/summary.json, OUT/ladder.md,
+    OUT/curves.png and OUT/agreement.png; rerunning continues where it stopped.
+
+    Args:
+        out: ladder directory.
+        policy: the policy every rung starts from: an SFT run or checkpoint (required unless --resume).
+        wm: the world model of the imagined rungs (r2, r3, r4, r4s).
+        judge: the judge run of the judged rungs (r1, r2, r4).
+        state: the state model (or ensemble) run of the state rungs (r1s, r4s).
+        rungs: the rungs to run now, in this order, comma-separated, of r0_real, r1_judge_real,
+            r1s_state_real, r2_imagined_verdict, r3_imagined_sight, r4_imagined, r4s_imagined_state;
+            all: every one. A later call may run others in the same OUT; the report covers them all.
+        index: also gather every ladder under this directory into INDEX/summary.json, nested by
+            path (e.g. --out results/ladder/scarce/mt10 --index results/ladder).
+        preset: debug (seconds; tests) or full (the recipe that learns on MT10, 100 evaluation
+            seeds per task; docs/rl.md "Where learning dies").
+        resume: continue the ladder in OUT with the settings and models saved there (also what a
+            plain rerun does).
+        config: the GRPO settings every rung shares; each one left out keeps the preset's value.
+    """
+    from gymnast.experiment.ladder import LADDER_PRESETS, LadderInputs, parse_rungs, run_ladder
+    from gymnast.experiment.ladder_report import ladder_table, write_ladder_index
+    from gymnast.utils.settings import from_json, saved_settings
+
+    def saved() -> tuple[RLConfig, dict]:
+        return from_json(RLConfig, saved_settings(out, "rl")), saved_settings(out, "inputs")
+
+    settings, inputs = resolve(
+        "ladder", out, resume or (out / "config.json").is_file(), LADDER_PRESETS[preset],
+        overrides=dataclasses.asdict(config), saved=saved,
+        inputs={"policy": policy, "wm": wm, "judge": judge, "state": state}, required=("policy",))
+    models = LadderInputs(**{name: str(value) if value is not None else None for name, value in inputs.items()})
+    if not (out / "config.json").is_file():
+        from gymnast.utils.atomic import write_json
+
+        write_json(out / "config.json", {"rl": dataclasses.asdict(settings), "inputs": dataclasses.asdict(models)})
+    summary = run_ladder(models, settings, parse_rungs(rungs), out)
+    print(ladder_table(summary))
+    if index is not None:
+        write_ladder_index(index)
+    print(f"report: {out / 'ladder.md'}")
 
 
 def dyna(

@@ -101,6 +101,16 @@ class StepReward(Reward, Protocol):
         ...
 
 
+@runtime_checkable
+class VerdictReward(Reward, Protocol):
+    """A continuous reward that also reads a 0/1 verdict off what it scores (the state model's:
+    success predicted at some step), so that its agreement with the real outcome can be measured."""
+
+    def verdict(self, instructions: Sequence[str], context: RewardContext) -> torch.Tensor:
+        """(B,) float 1.0 where the reward reads success, 0.0 where not."""
+        ...
+
+
 def env_mismatch(needs: RewardNeeds, env: EnvKind, demonstrations: bool = True) -> str | None:
     """Why a reward that `needs` these cannot score rollouts of `env` (starting from scenes with
     `demonstrations` or not), or None when it can."""

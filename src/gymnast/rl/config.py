@@ -148,6 +148,11 @@ class RLConfig:
     """Evaluation episodes per task, from the evaluation seeds."""
     real_eval: bool = True
     """Also evaluate in the real world when training elsewhere (its interactions are counted)."""
+    truth_groups: int = 0
+    """Groups of each step's first round whose actions are replayed in the real world to log how
+    often the reward agrees with the real outcome (``reward/agreement``, ``reward/truth_signal``),
+    counted apart as ``truth_real_interactions``. Where the rollouts or the reward's replays are
+    real, every rollout's outcome is known at no cost and logged whatever this is. 0: none."""
     watch_every: int = 10
     """Steps between reward-hacking checks (0: never): imagined actions replayed in the real world."""
     watch_rollouts: int = 16
@@ -228,15 +233,31 @@ class RLRun:
     wm: str | None = None
     data: str | None = None
     robot_state: str | None = None
+    reward_sees: EnvKind | None = None
+    """The world the reward's video comes from: None for the rollouts' own; else the same actions
+    from the same starts are replayed there (`gymnast.rl.sight.RewardSight`): ``real`` gives a
+    simulator's verdict on imagined actions, ``imagined`` the world model's re-imagining of real ones."""
 
     def to_json(self) -> dict[str, Any]:
         """The run as RUN/config.json keeps it: the env and the reward as the command line names them."""
         return {"policy": self.policy, "env": self.env.name, "reward": str(self.reward), "wm": self.wm,
-                "data": self.data, "robot_state": self.robot_state}
+                "data": self.data, "robot_state": self.robot_state,
+                "reward_sees": self.reward_sees.name if self.reward_sees else OWN_SIGHT}
 
     @classmethod
     def from_json(cls, saved: dict[str, Any]) -> RLRun:
-        return cls(**saved | {"env": env_kind(saved["env"]), "reward": RewardSpec.parse(saved["reward"])})
+        sees = saved.get("reward_sees", OWN_SIGHT)  # runs saved before the choice existed saw their own
+        return cls(**saved | {"env": env_kind(saved["env"]), "reward": RewardSpec.parse(saved["reward"]),
+                              "reward_sees": reward_sight(sees)})
+
+
+OWN_SIGHT = "own"
+"""`--reward-sees own`: the reward reads the rollouts' own video."""
+
+
+def reward_sight(name: str) -> EnvKind | None:
+    """The world `--reward-sees NAME` replays actions in: None for ``own``, else the env kind."""
+    return None if name == OWN_SIGHT else env_kind(name)
 
 
 def saved_rl_settings(run: Path) -> tuple[RLRun, RLConfig]:

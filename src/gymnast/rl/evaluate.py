@@ -182,15 +182,20 @@ class Replay:
             replayed to restore keyframe starts (their prefixes) included.
     """
 
-    success: torch.Tensor
+    success: torch.Tensor | None
     frames: torch.Tensor
-    success_by_step: torch.Tensor
-    rewards: torch.Tensor
+    success_by_step: torch.Tensor | None
+    rewards: torch.Tensor | None
     interactions: int
 
 
 def replay_actions(env: VectorEnv, starts: Sequence[Start], actions: torch.Tensor, lengths: torch.Tensor) -> Replay:
-    """Replays R rollouts' actions, action for action, in a simulator from the same start states.
+    """Replays R rollouts' actions, action for action, in a simulator (or a world model) from the
+    same start states.
+
+    A world model reports no outcome: its replay (a re-imagining of the actions from the same start
+    frames) has frames only, ``success``, ``success_by_step`` and ``rewards`` None, and
+    ``interactions`` counts imagined actions.
 
     The env steps whole chunks, so the chunk holding a rollout's last action is executed in full
     (with the zero actions that follow its end); a replay's outcome is read at the end of that
@@ -200,7 +205,7 @@ def replay_actions(env: VectorEnv, starts: Sequence[Start], actions: torch.Tenso
     steps all its episodes together.
 
     Args:
-        env: a `SimVectorEnv` (or one with its contract) with ``num_envs == R``.
+        env: a `SimVectorEnv` or `BatchedImaginedEnv` (or one with their contract) with ``num_envs == R``.
         starts: the R start states (their task and seed fix the scene).
         actions: (R, T, A) float32 the actions to replay (0 after each rollout's end).
         lengths: (R,) int64 actions each rollout executed.
@@ -218,22 +223,28 @@ def replay_actions(env: VectorEnv, starts: Sequence[Start], actions: torch.Tenso
     frames, by_chunk, rewards = [], [], []
     interactions = sum(len(start.prefix) for start in starts)  # restoring a keyframe takes real actions
     success = torch.zeros(count, dtype=torch.bool)
+    reports = True  # a world model reports no outcome
     for index, result in enumerate(run_batch(env, lambda images, instructions, states: next(plan).numpy(),
                                              start_options(starts), seed=0, max_calls=calls)):
         if not frames:
             frames.append(torch.from_numpy(result.observation)[:, None])  # (R, 1, H, W, 3) the start frame
         frames.append(torch.from_numpy(result.frames))  # (R, K, H, W, 3)
         interactions += int(result.executed.sum())
-        success = torch.where(last_chunk >= index, torch.from_numpy(result.success), success)  # only accumulates
-        by_chunk.append(success[:, None].expand(-1, chunk))  # (R, K)
-        rewards.append(torch.from_numpy(result.rewards))  # (R, K) NaN where not executed
+        reports = result.success is not None
+        if reports:
+            success = torch.where(last_chunk >= index, torch.from_numpy(result.success), success)  # only accumulates
+            by_chunk.append(success[:, None].expand(-1, chunk))  # (R, K)
+            rewards.append(torch.from_numpy(result.rewards))  # (R, K) NaN where not executed
     video = torch.cat(frames, dim=1)[:, : steps + 1]  # (R, <= T + 1, H, W, 3)
     ends = lengths.clamp(max=video.shape[1] - 1)  # (R,) the frame at each rollout's end
     index = torch.minimum(torch.arange(steps + 1)[None], ends[:, None])  # (R, T + 1): the end frame repeats
+    video = video[torch.arange(count)[:, None], index]
+    if not reports:
+        return Replay(None, video, None, None, interactions)
     after_end = torch.arange(steps)[None] >= lengths[:, None]  # (R, T)
     success_by_step = _to_steps(torch.cat(by_chunk, dim=1), steps, False) & ~after_end
     step_rewards = _to_steps(torch.cat(rewards, dim=1), steps, float("nan")).masked_fill(after_end, float("nan"))
-    return Replay(success, video[torch.arange(count)[:, None], index], success_by_step, step_rewards, interactions)
+    return Replay(success, video, success_by_step, step_rewards, interactions)
 
 
 def _to_steps(values: torch.Tensor, steps: int, fill) -> torch.Tensor:

@@ -53,6 +53,7 @@ from gymnast.rl.imitation import ImitationAnchor
 from gymnast.rl.inputs import check_other_robot, policy_dataset, policy_frames, policy_keys
 from gymnast.rl.rollout import (Rollouts, collect_rollouts, concat_rollouts, dataset_starts, heldout_starts,
                                 own_tasks, recorded_elsewhere, score_groups)
+from gymnast.rl.sight import RewardSight, reward_truth_metrics, reward_verdicts
 from gymnast.rl.videos import write_group_video
 from gymnast.utils.atomic import write_json
 from gymnast.utils.checkpoint import (load_checkpoint, load_extra, resolve_checkpoint, save_checkpoint,
@@ -113,7 +114,7 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
     policy = load_policy(run_spec.policy).to(device)
     cameras = getattr(policy.config, "cameras", ())
     world_model = load_world_model(run_spec.wm).to(device) if run_spec.wm else None
-    if env.imagined:
+    if env.imagined or (run_spec.reward_sees is not None and run_spec.reward_sees.imagined):
         check_policy_views(cameras, world_model, run_spec.policy, run_spec.wm)
     robot_state = robot_state_for(getattr(policy, "state_dim", 0), env, run_spec, world_model)
     if levers and not isinstance(world_model, EnsembleWorldModel):
@@ -124,7 +125,8 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
     if isinstance(reward, torch.nn.Module):  # a learned judge
         reward.to(device)
     from_dataset = not config.fresh_scenes and config.scenes is None
-    check_fits(reward, str(run_spec.reward), env, demonstrations=from_dataset)
+    # The reward reads the rollouts, or their replays in the world it sees.
+    check_fits(reward, str(run_spec.reward), run_spec.reward_sees or env, demonstrations=from_dataset)
     if config.credit != "rollout" and not isinstance(reward, StepReward):
         raise ValueError(f"--credit {config.credit} gives each policy call the rewards that followed it, but --reward "
                          f"{run_spec.reward} scores whole videos only; use a reward that scores every action "
@@ -161,6 +163,7 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
         env, policy.chunk_size, dataclasses.replace(env_config, horizon=config.evaluation_horizon), config.gap,
         config.workers, world_model, stop_above=config.disagreement_stop or None, runner=config.runner, batch=batch,
         robot_state=robot_state)
+    sight = RewardSight(envs, env, run_spec.reward_sees, config.truth_groups)
     resolved = {"rl": dataclasses.asdict(config), "run": run_spec.to_json(), "model": policy.spec(),
                 "data": str(data) if data else None, "frames": frames}
 
@@ -180,7 +183,7 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
                                               config.imitation_kl_gate, config.imitation_batch, keys,
                                               cameras if len(cameras) > 1 else None)
     state = {"real_interactions": 0, "eval_real_interactions": 0, "watch_real_interactions": 0,
-             "reset_frames": len(practice or ()), "curve": [], "wall_s": 0.0}
+             "truth_real_interactions": 0, "reset_frames": len(practice or ()), "curve": [], "wall_s": 0.0}
     start_step = 0
     if resume:
         checkpoint_dir = resolve_checkpoint(out)
@@ -211,7 +214,11 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
                 board.add_scalar(key, value, step)
 
     def evaluate(step: int) -> None:
-        values = evaluate_in_env(eval_envs, env, policy, reward, eval_starts, prefix="eval/own", progress=progress)
+        values: dict[str, float] = {}
+        # An imagined evaluation is judged by the run's reward; one that reads another world's replays
+        # (the real world's verdict on imagined actions) has its evaluation there, below.
+        if env.reports_success or run_spec.reward_sees is None:
+            values = evaluate_in_env(eval_envs, env, policy, reward, eval_starts, prefix="eval/own", progress=progress)
         if config.real_eval and not env.real_interactions:  # else its own evaluation is the real one
             real = evaluate_in_env(eval_envs, REAL, policy, reward, eval_starts, prefix="eval/real",
                                    progress=progress)
@@ -260,13 +267,21 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
             with remembered_vision(*([policy, reference] if config.remember_vision else [])) as memories:
                 batch, scores, values = rl_step(envs.train(config.starts_per_step * config.group_size), policy,
                                                 reward, draw_starts, config, sampler, actions, optimizer, schedule,
-                                                reference, anchor, critic, every_frame=reward.needs.video)
+                                                reference, anchor, critic,
+                                                every_frame=reward.needs.video and run_spec.reward_sees is None,
+                                                sight=sight)
             encoded = sum(memory.hits + memory.misses for memory in memories)
             if encoded:  # the share of the images a policy read whose tokens were already computed
                 values["train/vision_reused"] = sum(memory.hits for memory in memories) / encoded
             interactions = int(values.pop("rollout/interactions"))
+            replayed = int(values.pop("rollout/replay_interactions"))
             if env.real_interactions:
                 state["real_interactions"] += interactions
+            if sight.real_replays:  # the reward's verdict came from replaying the actions for real
+                state["real_interactions"] += replayed
+            state["truth_real_interactions"] = state.get("truth_real_interactions", 0) + int(
+                values.pop("reward/truth_interactions"))
+            values["reward/truth_real_interactions"] = state["truth_real_interactions"]
             values["time/step_s"] = time.perf_counter() - started
             values["train/lr"] = schedule.get_last_lr()[0]
             values["rollout/real_interactions"] = state["real_interactions"]
@@ -303,12 +318,15 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
 def rl_step(env: VectorEnv, policy, reward: Reward, draw_starts: Callable[[int, torch.Generator], list[Start]],
             config: RLConfig, sampler: torch.Generator, actions: torch.Generator, optimizer: torch.optim.Optimizer,
             schedule: torch.optim.lr_scheduler.LRScheduler, reference=None, anchor: ImitationAnchor | None = None,
-            critic: CallCritic | None = None, every_frame: bool = True
+            critic: CallCritic | None = None, every_frame: bool = True, sight: RewardSight | None = None
             ) -> tuple[Rollouts | None, torch.Tensor | None, dict[str, float]]:
     """One RL step, from start states to the policy update.
 
     1. Draw B start states and roll the policy out G times from each, at the rollout temperature.
-    2. Score every rollout with the reward, one group (one start state) at a time.
+    2. Score every rollout with the reward, one group (one start state) at a time, on the video
+       the reward sees (`sight`: the rollouts' own, or their actions replayed in another world).
+       In the first round, measure the reward against the real outcome where it is known
+       (``reward/agreement``...; `gymnast.rl.sight`).
     3. Dynamic sampling: keep the groups with something to learn from, refilling from fresh starts
        for at most `max_rounds` rounds. A binary reward keeps a group when its success rate lies in
        [keep_low, keep_high]; a continuous one (dense, verified) when its rewards differ at all.
@@ -329,18 +347,22 @@ def rl_step(env: VectorEnv, policy, reward: Reward, draw_starts: Callable[[int, 
             shuffles with `actions`.
         every_frame: False when neither the reward nor a video reads the frames inside a chunk: a
             simulator then renders only the frames the policy reads (`collect_rollouts`).
+        sight: what the reward sees and where the truth it is held to comes from; None: the
+            rollouts' own video, no truth measured.
 
     Returns:
         (the kept rollouts or None, their (R,) scores or None, metrics), the metrics including
         ``rollout/interactions``: the actions taken in every round, the replays that restored its
-        keyframes included.
+        keyframes included; ``rollout/replay_interactions``: those the reward's replays took;
+        ``reward/truth_interactions``: the real actions spent measuring the truth.
     """
     groups, size = config.starts_per_step, config.group_size
     per_call = config.credit != "rollout"
     kept: list[Rollouts] = []
     kept_scores: list[torch.Tensor] = []
     kept_steps: list[torch.Tensor] = []  # (G, T) each, with per-call credit
-    values: dict[str, float] = {"rollout/interactions": 0, "time/rollout_s": 0.0, "time/policy_s": 0.0,
+    values: dict[str, float] = {"rollout/interactions": 0, "rollout/replay_interactions": 0,
+                                "reward/truth_interactions": 0, "time/rollout_s": 0.0, "time/policy_s": 0.0,
                                 "time/reward_s": 0.0}
     for round_ in range(config.max_rounds):
         starts = draw_starts(groups, sampler)
@@ -353,11 +375,13 @@ def rl_step(env: VectorEnv, policy, reward: Reward, draw_starts: Callable[[int, 
         values["time/rollout_s"] += time.perf_counter() - began
         values["time/policy_s"] += timer.get("policy_s", 0.0)
         began = time.perf_counter()
+        seen, replayed = sight.seen(rollouts) if sight is not None else (rollouts, 0)
+        values["rollout/replay_interactions"] += replayed
         if per_call:
-            steps = score_groups(reward, rollouts, size, per_step=True)  # (R, T)
+            steps = score_groups(reward, seen, size, per_step=True)  # (R, T)
             scores = torch.nanmean(steps, dim=1)  # what score() gives
         else:
-            scores = score_groups(reward, rollouts, size)  # (R,)
+            scores = score_groups(reward, seen, size)  # (R,)
         values["time/reward_s"] += time.perf_counter() - began
         # A keyframe is restored by replaying its prefix in the env the rollout runs in.
         values["rollout/interactions"] += int(rollouts.lengths.sum()) + size * sum(len(s.prefix) for s in starts)
@@ -365,8 +389,14 @@ def rl_step(env: VectorEnv, policy, reward: Reward, draw_starts: Callable[[int, 
             finite = scores[torch.isfinite(scores)]
             values |= {"reward/mean": finite.mean().item() if len(finite) else float("nan"),
                        "reward/std": finite.std().item() if len(finite) > 1 else float("nan"),
-                       "rollout/success": torch.nanmean(verdicts(rollouts, scores, reward)).item(),
+                       "rollout/success": torch.nanmean(verdicts(seen, scores, reward)).item(),
                        "rollout/length": rollouts.lengths.float().mean().item()}
+            if sight is not None:
+                began = time.perf_counter()
+                truth, spent = sight.truth(rollouts, seen, size)
+                values["reward/truth_interactions"] += spent
+                values |= reward_truth_metrics(reward_verdicts(reward, seen, scores, size), truth, scores, size)
+                values["time/truth_s"] = time.perf_counter() - began
             if rollouts.disagreement is not None:
                 values |= disagreement_metrics(rollouts, config)
         grouped = scores.view(groups, size)  # (B, G)
@@ -382,7 +412,7 @@ def rl_step(env: VectorEnv, policy, reward: Reward, draw_starts: Callable[[int, 
                 kept_steps.append(steps[index])
         # The kept groups are copies: the round's frames (gigabytes with several cameras) go now,
         # not when the next round's are already collected beside them.
-        del rollouts
+        del rollouts, seen
         if len(kept) == groups:
             break
     values |= {"rollout/kept_groups": len(kept), "rollout/rounds": round_ + 1}
@@ -508,8 +538,8 @@ def write_summary(out: Path, run_spec: RLRun, config: RLConfig, state: dict) -> 
     """
     first, last = state["curve"][0], state["curve"][-1]
     where = {"": "own", "_real": "own" if run_spec.env.real_interactions else "real"}
-    summary = {"env": run_spec.env.name, "reward": str(run_spec.reward), "steps": config.steps, "policy": run_spec.policy,
-               "wm": run_spec.wm}
+    summary = {"env": run_spec.env.name, "reward": str(run_spec.reward), "reward_sees": run_spec.to_json()["reward_sees"],
+               "steps": config.steps, "policy": run_spec.policy, "wm": run_spec.wm}
     for suffix, env in where.items():
         for moment, point in (("start", first), ("end", last)):
             summary[f"{moment}{suffix}_success"] = point.get(f"eval/{env}_success")
@@ -519,6 +549,7 @@ def write_summary(out: Path, run_spec: RLRun, config: RLConfig, state: dict) -> 
         "real_interactions": state["real_interactions"],
         "eval_real_interactions": state["eval_real_interactions"],
         "watch_real_interactions": state["watch_real_interactions"],
+        "truth_real_interactions": state.get("truth_real_interactions", 0),
         "reset_frames": state.get("reset_frames", 0),
         "wall_s": state["wall_s"],
         "curve": state["curve"],

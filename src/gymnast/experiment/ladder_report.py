@@ -1,0 +1,174 @@
+"""The learning ladder's report: OUT/summary.json, OUT/ladder.md and two plots, from the rungs' runs.
+
+Everything is read from each rung's RUN/metrics.jsonl, so a ladder still under way reports the
+steps and evaluations it has, and a rung's row says whether it finished. Per rung: real success at
+its last evaluation with the 95% Wilson interval, the curve of every evaluation, the real
+interactions it spent (training's, the truth's, the watch's and the evaluations'), the
+reward-hacking watch at every evaluation, and `agreement_by_step`: how often the reward the policy
+trained on agreed with the real outcome of the same rollouts at each step (`gymnast.rl.sight`).
+`write_ladder_index` gathers several ladders (regimes, task sets) into one summary.json.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from gymnast.experiment.formatting import pct
+from gymnast.experiment.ladder import RUNGS, Rung, rung_dir
+from gymnast.experiment.plots import _figure, _save
+from gymnast.rl.config import RLConfig
+from gymnast.utils.atomic import read_json, write_bytes, write_json
+from gymnast.utils.metrics import read_metrics
+
+TRUTH = ("agreement", "false_success", "missed_success", "truth_success", "truth_signal", "truth_rollouts")
+"""The ``reward/`` metrics of each step that `agreement_by_step` keeps."""
+WATCH = ("agreement", "false_success", "imagined_success", "real_success")
+"""The ``eval/watch_`` metrics kept at each watch."""
+
+
+def rung_record(rung: Rung, run: Path, steps: int) -> dict | None:
+    """Rung `rung`'s figures from its run directory, or None before its first evaluation."""
+    lines = read_metrics(run)
+    # A rung in the real world evaluates itself there ("own"); the others also in the real world.
+    real = "eval/own" if rung.env.real_interactions else "eval/real"
+    curve = [_evaluation(line, real) for line in lines if f"{real}_success" in line]
+    if not curve:
+        return None
+    last = curve[-1]
+    by_step = [{"step": line["step"], **{name: line[f"reward/{name}"] for name in TRUTH if f"reward/{name}" in line},
+                "verdict_success": line.get("rollout/success")}
+               for line in lines if "reward/truth_rollouts" in line]
+    watch = [{"step": line["step"], **{name: line[f"eval/watch_{name}"] for name in WATCH if f"eval/watch_{name}" in line}}
+             for line in lines if "eval/watch_real_success" in line]
+    spent = {key: max([line[f"{prefix}"] for line in lines if prefix in line], default=0) for key, prefix in (
+        ("real_interactions", "rollout/real_interactions"), ("truth_real_interactions", "reward/truth_real_interactions"),
+        ("watch_real_interactions", "eval/watch_real_interactions"), ("eval_real_interactions", "eval/real_interactions"))}
+    done = max((line["step"] for line in lines if "train/lr" in line), default=0)
+    return {"what": rung.what, "env": rung.env.name, "reward": rung.reward,
+            "reward_sees": rung.sees.name if rung.sees else "own",
+            "success": last["success"], "ci_low": last["ci_low"], "ci_high": last["ci_high"],
+            "episodes": last["episodes"], "step": last["step"], "start_success": curve[0]["success"],
+            **spent, "steps_done": done, "finished": done >= steps and last["step"] >= steps,
+            "agreement_by_step": by_step, "curve": curve, "watch": watch}
+
+
+def _evaluation(line: dict, prefix: str) -> dict:
+    tasks = {key.removeprefix(f"{prefix}_success/"): value for key, value in line.items()
+             if key.startswith(f"{prefix}_success/")}
+    return {"step": line["step"], "success": line[f"{prefix}_success"], "ci_low": line[f"{prefix}_ci_low"],
+            "ci_high": line[f"{prefix}_ci_high"], "episodes": line[f"{prefix}_episodes"], "tasks": tasks}
+
+
+def ladder_summary(out: Path, config: RLConfig) -> dict:
+    """The ladder's summary.json: ``sft`` (every rung's step-0 evaluation) and one entry per rung of
+    OUT that has evaluated, in the ladder's order."""
+    summary: dict = {}
+    for rung in RUNGS.values():
+        record = rung_record(rung, rung_dir(out, rung), config.steps)
+        if record is None:
+            continue
+        if "sft" not in summary:
+            first = record["curve"][0]
+            summary["sft"] = {"what": "the starting policy (every rung's step-0 evaluation)",
+                              "success": first["success"], "ci_low": first["ci_low"], "ci_high": first["ci_high"],
+                              "episodes": first["episodes"], "real_interactions": 0, "agreement_by_step": [],
+                              "curve": [first]}
+        summary[rung.name] = record
+    return summary
+
+
+def mean_agreement(record: dict, key: str = "agreement") -> float | None:
+    """A rung's `key` averaged over the steps that measured it (None where none did)."""
+    values = [row[key] for row in record["agreement_by_step"] if row.get(key) is not None]
+    return sum(values) / len(values) if values else None
+
+
+def ladder_table(summary: dict) -> str:
+    """The ladder as a markdown table, one row per rung."""
+    rows = ["| rung | real success [95% CI] | from | agreement (first -> last step) | false successes | "
+            "signal | real interactions (training) | steps |", "|---|---|---|---|---|---|---|---|"]
+    for name, record in summary.items():
+        if name == "sft":
+            rows.append(f"| sft | {pct(record['success'])} [{pct(record['ci_low'])}, {pct(record['ci_high'])}] | | | | "
+                        f"| 0 | |")
+            continue
+        agreement = [row["agreement"] for row in record["agreement_by_step"] if row.get("agreement") is not None]
+        moved = f"{pct(agreement[0])} -> {pct(agreement[-1])}" if agreement else "n/a"
+        false = mean_agreement(record, "false_success")
+        signal = mean_agreement(record, "truth_signal")
+        rows.append(f"| {name} | {pct(record['success'])} [{pct(record['ci_low'])}, {pct(record['ci_high'])}] | "
+                    f"{pct(record['start_success'])} | {moved} | {'n/a' if false is None else pct(false)} | "
+                    f"{'n/a' if signal is None else f'{signal:+.2f}'} | {record['real_interactions']:,} | "
+                    f"{record['steps_done']}{'' if record['finished'] else ' (under way)'} |")
+    return "\n".join(rows)
+
+
+def write_ladder_report(out: Path, config: RLConfig) -> dict:
+    """Writes OUT/summary.json, OUT/ladder.md, OUT/curves.png and OUT/agreement.png; returns the summary."""
+    summary = ladder_summary(out, config)
+    write_json(out / "summary.json", summary)
+    if len(summary) > 1:
+        plot_ladder_curves(summary, out / "curves.png")
+        plot_ladder_agreement(summary, out / "agreement.png")
+    lines = ["# The learning ladder", "",
+             f"{config.steps} GRPO steps of {config.starts_per_step} x {config.group_size} rollouts on {config.tasks}, "
+             f"real success on {config.eval_episodes} evaluation seeds per task (95% Wilson intervals). Agreement: how "
+             "often the reward's verdict equals the real outcome of the same rollouts (first and last step measured); "
+             "false successes: the share of its successes that fail for real (mean over steps); signal: the "
+             "correlation of its group advantages with the real outcomes (mean over steps).", "",
+             ladder_table(summary), "", "| rung | what it swaps |", "|---|---|",
+             *[f"| {name} | {RUNGS[name].what} |" for name in summary if name in RUNGS], "",
+             "Plots: curves.png (real success by step), agreement.png (agreement by step).", ""]
+    write_bytes(out / "ladder.md", "\n".join(lines).encode())
+    return summary
+
+
+def write_ladder_index(root: Path) -> dict:
+    """ROOT/summary.json: every ladder under ROOT (a summary.json beside a ladder.md), nested by its
+    path, e.g. ROOT/scarce/mt10 as ``{"scarce": {"mt10": {...}}}``."""
+    index: dict = {}
+    for report in sorted(root.rglob("ladder.md")):
+        where = report.parent.relative_to(root).parts
+        if not where:
+            continue
+        node = index
+        for part in where[:-1]:
+            node = node.setdefault(part, {})
+        node[where[-1]] = read_json(report.parent / "summary.json")
+    write_json(root / "summary.json", index)
+    return index
+
+
+def plot_ladder_curves(summary: dict, path: Path) -> Path:
+    """Real success against RL step, one line per rung, SFT as a horizontal line."""
+    plt, figure, axes = _figure(8.0, 5.2)
+    for name, record in summary.items():
+        if name == "sft":
+            axes.axhline(record["success"], color="grey", linestyle="--", label="SFT")
+            continue
+        steps = [point["step"] for point in record["curve"]]
+        axes.plot(steps, [point["success"] for point in record["curve"]], marker="o", label=name)
+        axes.fill_between(steps, [p["ci_low"] for p in record["curve"]], [p["ci_high"] for p in record["curve"]],
+                          alpha=0.1)
+    axes.set_xlabel("RL step")
+    axes.set_ylabel("real-world success")
+    axes.set_ylim(0, 1.05)
+    axes.set_title("The learning ladder: real success by step (95% CI)", fontsize=10)
+    axes.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.0, 1.0))
+    return _save(plt, figure, path)
+
+
+def plot_ladder_agreement(summary: dict, path: Path) -> Path:
+    """Each rung's agreement of its reward with the real outcome, step by step."""
+    plt, figure, axes = _figure(8.0, 5.2)
+    for name, record in summary.items():
+        points = [row for row in record["agreement_by_step"] if row.get("agreement") is not None]
+        if points:
+            axes.plot([row["step"] for row in points], [row["agreement"] for row in points], marker=".", label=name)
+    axes.set_xlabel("RL step")
+    axes.set_ylabel("reward verdict = real outcome")
+    axes.set_ylim(0, 1.05)
+    axes.set_title("Does the reward still tell the truth as the policy moves?", fontsize=10)
+    axes.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.0, 1.0))
+    return _save(plt, figure, path)
+

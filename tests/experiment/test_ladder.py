@@ -1,0 +1,75 @@
+"""`gymnast ladder` end to end at the debug size, with the committed models: one part swapped per
+rung, the real outcome held against each rung's reward at every step, reruns that continue."""
+
+import json
+from pathlib import Path
+
+import pytest
+
+from gymnast.cli import main
+from gymnast.experiment.ladder import RUNGS, LadderInputs, parse_rungs
+from gymnast.experiment.ladder_report import write_ladder_index
+from gymnast.utils.metrics import read_metrics
+
+RESULTS = Path(__file__).resolve().parents[2] / "results"
+POLICY, WORLD_MODEL, JUDGE = RESULTS / "sft" / "policy", RESULTS / "world_model" / "wm", RESULTS / "judge" / "one_camera" / "judge"
+
+RUNG_KEYS = {"success", "ci_low", "ci_high", "episodes", "real_interactions", "agreement_by_step", "curve", "watch"}
+
+
+def _ladder(out, *rungs, models=True):
+    args = ["ladder", "--out", str(out), "--preset", "debug", "--rungs", ",".join(rungs)]
+    return args + (["--policy", str(POLICY), "--wm", str(WORLD_MODEL), "--judge", str(JUDGE)] if models else [])
+
+
+def test_the_ladder_swaps_one_part_per_rung_and_holds_each_reward_to_the_real_outcome(tmp_path, capsys):
+    out = tmp_path / "ladder" / "scarce" / "reach"
+    main(_ladder(out, "r3_imagined_sight", "r2_imagined_verdict", "r4_imagined") + ["--index", str(tmp_path / "ladder")])
+    summary = json.loads((out / "summary.json").read_text())
+    assert list(summary) == ["sft", "r2_imagined_verdict", "r3_imagined_sight", "r4_imagined"]
+    for name in ("r2_imagined_verdict", "r3_imagined_sight", "r4_imagined"):
+        record = summary[name]
+        assert RUNG_KEYS <= record.keys() and record["finished"]
+        assert [point["step"] for point in record["curve"]] == [0, 2]
+        assert record["curve"][0]["success"] == summary["sft"]["success"]  # the same policy on the same seeds
+        # every step says how its reward agreed with the real outcome of the same rollouts
+        assert [row["step"] for row in record["agreement_by_step"]] == [1, 2]
+        assert all(row["truth_rollouts"] > 0 and "agreement" in row for row in record["agreement_by_step"])
+    r2, r3, r4 = (summary[name] for name in ("r2_imagined_verdict", "r3_imagined_sight", "r4_imagined"))
+    assert r2["real_interactions"] > 0 and r2["truth_real_interactions"] == 0  # acts for real: the truth is free
+    assert r3["real_interactions"] > 0  # its reward replays the imagined actions for real
+    assert all(row["agreement"] == 1.0 for row in r3["agreement_by_step"])  # its reward is the truth
+    assert r4["real_interactions"] == 0 and r4["truth_real_interactions"] > 0  # the truth measured apart
+    assert [row["step"] for row in r4["watch"]] == [1, 2]
+    saved = json.loads((out / "r2_imagined_verdict" / "config.json").read_text())["run"]
+    assert saved["env"] == "real" and saved["reward_sees"] == "imagined" and saved["reward"] == f"judge:{JUDGE}"
+    assert (out / "ladder.md").is_file() and (out / "curves.png").is_file() and (out / "agreement.png").is_file()
+    index = json.loads((tmp_path / "ladder" / "summary.json").read_text())
+    assert index["scarce"]["reach"]["r4_imagined"] == r4
+    assert "r4_imagined" in capsys.readouterr().out
+
+    # A rerun finishes nothing twice; another rung joins the same ladder and its report.
+    before = {name: len(read_metrics(out / name)) for name in ("r2_imagined_verdict", "r4_imagined")}
+    main(_ladder(out, "r0_real", "r4_imagined", models=False))
+    assert {name: len(read_metrics(out / name)) for name in before} == before
+    summary = json.loads((out / "summary.json").read_text())
+    assert list(summary) == ["sft", "r0_real", "r2_imagined_verdict", "r3_imagined_sight", "r4_imagined"]
+    assert summary["r0_real"]["real_interactions"] > 0
+    assert write_ladder_index(tmp_path / "ladder")["scarce"]["reach"]["r0_real"] == summary["r0_real"]
+
+
+def test_a_rung_whose_model_is_missing_is_refused_before_any_rung_trains(tmp_path, capsys):
+    out = tmp_path / "ladder"
+    with pytest.raises(SystemExit):
+        main(["ladder", "--out", str(out), "--preset", "debug", "--policy", str(POLICY), "--rungs", "r0_real,r4_imagined"])
+    assert "--wm RUN" in capsys.readouterr().err
+    assert not (out / "r0_real").exists()
+    with pytest.raises(ValueError, match="--state RUN"):
+        LadderInputs(policy="p", wm="w").run_of(RUNGS["r4s_imagined_state"])
+
+
+def test_rungs_are_named_and_run_in_the_order_given():
+    assert [rung.name for rung in parse_rungs("r3_imagined_sight,r0_real")] == ["r3_imagined_sight", "r0_real"]
+    assert parse_rungs("all") == tuple(RUNGS.values())
+    with pytest.raises(ValueError, match="r1_judge_real"):
+        parse_rungs("r9")

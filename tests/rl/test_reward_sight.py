@@ -1,0 +1,101 @@
+"""What the reward sees (the rollouts' own video, or their actions replayed in another world) and
+how its verdicts are held to the real outcome, against the real simulator and the committed models."""
+
+import math
+
+import pytest
+import torch
+from rl_helpers import JUDGE, POLICY, WORLD_MODEL
+
+from gymnast.config import EnvConfig
+from gymnast.envs.factory import EnvFactory
+from gymnast.envs.kinds import IMAGINED, REAL
+from gymnast.policy.load import load_policy
+from gymnast.reward.spec import RewardSpec
+from gymnast.rl.config import RLRun
+from gymnast.rl.rollout import collect_rollouts, dataset_starts
+from gymnast.rl.sight import RewardSight, reward_truth_metrics
+from gymnast.world_model.base import load_world_model
+
+CONFIG = EnvConfig(image_size=96, horizon=30)
+
+
+@pytest.fixture(scope="module")
+def imagined_and_real(rl_dataset):
+    """Two groups of 2 rollouts of the committed policy, imagined and real, from the same starts."""
+    policy = load_policy(POLICY)
+    starts = [start for start in dataset_starts(rl_dataset) for _ in range(2)]
+    envs = EnvFactory(IMAGINED, policy.chunk_size, CONFIG, "mild", workers=1, world_model=load_world_model(WORLD_MODEL))
+    try:
+        imagined = collect_rollouts(envs.get(IMAGINED, len(starts)), policy, starts, 1.0, torch.Generator().manual_seed(0))
+        real = collect_rollouts(envs.get(REAL, len(starts)), policy, starts, 1.0, torch.Generator().manual_seed(0))
+        yield envs, imagined, real
+    finally:
+        envs.close()
+
+
+def test_imagined_actions_replayed_for_real_carry_the_simulators_outcome_and_its_frames(imagined_and_real):
+    envs, imagined, _ = imagined_and_real
+    assert imagined.success is None
+    seen, spent = RewardSight(envs, IMAGINED, sees=REAL).seen(imagined)
+    assert seen.success is not None and seen.env_rewards is not None
+    assert spent > 0  # real actions taken to replay them
+    assert seen.frames.shape[:2] == (len(imagined.starts), imagined.actions.shape[1] + 1)
+    assert torch.equal(seen.actions, imagined.actions) and torch.equal(seen.tokens, imagined.tokens)
+    assert not torch.equal(seen.frames[:, 1:], imagined.frames[:, 1:])  # the real world's frames, not the imagined ones
+
+
+def test_real_actions_re_imagined_have_frames_and_no_outcome(imagined_and_real):
+    envs, _, real = imagined_and_real
+    seen, _ = RewardSight(envs, REAL, sees=IMAGINED).seen(real)
+    assert seen.success is None and seen.env_rewards is None
+    assert seen.frames.dtype == torch.uint8 and seen.frames.shape[1] == real.actions.shape[1] + 1
+    # from the same real start frame (as the world model reproduces it)
+    assert (seen.frames[:, 0].float() - real.frames[:, 0].float()).abs().mean() < 8
+
+
+def test_the_truth_is_free_where_rollouts_are_real_and_replayed_for_a_few_groups_in_imagination(imagined_and_real):
+    envs, imagined, real = imagined_and_real
+    truth, spent = RewardSight(envs, REAL).truth(real, real, size=2)
+    assert spent == 0 and torch.equal(truth, real.success.float())
+    truth, spent = RewardSight(envs, IMAGINED, truth_groups=1).truth(imagined, imagined, size=2)
+    assert spent > 0 and int(torch.isfinite(truth).sum()) == 2  # one group of two measured
+    truth, spent = RewardSight(envs, IMAGINED).truth(imagined, imagined, size=2)
+    assert spent == 0 and not torch.isfinite(truth).any()
+
+
+def test_a_sight_that_replays_the_rollouts_in_their_own_world_is_refused(imagined_and_real):
+    envs = imagined_and_real[0]
+    with pytest.raises(ValueError, match="leave --reward-sees out"):
+        RewardSight(envs, REAL, sees=REAL)
+
+
+def test_agreement_false_and_missed_successes_are_counted_as_by_hand():
+    verdict = torch.tensor([1.0, 1.0, 0.0, 0.0, 1.0, float("nan")])
+    truth = torch.tensor([1.0, 0.0, 0.0, 1.0, float("nan"), 1.0])
+    scores = torch.tensor([0.9, 0.8, 0.1, 0.2, 0.7, 0.5])
+    values = reward_truth_metrics(verdict, truth, scores, size=2)
+    # measured and judged: rollouts 0-3 -> agreement 2/4; said success 0, 1 -> one false of two;
+    # real successes 0, 3 -> one missed of two
+    assert values["reward/truth_rollouts"] == 5
+    assert values["reward/agreement"] == 0.5
+    assert values["reward/false_success"] == 0.5 and values["reward/missed_success"] == 0.5
+    assert values["reward/truth_success"] == pytest.approx(3 / 5)
+
+
+def test_the_truth_signal_is_the_correlation_of_group_advantages_with_real_outcomes():
+    scores = torch.tensor([0.9, 0.1, 0.2, 0.8, 0.3, 0.7])  # groups of 2
+    truth = torch.tensor([1.0, 0.0, 0.0, 1.0, 1.0, 0.0])  # agrees, agrees, disagrees
+    advantages = torch.tensor([1.0, -1.0, -1.0, 1.0, -1.0, 1.0]) / math.sqrt(2)
+    centred = torch.tensor([0.5, -0.5, -0.5, 0.5, 0.5, -0.5])
+    expected = torch.corrcoef(torch.stack([advantages, centred]))[0, 1].item()
+    values = reward_truth_metrics(scores.round(), truth, scores, size=2)
+    assert values["reward/truth_signal"] == pytest.approx(expected) and expected == pytest.approx(1 / 3)
+
+
+def test_what_the_reward_sees_is_saved_with_the_run_and_old_runs_saw_their_own():
+    run = RLRun(policy="p", env=REAL, reward=RewardSpec.judge(JUDGE), wm="w", reward_sees=IMAGINED)
+    assert RLRun.from_json(run.to_json()) == run
+    saved = run.to_json()
+    del saved["reward_sees"]
+    assert RLRun.from_json(saved).reward_sees is None
