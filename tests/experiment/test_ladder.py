@@ -7,7 +7,8 @@ from pathlib import Path
 import pytest
 
 from gymnast.cli import main
-from gymnast.experiment.ladder import RUNGS, LadderInputs, parse_rungs
+from gymnast.experiment.ladder import LadderInputs, parse_rungs
+from gymnast.experiment.rungs import RUNGS
 from gymnast.experiment.ladder_report import write_ladder_index
 from gymnast.utils.metrics import read_metrics
 

@@ -32,52 +32,13 @@ import logging
 from dataclasses import dataclass
 from pathlib import Path
 
-from gymnast.envs.kinds import IMAGINED, REAL, EnvKind
+from gymnast.experiment.ladder_report import write_ladder_report
+from gymnast.experiment.rungs import RUNGS, Rung, rung_dir
 from gymnast.reward.spec import RewardSpec
 from gymnast.rl.config import RL_PRESETS, RLConfig, RLRun
 from gymnast.utils.atomic import read_json
 
 logger = logging.getLogger(__name__)
-
-REWARDS = ("sim", "judge", "state")
-"""Who gives a rung's reward: the simulator's success, the learned judge or the state model."""
-
-
-@dataclass(frozen=True)
-class Rung:
-    """One rung: which env the policy acts in, who rewards it and what that reward sees.
-
-    Attributes:
-        name: the rung's key in summary.json and its run directory.
-        env: where the rollouts run (and so what the policy sees).
-        reward: who gives the reward (one of `REWARDS`).
-        sees: where the reward's video comes from (None: the rollouts' own).
-        what: the rung in words, for the report.
-    """
-
-    name: str
-    env: EnvKind
-    reward: str
-    sees: EnvKind | None
-    what: str
-
-    @property
-    def needs_world_model(self) -> bool:
-        return self.env.imagined or (self.sees is not None and self.sees.imagined)
-
-
-RUNGS: dict[str, Rung] = {rung.name: rung for rung in (
-    Rung("r0_real", REAL, "sim", None, "reality: rendered frames, real dynamics, the simulator's success"),
-    Rung("r1_judge_real", REAL, "judge", None, "the judge's verdict on the real video"),
-    Rung("r1s_state_real", REAL, "state", None, "the state model's reward on the real rollouts"),
-    Rung("r2_imagined_verdict", REAL, "judge", IMAGINED,
-         "the policy acts for real; the judge scores the world model's re-imagining of the same actions"),
-    Rung("r3_imagined_sight", IMAGINED, "sim", REAL,
-         "the policy acts on imagined frames; its actions replayed for real give the simulator's success"),
-    Rung("r4_imagined", IMAGINED, "judge", None, "imagination: imagined frames, the judge on imagined video"),
-    Rung("r4s_imagined_state", IMAGINED, "state", None, "imagination with the state model's reward"),
-)}
-
 
 @dataclass(frozen=True)
 class LadderInputs:
@@ -145,10 +106,6 @@ LADDER_PRESETS: dict[str, RLConfig] = {
 }
 
 
-def rung_dir(out: Path, rung: Rung) -> Path:
-    return out / rung.name
-
-
 def run_rung(rung: Rung, inputs: LadderInputs, config: RLConfig, out: Path, progress: bool = True) -> dict:
     """Trains `rung` in OUT/<rung> (resuming it where it has a checkpoint; a finished one is read
     back) and returns its RL summary."""
@@ -174,7 +131,6 @@ def run_ladder(inputs: LadderInputs, config: RLConfig, rungs: tuple[Rung, ...], 
     Each rung's run is checked before any trains: a missing model is refused at once, not after
     hours of the rungs before it.
     """
-    from gymnast.experiment.ladder_report import write_ladder_report
     from gymnast.rl.evaluate import shared_evaluations
 
     for rung in rungs:

@@ -14,7 +14,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from gymnast.experiment.formatting import pct
-from gymnast.experiment.ladder import RUNGS, Rung, rung_dir
+from gymnast.experiment.rungs import RUNGS, Rung, rung_dir
 from gymnast.experiment.plots import _figure, _save
 from gymnast.rl.config import RLConfig
 from gymnast.utils.atomic import read_json, write_bytes, write_json
