@@ -87,6 +87,8 @@ def test_chunks_equal_plain_episodes_stepped_with_the_same_actions(env, plain):
             np.testing.assert_array_equal(step_infos["frames"][i], expected)
             np.testing.assert_array_equal(step_obs["image"][i], expected[-1])
             np.testing.assert_array_equal(step_infos["rewards"][i], [r[1] for r in results])
+            # the full simulator state after each action, as the plain env's info gives it
+            np.testing.assert_allclose(step_infos["env_states"][i], [r[4]["env_state"] for r in results], rtol=1e-6)
             assert rewards[i] == pytest.approx(sum(r[1] for r in results))
             assert step_infos["executed"][i] == K and not terminated[i] and not truncated[i]
         assert steps[-1][4]["step"][i] == 2 * K
@@ -158,7 +160,7 @@ def test_a_successful_episode_terminates_and_is_frozen_while_the_others_run_on(e
     assert success_infos["executed"][0] == n - (len(padded) - 2) * K
     assert not any(s[2][0] for s in steps[:-2])  # not before
     assert terminated[0] and not truncated[0] and infos["success"][0] and reward[0] == 0.0
-    assert infos["executed"][0] == 0 and np.isnan(infos["rewards"][0]).all()
+    assert infos["executed"][0] == 0 and np.isnan(infos["rewards"][0]).all() and np.isnan(infos["env_states"][0]).all()
     np.testing.assert_array_equal(infos["frames"][0], np.repeat(success_infos["frames"][0, -1:], K, axis=0))
     assert infos["executed"][1] > 0 and infos["step"][1] == min(len(padded) * K, HORIZON)  # push ran on
 

@@ -99,3 +99,17 @@ def test_the_report_reads_the_judges_ranking_apart_from_its_threshold_when_measu
     text = report_markdown(summary, plots)
     assert ("ranks a success above a failure 98.8% of the time (AUC); the best threshold for these very cases "
             "would pass at least 95.0% of the successes at FPR 0.05.") in text
+
+
+def test_the_ladders_two_ends_are_one_sentence_where_the_demos_size_cannot_tell_them_apart():
+    summary = json.loads(COMMITTED_HEADLINE.read_text())
+    summary["arms"] = {name: row | _row(8, 20) for name, row in summary["arms"].items()}
+    summary["goals"] = experiment_goals(summary["arms"], None, 0.5, summary["watch_false_success"])
+    summary["weak_tasks"] = None
+    text = format_table(summary)
+    assert "R0, reality" in text and "R4, imagination" in text
+    assert "cannot be told apart" in text and "Reality teaches" not in text
+    # Reality apart from SFT, imagination not: the sentence points to the rungs between them.
+    summary["arms"]["rl_real"] |= _row(19, 20)
+    text = format_table(summary)
+    assert "cannot be told apart" not in text and "Reality teaches and imagination does not" in text

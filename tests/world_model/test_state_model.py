@@ -77,6 +77,25 @@ def test_the_reward_head_scores_rollouts_from_their_start_states_and_actions(sta
         reward.score(frames, ["reach the goal"] * 4, RewardContext(start_state=states[:, :3], actions=actions))
 
 
+def test_on_a_simulators_rollouts_the_reward_head_reads_the_real_states_held_after_the_end(state_run):
+    reward = StateReward(load_state_model(state_run))
+    model, words = reward.models[0], ["reach the goal"] * 2
+    start = torch.randn(2, model.config.state_dim)
+    real = torch.randn(2, 5, model.config.state_dim)
+    real[1, 3:] = float("nan")  # the second rollout ended (a success) after 3 actions
+    context = RewardContext(start_state=start, actions=torch.zeros(2, 5, 4), env_states=real)
+    read = reward.imagine(words, context)[0]
+    held = real.clone()
+    held[1, 3:] = real[1, 2]  # the world stays where the episode ended
+    expected = model.read(start, held, reward.encoder(words))
+    assert torch.equal(read.states, held) and torch.allclose(read.rewards, expected.rewards)
+    imagined = reward.imagine(words, RewardContext(start_state=start, actions=torch.zeros(2, 5, 4)))[0]
+    assert not torch.allclose(imagined.states, held)  # without real states, the model's own dynamics
+    with pytest.raises(ValueError, match="simulator's states"):
+        reward.score(torch.zeros(2, 6, 8, 8, 3, dtype=torch.uint8), words,
+                     RewardContext(start_state=start, actions=torch.zeros(2, 5, 4), env_states=real[..., :3]))
+
+
 def test_sizes_that_cannot_build_a_model_are_refused():
     with pytest.raises(ValueError, match="hidden"):
         StateModelConfig(hidden=0)

@@ -203,6 +203,8 @@ class ChunkResult:
         success: (R,) bool a simulator's success at any step so far, or None.
         disagreement: (R, k) float32 a world-model ensemble's disagreement on each frame, or None
             (simulators and single world models report none).
+        env_states: (R, k, E) float32 a simulator's full state after each action (NaN where none
+            was executed), or None (a world model has none).
     """
 
     observation: np.ndarray
@@ -213,6 +215,7 @@ class ChunkResult:
     rewards: np.ndarray | None
     success: np.ndarray | None
     disagreement: np.ndarray | None = None
+    env_states: np.ndarray | None = None
 
 
 def run_batch(env: VectorEnv, actor: BatchActor, options: dict[str, Any], seed: int = 0,
@@ -248,7 +251,8 @@ def run_batch(env: VectorEnv, actor: BatchActor, options: dict[str, Any], seed: 
         rewards = np.asarray(infos["rewards"], dtype=np.float32) if "rewards" in infos else None
         success = np.asarray(infos["success"], dtype=bool) if "success" in infos else None
         disagreement = np.asarray(infos["disagreement"], dtype=np.float32) if "disagreement" in infos else None
+        env_states = np.asarray(infos["env_states"], dtype=np.float32) if "env_states" in infos else None
         ended |= np.asarray(terminated) | np.asarray(truncated)
         calls += 1
-        yield ChunkResult(image, states, actions, frames, executed, rewards, success, disagreement)
+        yield ChunkResult(image, states, actions, frames, executed, rewards, success, disagreement, env_states)
 

@@ -41,7 +41,7 @@ from gymnast.config import EnvConfig
 from gymnast.envs.engine import EpisodeRun, play_chunk, start_episode
 from gymnast.envs.gap import get_gap
 from gymnast.envs.instructions import SPLITS
-from gymnast.envs.metaworld import ACTION_DIM, CONTROL_FPS, STATE_DIM, MetaWorldEnv
+from gymnast.envs.metaworld import ACTION_DIM, CONTROL_FPS, ENV_STATE_DIM, STATE_DIM, MetaWorldEnv
 from gymnast.envs.tasks import check_task
 from gymnast.envs.workers import Workers, parse_runner
 from gymnast.utils.memory import release_freed_memory
@@ -72,7 +72,9 @@ class _Episodes:
             counts[task] += 1
             if key not in self._envs:
                 self._envs[key] = MetaWorldEnv(task, **self._args)
-            self._episodes.append(start_episode(self._envs[key], seed, instruction, prefix=prefix))
+            # The full simulator state after every action: a reward model of states reads the real ones.
+            self._episodes.append(start_episode(self._envs[key], seed, instruction, record=("env_states",),
+                                                prefix=prefix))
         if len(self._envs) > 2 * len(self._episodes):
             used = {id(e.env) for e in self._episodes}
             for key in [key for key, env in self._envs.items() if id(env) not in used]:
@@ -90,18 +92,22 @@ class _Episodes:
         config = self._args["config"]
         frames = np.empty((b, k, config.image_size, len(config.cameras) * config.image_size, 3), np.uint8)
         rewards = np.full((b, k), np.nan)
+        env_states = np.full((b, k, ENV_STATE_DIM), np.nan, np.float32)
         executed = np.zeros(b, np.int64)
         for i, episode in enumerate(self._episodes):
             played = play_chunk(episode, actions[i], self._every_frame)
             executed[i] = len(played)
             rewards[i, : len(played)] = [reward for _, reward in played]
+            if played:
+                env_states[i, : len(played)] = episode.env_states[-len(played):]
             # Each step's frame, then the final one after an episode's end; without every_frame, all of
             # them the chunk's last (the others were not rendered).
             shown = len(played) if self._every_frame else 0
             for j, (obs, _) in enumerate(played[:shown]):
                 frames[i, j] = obs["image"]
             frames[i, shown:] = episode.obs["image"]
-        return {"frames": frames, "state": self._states(), "rewards": rewards, "executed": executed, **self._status()}
+        return {"frames": frames, "state": self._states(), "rewards": rewards, "executed": executed,
+                "env_states": env_states, **self._status()}
 
     def _states(self) -> np.ndarray:
         """(b, D) float32 each episode's robot state now (hand position and gripper)."""
@@ -136,7 +142,8 @@ class SimVectorEnv(VectorEnv):
     ``prefix_steps`` (B,) int real actions replayed to restore each start (0 for a first frame),
     ``step`` (B,) int actions taken so far (from the start), ``success`` (B,) bool succeeded at any step so far and,
     after `step`, ``frames`` (B, K, H, W, 3) uint8, ``rewards`` (B, K) float (NaN where no action
-    was executed) and ``executed`` (B,) int actions executed in the chunk.
+    was executed), ``env_states`` (B, K, 39) float32 Meta-World's full state after each action (NaN
+    where none was executed) and ``executed`` (B,) int actions executed in the chunk.
 
     Args:
         num_envs: B, episodes stepped together.
@@ -233,7 +240,7 @@ class SimVectorEnv(VectorEnv):
         actions = np.clip(actions, -1.0, 1.0)
         result = self._call("step", [(actions[s],) for s in self._slices])
         self._info.update(step=result["step"], success=result["success"])
-        infos = {**self._infos(), **{key: result[key] for key in ("frames", "rewards", "executed")}}
+        infos = {**self._infos(), **{key: result[key] for key in ("frames", "rewards", "executed", "env_states")}}
         obs = {"image": result["frames"][:, -1].copy(), "state": result["state"]}  # not a view into infos["frames"]
         rewards = np.nansum(result["rewards"], axis=1)  # (B,); 0 where nothing was executed
         return obs, rewards, result["terminated"], result["truncated"], infos

@@ -10,7 +10,7 @@ reality to imagination:
 |---|---|---|---|
 | r0_real | real | the simulator's success | the real rollout |
 | r1_judge_real | real | the judge | the real video |
-| r1s_state_real | real | the state model | the real start state and the real actions |
+| r1s_state_real | real | the state model's reward head | the real states |
 | r2_imagined_verdict | real | the judge | the world model's re-imagining of the real actions |
 | r3_imagined_sight | imagined | the simulator's success | the imagined actions replayed in the real world |
 | r4_imagined | imagined | the judge | the imagined video (World-Gymnast) |

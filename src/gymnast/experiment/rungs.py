@@ -38,7 +38,7 @@ class Rung:
 RUNGS: dict[str, Rung] = {rung.name: rung for rung in (
     Rung("r0_real", REAL, "sim", None, "reality: rendered frames, real dynamics, the simulator's success"),
     Rung("r1_judge_real", REAL, "judge", None, "the judge's verdict on the real video"),
-    Rung("r1s_state_real", REAL, "state", None, "the state model's reward on the real rollouts"),
+    Rung("r1s_state_real", REAL, "state", None, "the state model's reward head on the real states of the real rollouts"),
     Rung("r2_imagined_verdict", REAL, "judge", IMAGINED,
          "the policy acts for real; the judge scores the world model's re-imagining of the same actions"),
     Rung("r3_imagined_sight", IMAGINED, "sim", REAL,

@@ -39,6 +39,8 @@ class RewardContext:
         start_action: (B, A) float the action that led to each start (the last of its prefix; zeros
             at a first frame).
         actions: (B, T) float the actions each rollout executed (0 after its end).
+        env_states: (B, T, E) float a simulator's full state after each action (NaN after the
+            episode's end), or None where the rollout was imagined (or replayed in a world model).
     """
 
     start: torch.Tensor | None = None
@@ -48,6 +50,7 @@ class RewardContext:
     start_state: torch.Tensor | None = None
     start_action: torch.Tensor | None = None
     actions: torch.Tensor | None = None
+    env_states: torch.Tensor | None = None
 
 
 @dataclass(frozen=True)

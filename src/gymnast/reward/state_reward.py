@@ -13,6 +13,10 @@ The score is the predicted dense reward as `gymnast.reward.sim.SimDense` scores 
 the mean per-step reward in units of Meta-World's largest, each step from the first predicted
 success on counting as the largest. `verdict` gives the 0/1 reading: success predicted at any step.
 
+On a simulator's rollouts, which carry the real state after every action
+(`RewardContext.env_states`), the reward head reads those instead of imagined ones: the reward
+model on reality, without the state model's dynamics between it and the truth.
+
 With an ensemble of state models (``gymnast make-ensemble`` over `gymnast train-state` runs of
 different seeds), the predicted rewards are the members' mean, and success counts only where every
 member predicts it: an imagined success that some member does not see is treated as likely
@@ -56,7 +60,9 @@ class StateReward:
         return {} if self._disagreement is None else {"reward/state_disagreement": self._disagreement}
 
     def imagine(self, instructions: Sequence[str], context: RewardContext) -> list[StateRollout]:
-        """Each member's rollout of `context.actions` (B, T, A) from `context.start_state` (B, S).
+        """Each member's rollout of `context.actions` (B, T, A) from `context.start_state` (B, S), or,
+        where the context holds the real states (`RewardContext.env_states`), each member's reward
+        head on those.
 
         Raises:
             ValueError: the context lacks them, or their shapes do not fit the models.
@@ -71,6 +77,12 @@ class StateReward:
             raise ValueError(f"start_state {tuple(start.shape)} and actions {tuple(actions.shape)} do not fit the state "
                              f"model's (B, {expected[0]}) states and (B, T, {expected[1]}) actions")
         embedding = self.encoder(list(instructions))
+        if context.env_states is not None:
+            if context.env_states.shape[-1] != config.state_dim:
+                raise ValueError(f"the simulator's states {tuple(context.env_states.shape)} do not fit the state "
+                                 f"model's (B, T, {config.state_dim})")
+            real = _held_after_end(context.env_states.float(), start.float())  # (B, T, S)
+            return [model.read(start, real, embedding) for model in self.models]
         return [model.imagine(start, actions, embedding, context.start_action) for model in self.models]
 
     def _succeeded(self, rollouts: list[StateRollout]) -> torch.Tensor:
@@ -113,3 +125,16 @@ class StateReward:
 
     def _verdict(self, rollouts: list[StateRollout], steps: int) -> torch.Tensor:
         return self._succeeded(rollouts)[:, :steps].any(dim=1).float()
+
+
+def _held_after_end(states: torch.Tensor, start: torch.Tensor) -> torch.Tensor:
+    """(B, T, S) real states with each rollout's last state held after its end (NaN rows there),
+    the start state before its first action where it took none: the world stays where it ended."""
+    held = states.clone()
+    previous = start
+    for t in range(held.shape[1]):
+        missing = ~torch.isfinite(held[:, t]).all(dim=-1)  # (B,)
+        held[missing, t] = previous[missing]
+        previous = held[:, t]
+    return held
+

@@ -60,6 +60,8 @@ class Rollouts:
             (NaN after the end), or None (simulators and single world models report none).
         states: (R, S, D) float32 the robot state the policy was given at each call (a
             simulator's), or None (a world model imagines none).
+        env_states: (R, T, E) float32 a simulator's full state after each action (NaN after the
+            end), or None (a world model has none): what a reward model of states reads for real.
         hold: the actions each kept frame after the first stands for: 1, or K where every frame
             inside a chunk was its last one repeated (a simulator that rendered only the frames the
             policy reads), kept once: about a K-th of the memory (the frames are most of a real RL
@@ -78,6 +80,7 @@ class Rollouts:
     env_rewards: torch.Tensor | None
     disagreement: torch.Tensor | None = None
     states: torch.Tensor | None = None
+    env_states: torch.Tensor | None = None
     hold: int = 1
 
     @property
@@ -97,7 +100,7 @@ class Rollouts:
         """The rollouts at `index` (R',) int64, in that order."""
         pick = index.tolist()
         optional = {name: None if getattr(self, name) is None else getattr(self, name)[index]
-                    for name in ("success", "env_rewards", "disagreement", "states")}
+                    for name in ("success", "env_rewards", "disagreement", "states", "env_states")}
         return Rollouts(tuple(self.starts[i] for i in pick), self.observations[index], self.tokens[index],
                         self.logp[index], self.token_mask[index], self.rendered[index], self.actions[index],
                         self.lengths[index], **optional, hold=self.hold)
@@ -144,6 +147,7 @@ def collect_rollouts(
         return samples[-1].actions.numpy()
 
     seen, states, masks, frames, actions, rewards, disagreement, success = [], [], [], [], [], [], [], None
+    env_states = []
     kept_once = [False]  # for each entry of `frames`: a chunk kept as its last frame alone (the start frame is not)
     for result in run_batch(env, act, start_options(starts) | {"every_frame": every_frame}, seed):
         image, new = torch.from_numpy(result.observation), torch.from_numpy(result.frames)  # new: (R, k, H, W, 3)
@@ -160,6 +164,8 @@ def collect_rollouts(
         actions.append(torch.from_numpy(result.actions)[:, : new.shape[1]].float() * valid[:, : new.shape[1], None])
         if result.rewards is not None:
             rewards.append(torch.from_numpy(result.rewards))
+        if result.env_states is not None:
+            env_states.append(torch.from_numpy(result.env_states))
         if result.disagreement is not None:  # only where an action was executed: NaN after the end
             trusted = valid[:, : new.shape[1]]
             disagreement.append(torch.from_numpy(result.disagreement).masked_fill(~trusted, float("nan")))
@@ -179,6 +185,8 @@ def collect_rollouts(
         for padded in (rewards, disagreement):
             if padded:
                 padded.append(torch.full((count, chunk), float("nan")))
+        if env_states:
+            env_states.append(torch.full_like(env_states[-1], float("nan")))
     held = all(kept_once[1:])
     if not held:  # some chunk showed more than its last frame: every chunk gets its K frames back
         frames = [f.expand(-1, chunk, -1, -1, -1) if once else f for f, once in zip(frames, kept_once)]
@@ -196,6 +204,7 @@ def collect_rollouts(
         env_rewards=torch.cat(rewards, dim=1) if rewards else None,
         disagreement=torch.cat(disagreement, dim=1) if disagreement else None,
         states=torch.stack(states, dim=1) if states else None,
+        env_states=torch.cat(env_states, dim=1) if env_states else None,
         hold=chunk if held else 1,
     )
 
@@ -238,6 +247,7 @@ def reward_context(rollouts: Rollouts) -> RewardContext:
                                                 np.zeros(rollouts.actions.shape[-1], np.float32)
                                                 for start in rollouts.starts])),
         actions=rollouts.actions,
+        env_states=rollouts.env_states,
     )
 
 

@@ -74,7 +74,7 @@ class RewardSight:
         replay = replay_actions(self.envs.get(self.sees, len(rollouts.starts)), rollouts.starts, rollouts.actions,
                                 rollouts.lengths)
         replayed = dataclasses.replace(rollouts, rendered=replay.frames, hold=1, success=replay.success,
-                                       env_rewards=replay.rewards, disagreement=None)
+                                       env_rewards=replay.rewards, disagreement=None, env_states=None)
         return replayed, replay.interactions
 
     def truth(self, rollouts: Rollouts, seen: Rollouts, size: int) -> tuple[torch.Tensor, int]:

@@ -171,6 +171,16 @@ class StateModel(nn.Module):
         states, rewards, logits = self.unroll(start.float(), actions.float(), embedding.float(), last_action)
         return StateRollout(states, rewards, torch.sigmoid(logits))
 
+    @torch.inference_mode()
+    def read(self, start: torch.Tensor, states: torch.Tensor, embedding: torch.Tensor) -> StateRollout:
+        """The reward head on given (B, T, S) `states` (real ones) from (B, S) `start` states, with
+        success as a probability: `imagine`'s reading without its dynamics."""
+        text = self.embed_text(embedding.float())
+        steps = states.shape[1]
+        rewards, logits = self.read_reward(states.float(), start.float()[:, None].expand(-1, steps, -1),
+                                           text[:, None].expand(-1, steps, -1))
+        return StateRollout(states.float(), rewards, torch.sigmoid(logits))
+
     def spec(self) -> dict:
         """JSON-able description that `load_state_model` rebuilds the model from."""
         return asdict(self.config)

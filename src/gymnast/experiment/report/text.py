@@ -44,7 +44,31 @@ def verdict_lines(summary: dict) -> list[str]:
         (f"- WorldGym: Pearson r = {number(summary['worldgym_pearson'])}, Spearman = {number(summary['worldgym_spearman'])} over "
          f"{len(summary['worldgym'])} policies. Goal r >= 0.9: **{met[goals['worldgym_r_at_least_0.9']]}**."),
         *_weak_tasks_verdict(summary), *_dyna_verdict(summary), *_equal_budget_verdict(summary), *_watch_verdict(summary),
+        *_ladder_ends_verdict(summary),
     ]
+
+
+def _ladder_ends_verdict(summary: dict) -> list[str]:
+    """The learning ladder's two ends beside SFT (docs/rl.md "Where learning dies"): R0, RL in the
+    real world on the simulator's success, and R4, RL in imagination on the judge's verdict, with
+    how often R4's verdict held for real at its last watch; one sentence where the intervals cannot
+    tell them apart, rather than a row of identical verdicts."""
+    arms = summary["arms"]
+    sft, r0, r4 = arms["sft"], arms["rl_real"], arms["rl_wm_judge"]
+    watched = [row for row in summary.get("watch", {}).get("rl_wm_judge", []) if row.get("agreement") is not None]
+    held = (f"; at its last watch the judge's imagined verdicts held for real in {pct(watched[-1]['agreement'])} of the "
+            f"replays" if watched else "")
+    line = (f"- The learning ladder's two ends: R0, reality (RL in the real world on the simulator's success), "
+            f"{pct(r0['success'])} {ci(r0)}; R4, imagination (the judge on imagined video), {pct(r4['success'])} "
+            f"{ci(r4)}{held}; SFT {pct(sft['success'])} {ci(sft)}.")
+    apart = {name: not _overlap(arm, sft) for name, arm in (("r0", r0), ("r4", r4))}
+    if not any(apart.values()) and _overlap(r0, r4):
+        return [line + " At this size their 95% intervals overlap, so the ends cannot be told apart; `gymnast ladder "
+                "--preset full` runs every rung between them (docs/rl.md)."]
+    if apart["r0"] and not apart["r4"]:
+        return [line + " Reality teaches and imagination does not: the rungs between them (`gymnast ladder`) say "
+                "which part of imagination loses it."]
+    return [line]
 
 
 def _short_title(summary: dict, name: str) -> str:
@@ -192,8 +216,13 @@ def goal_in_words(met: bool, ahead: bool) -> str:
     return "not significant at this size" if ahead else "not met"
 
 
+def _overlap(a: dict, b: dict) -> bool:
+    """Whether the 95% intervals of two rows overlap."""
+    return a["ci_low"] <= b["ci_high"] and b["ci_low"] <= a["ci_high"]
+
+
 def _significance(a: dict, b: dict) -> str:
-    if a["ci_low"] <= b["ci_high"] and b["ci_low"] <= a["ci_high"]:
+    if _overlap(a, b):
         return "the 95% intervals overlap: no significant difference"
     return "the 95% intervals do not overlap"
 
