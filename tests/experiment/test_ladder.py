@@ -74,3 +74,27 @@ def test_rungs_are_named_and_run_in_the_order_given():
     assert parse_rungs("all") == tuple(RUNGS.values())
     with pytest.raises(ValueError, match="r1_judge_real"):
         parse_rungs("r9")
+
+
+def test_a_rung_claimed_by_a_live_process_is_left_to_it_and_a_dead_ones_claim_is_taken_over(tmp_path):
+    import socket
+    import subprocess
+
+    from gymnast.experiment.ladder import CLAIM, claimed
+
+    where = tmp_path / "r0_real"
+    with claimed(where) as mine:
+        assert mine and (where / CLAIM).read_text().split()[1] == str(__import__("os").getpid())
+        with claimed(where) as again:  # the same rung asked for twice: the second waits its turn elsewhere
+            assert not again
+    assert not (where / CLAIM).exists()  # released
+    live = subprocess.Popen(["sleep", "30"])
+    try:
+        (where / CLAIM).write_text(f"{socket.gethostname()} {live.pid}")
+        with claimed(where) as mine:
+            assert not mine
+    finally:
+        live.kill()
+        live.wait()
+    with claimed(where) as mine:  # its process has ended: the claim is stale
+        assert mine

@@ -27,8 +27,12 @@ ladder.md and plots.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import logging
+import os
+import socket
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -106,9 +110,9 @@ LADDER_PRESETS: dict[str, RLConfig] = {
 }
 
 
-def run_rung(rung: Rung, inputs: LadderInputs, config: RLConfig, out: Path, progress: bool = True) -> dict:
+def run_rung(rung: Rung, inputs: LadderInputs, config: RLConfig, out: Path, progress: bool = True) -> dict | None:
     """Trains `rung` in OUT/<rung> (resuming it where it has a checkpoint; a finished one is read
-    back) and returns its RL summary."""
+    back) and returns its RL summary; None where another process is training it (`claimed`)."""
     from gymnast.rl.train import train_rl
 
     where = rung_dir(out, rung)
@@ -117,9 +121,61 @@ def run_rung(rung: Rung, inputs: LadderInputs, config: RLConfig, out: Path, prog
         if summary.get("steps") == config.steps and summary["curve"] and summary["curve"][-1]["step"] == config.steps:
             logger.info("ladder: %s finished already", rung.name)
             return summary
-    resume = (where / "checkpoints").is_dir() and any((where / "checkpoints").iterdir())
-    logger.info("ladder: %s (%s)%s", rung.name, rung.what, ", resumed" if resume else "")
-    return train_rl(inputs.run_of(rung), where, config, resume=resume, progress=progress)
+    with claimed(where) as mine:
+        if not mine:
+            logger.info("ladder: %s is under way in another process; going on to the next rung", rung.name)
+            return None
+        resume = (where / "checkpoints").is_dir() and any((where / "checkpoints").iterdir())
+        logger.info("ladder: %s (%s)%s", rung.name, rung.what, ", resumed" if resume else "")
+        return train_rl(inputs.run_of(rung), where, config, resume=resume, progress=progress)
+
+
+CLAIM = ".claim"
+"""The file in a rung's directory that names the process training it (host and pid)."""
+
+
+@contextlib.contextmanager
+def claimed(where: Path) -> Iterator[bool]:
+    """Claims a rung's directory for this process while the block runs: yields False where another
+    live process holds it, so that several ladder processes (on one machine, or on several sharing
+    the directory) can run the rungs of one ladder side by side, each taking the next free rung.
+    A claim left by a process of this host that no longer runs is taken over."""
+    where.mkdir(parents=True, exist_ok=True)
+    path, me = where / CLAIM, f"{socket.gethostname()} {os.getpid()}"
+    for _ in range(2):
+        try:
+            descriptor = os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
+        except FileExistsError:
+            if not _stale(path):
+                yield False
+                return
+            path.unlink(missing_ok=True)
+            continue
+        with os.fdopen(descriptor, "w") as file:
+            file.write(me)
+        try:
+            yield True
+        finally:
+            path.unlink(missing_ok=True)
+        return
+    yield False
+
+
+def _stale(path: Path) -> bool:
+    """Whether the claim at `path` was left by a process of this host that has ended."""
+    try:
+        host, pid = path.read_text().split()
+    except (OSError, ValueError):
+        return True  # unreadable or half-written: nobody holds it
+    if host != socket.gethostname():
+        return False  # another machine's: it cannot be checked from here
+    try:
+        os.kill(int(pid), 0)
+    except ProcessLookupError:
+        return True
+    except PermissionError:
+        return False
+    return False
 
 
 def run_ladder(inputs: LadderInputs, config: RLConfig, rungs: tuple[Rung, ...], out: Path,
