@@ -166,6 +166,18 @@ def test_rl_rejects_a_reward_the_env_cannot_give(rl_dataset, tmp_path, capsys):
     assert "--reward sim cannot score rollouts of --env imagined" in error
 
 
+def test_what_the_reward_sees_must_fit_the_reward_and_differ_from_the_rollouts_own(rl_dataset, tmp_path, capsys):
+    # The simulator's verdict cannot be read off a world model's re-imagining of real actions...
+    with pytest.raises(SystemExit):
+        main(_rl_args("real", "sim", tmp_path / "a", rl_dataset, "--reward-sees", "imagined", "--wm", str(WORLD_MODEL)))
+    assert "--reward sim cannot score rollouts of --env imagined" in capsys.readouterr().err
+    # ... and replaying imagined rollouts in imagination again says nothing new.
+    with pytest.raises(SystemExit):
+        main(_rl_args("imagined", f"judge:{JUDGE}", tmp_path / "b", rl_dataset, "--reward-sees", "imagined"))
+    assert "leave --reward-sees out" in capsys.readouterr().err
+    assert not (tmp_path / "a" / "checkpoints").exists() and not (tmp_path / "b" / "checkpoints").exists()
+
+
 def _comparable(metrics):
     return [{k: v for k, v in m.items() if not k.startswith("time/")} for m in metrics]
 
