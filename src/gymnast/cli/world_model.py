@@ -153,7 +153,9 @@ def eval_wm(
     """Measure a world model's open-loop fidelity and controllability on held-out episodes.
 
     Args:
-        wm: world-model run (or checkpoint) directory.
+        wm: world-model run (or checkpoint) directory, or an ensemble; or your own:
+            python:MODULE:FACTORY[@ARG] or plugin:NAME[@ARG] (gymnast check-wm --help) (measured on the
+            scenes gymnast's own models hold out).
         data: dataset directory; its episodes from held-out scenes are used.
         out: report JSON; side-by-side videos go to <out stem>_videos/.
         max_episodes: evaluate at most this many held-out episodes (0 = all).
@@ -196,7 +198,8 @@ def object_fidelity(
     world model imagines (open-loop, held-out episodes) is from the real one at steps 1, 8, 16, 32, 64, 128.
 
     Args:
-        wm: world-model run (or checkpoint) directory; its held-out scenes are measured.
+        wm: world-model run (or checkpoint) directory; its held-out scenes are measured; or your own:
+            python:MODULE:FACTORY[@ARG] or plugin:NAME[@ARG] (gymnast check-wm --help).
         data: dataset directory.
         out: report JSON (per task and step: centimetres, counts, probe floor, settings, seconds).
         extra_data: more datasets (same image size) to train the probe on and measure.
