@@ -126,14 +126,15 @@ class _Checker:
 
     def run(self) -> None:
         self.short_context()
-        self.action_width()
-        state, frames = self.step(self.init(self.context), self.actions[0])
+        state, frames = self.first_step()
         self.frames(frames)
         self.disagreement(state)
-        self.reproducible(frames.detach().cpu())
-        self.state_in_place()
-        self.batch_rows()
-        self.offload_hooks(frames.detach().cpu())
+        frames = frames.detach().cpu()
+        if not self.reproducible(frames):
+            return  # the checks below compare runs, which differ anyway
+        self.state_in_place(frames)
+        self.batch_rows(frames)
+        self.offload_hooks(frames)
 
     def short_context(self) -> None:
         if self.model.context_frames < 2:
@@ -146,20 +147,24 @@ class _Checker:
                                         "(an episode starts from one real frame): repeat the first frame in front "
                                         "(gymnast.world_model.base.pad_context(context, context_frames))"))
 
-    def action_width(self) -> None:
+    def first_step(self) -> tuple[Any, torch.Tensor]:
+        """The first rollout's state and frames; a step that refuses the declared action width
+        stops the check, naming the width it takes where another one works."""
         width = self.model.action_dim
+        state = self.init(self.context)
         try:
-            self.model.step(self.init(self.context), self.actions[0].to(self.device), generator=self._generator(2),
-                            **({} if self.states is None else {"states": self.states.to(self.device)}))
-            return
+            result = self.model.step(state, self.actions[0].to(self.device), generator=self._generator(2),
+                                     **({} if self.states is None else {"states": self.states.to(self.device)}))
         except Exception as error:
-            failure = f"{type(error).__name__}: {error}"
-        inputs = torch.Generator().manual_seed(self.seed)
-        taken = [w for w in range(1, 33) if w != width and self._takes(self._actions(inputs, len(self.context), w))]
-        took = f"; it takes {taken[0]}-wide actions: declare action_dim={taken[0]}" if taken else ""
-        raise _Stop(Breach("action_width", f"step refused ({len(self.context)}, {self.k}, {width}) actions, the width the "
-                                           f"model declares (action_dim={width}): {failure}{took}; a world model takes "
-                                           "actions as wide as its action_dim"))
+            inputs = torch.Generator().manual_seed(self.seed)
+            taken = [w for w in range(1, 33) if w != width and self._takes(self._actions(inputs, len(self.context), w))]
+            took = f"; it takes {taken[0]}-wide actions: declare action_dim={taken[0]}" if taken else ""
+            raise _Stop(Breach("action_width", f"step refused ({len(self.context)}, {self.k}, {width}) actions, the width "
+                                               f"the model declares (action_dim={width}): {type(error).__name__}: {error}"
+                                               f"{took}; a world model takes actions as wide as its action_dim")) from error
+        if not (isinstance(result, tuple) and len(result) == 2 and isinstance(result[1], torch.Tensor)):
+            raise _Stop(Breach("step", f"step returned {type(result).__name__}; it returns (new state, frames tensor)"))
+        return result
 
     def _takes(self, actions: torch.Tensor) -> bool:
         try:
@@ -198,21 +203,23 @@ class _Checker:
             self.breaches.append(Breach("disagreement", f"the state's disagreement is {got}, expected a {expected} tensor: "
                                         "how far to trust each frame of the last step (gymnast.world_model.ensemble)"))
 
-    def reproducible(self, frames: torch.Tensor) -> None:
-        again = self.imagine()
-        difference = _difference(frames, again)
-        if difference > TOLERANCE:
-            self.breaches.append(Breach("generator", f"two rollouts from the same context and actions with generators "
-                                        f"seeded alike differ (mean |difference| {difference:.2f} of 255): draw every "
-                                        "random number from the generator passed to init_state and step (torch.randn("
-                                        "..., generator=generator)), not from torch's global random state"))
+    def reproducible(self, frames: torch.Tensor) -> bool:
+        difference = _difference(frames, self.imagine())
+        if difference <= TOLERANCE:
+            return True
+        self.breaches.append(Breach("generator", f"two rollouts from the same context and actions with generators "
+                                    f"seeded alike differ (mean |difference| {difference:.2f} of 255): draw every "
+                                    "random number from the generator passed to init_state and step (torch.randn("
+                                    "..., generator=generator)), not from torch's global random state (the checks "
+                                    "that compare runs, of the state and of a batch's rows, wait until it does)"))
+        return False
 
-    def state_in_place(self) -> None:
+    def state_in_place(self, fresh: torch.Tensor) -> None:
+        """`fresh`: the first continuation from a fresh state (`first_step`'s frames)."""
         state = self.init(self.context)
         first = self.step(state, self.actions[0])[1].detach().cpu()
         second = self.step(state, self.actions[1])[1].detach().cpu()
-        fresh = [self.imagine(continuation=c) for c in (0, 1)]
-        difference = max(_difference(first, fresh[0]), _difference(second, fresh[1]))
+        difference = max(_difference(first, fresh), _difference(second, self.imagine(continuation=1)))
         if difference > TOLERANCE:
             self.breaches.append(Breach("state_in_place", f"two continuations from one state differ from the same two "
                                         f"from fresh states (mean |difference| {difference:.2f} of 255): step changed the "
@@ -220,8 +227,8 @@ class _Checker:
                                         "state and leave the given one as it was (torch.cat or clone, not in-place "
                                         "writes or list.append)"))
 
-    def batch_rows(self) -> None:
-        together = self.imagine()
+    def batch_rows(self, together: torch.Tensor) -> None:
+        """`together`: the batch's frames (`first_step`'s)."""
         alone = torch.cat([self.imagine(slice(b, b + 1)) for b in range(len(self.context))])
         difference = _difference(together, alone)
         if difference <= TOLERANCE:
