@@ -34,11 +34,6 @@ LEROBOT = "lerobot:"
 PLUGIN_GROUP = "gymnast.policies"
 """The entry-point group where installed packages register policies (``--policy plugin:NAME``)."""
 
-POLICY_FORMS = ("RUN (an SFT or RL run or checkpoint directory), lerobot:PATH (a LeRobot pretrained_model "
-                "folder), python:MODULE:FACTORY[@ARG] (your own policy: FACTORY(ARG) returns it) or "
-                f"plugin:NAME[@ARG] (a factory an installed package registers in the entry-point group {PLUGIN_GROUP})")
-"""Every form a ``--policy`` takes, for the commands' help."""
-
 REQUIRED = ("chunk_size", "action_dim", "config", "sample", "log_prob", "log_prob_and_entropy", "chunk_tokens", "act")
 """What gymnast reads off any policy: the `Policy` protocol's members and a ``config`` with the
 ``image_size`` it sees (and its ``cameras``, for one of several)."""

@@ -254,11 +254,6 @@ BACKENDS = {"embedded": "gymnast.world_model.embedded:EmbeddedWorldModel",
 PLUGIN_GROUP = "gymnast.world_models"
 """The entry-point group where installed packages register world models (``--wm plugin:NAME``)."""
 
-WM_FORMS = ("RUN (a world-model run or checkpoint directory, or an ensemble directory from make-ensemble), "
-            "python:MODULE:FACTORY[@ARG] (your own world model: FACTORY(ARG) returns it) or plugin:NAME[@ARG] "
-            f"(a factory an installed package registers in the entry-point group {PLUGIN_GROUP})")
-"""Every form a ``--wm`` takes, for the commands' help."""
-
 REQUIRED = ("context_frames", "image_size", "action_dim", "init_state", "step")
 """What gymnast reads off any world model (the `WorldModel` protocol's members)."""
 
