@@ -14,7 +14,10 @@ TEST_PROCESSES ?= 2
 
 .PHONY: demo test setup clean
 
-$(STAMP): pyproject.toml Makefile
+# The example of a world model and a policy of one's own (docs/world_model.md): its tests plug it in.
+EXAMPLE := examples/tiny_video_wm
+
+$(STAMP): pyproject.toml Makefile $(EXAMPLE)/pyproject.toml
 	@$(PYTHON) -c 'import sys; sys.exit(sys.version_info < (3, 11))' || \
 		{ echo "gymnast needs Python >= 3.11 (found $$($(PYTHON) --version)); set PYTHON=python3.11"; exit 1; }
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -24,6 +27,9 @@ $(STAMP): pyproject.toml Makefile
 	$(BIN)/python -m pip install --quiet --no-deps uv '$(TORCH_CPU)'
 	$(BIN)/uv pip install --quiet --python $(BIN)/python -e '.[dev]' '$(TORCH_CPU)'
 	$(BIN)/uv pip install --quiet --python $(BIN)/python --no-deps '$(LEROBOT)'
+	@# Without its dependencies (torch and safetensors, already here): an installed package's entry
+	@# points are what `--wm plugin:NAME` finds.
+	$(BIN)/uv pip install --quiet --python $(BIN)/python --no-deps -e $(EXAMPLE)
 	@# A CUDA build of torch (or its nvidia-* wheels) would mean gigabytes nobody asked for.
 	@! $(BIN)/python -m pip list 2>/dev/null | grep -qi '^nvidia' || \
 		{ echo "set-up pulled CUDA packages; the CPU build is expected"; exit 1; }

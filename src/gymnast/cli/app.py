@@ -12,9 +12,9 @@ import gymnast  # noqa: F401  (sets MUJOCO_GL before anything imports mujoco)
 from gymnast.cli.data import collect, contact_sheet, gap_report, inspect, tasks
 from gymnast.cli.judge import calibrate_judge, eval_judge, serve_judge, train_judge
 from gymnast.cli.measure import imagination, practice_summary, rl_signal, worldgym
-from gymnast.cli.policy import evaluate_command, sft
+from gymnast.cli.policy import check_policy, evaluate_command, sft
 from gymnast.cli.practice import dyna, experiment, ladder, rl
-from gymnast.cli.world_model import eval_wm, make_ensemble, object_fidelity, train_state, train_wm
+from gymnast.cli.world_model import check_wm, eval_wm, make_ensemble, object_fidelity, train_state, train_wm
 from gymnast.utils.memory import reuse_large_blocks
 
 
@@ -58,9 +58,11 @@ COMMANDS = {
     "inspect": inspect,
     "sft": sft,
     "eval": evaluate_command,
+    "check-policy": check_policy,
     "train-wm": train_wm,
     "train-state": train_state,
     "eval-wm": eval_wm,
+    "check-wm": check_wm,
     "make-ensemble": make_ensemble,
     "object-fidelity": object_fidelity,
     "train-judge": train_judge,

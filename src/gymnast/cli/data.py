@@ -31,12 +31,14 @@ def collect(
         out: dataset directory (created if missing).
         config: what to record.
         policy: an SFT/RL run directory: record its rollouts (behaviour policy-<tag>, greedy plus the
-            --noise levels, no failure episodes) instead of the scripted behaviours.
+            --noise levels, no failure episodes) instead of the scripted behaviours; also lerobot:PATH (a
+            LeRobot pretrained_model folder), or your own: python:MODULE:FACTORY[@ARG] or plugin:NAME[@ARG]
+            (gymnast check-policy --help).
         temperature: with --policy, sample the action tokens at this temperature (0: greedy).
-        imagine_with: with --policy, a world-model run: the policy plans each episode closed loop in
-            it from the scene's first frame and the real world executes the plan, so that every
-            episode labels an imagined rollout with its real outcome (judge data for
-            `gymnast train-judge --wm` on the same world model).
+        imagine_with: with --policy, a world-model run (or your own: python:MODULE:FACTORY[@ARG] or
+            plugin:NAME[@ARG]): the policy plans each episode closed loop in it from the scene's first
+            frame and the real world executes the plan, so that every episode labels an imagined rollout
+            with its real outcome (judge data for `gymnast train-judge --wm` on the same world model).
         replay: a dataset gymnast recorded: execute each of its episodes' actions again from the
             same scene and record what --cameras and --env.image-size show (the same episodes,
             checked step by step; its tasks, seeds, horizon and end at success are kept).

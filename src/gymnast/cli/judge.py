@@ -41,7 +41,8 @@ def train_judge(
     Args:
         out: run directory: checkpoints, metrics.jsonl, metrics.json (the held-out figures).
         data: dataset directory (from `gymnast collect`); with --resume, the run's own.
-        wm: world-model run: also train and measure on its re-imagining of every episode.
+        wm: world-model run: also train and measure on its re-imagining of every episode; or your own:
+            python:MODULE:FACTORY[@ARG] or plugin:NAME[@ARG] (gymnast check-wm --help).
         preset: debug (seconds), demo (minutes), full or gpu (a wider judge for one GPU; docs/gpu.md).
         resume: continue the run in OUT from its last checkpoint, with the settings, data and world model
             saved there.
@@ -160,7 +161,8 @@ def eval_judge(
         reward: the judge, e.g. judge:runs/judge or vlm:gpt-4o@https://api.openai.com/v1 (key from OPENAI_API_KEY).
         data: dataset directory; the episodes of its held-out scenes are judged.
         out: report JSON.
-        wm: world-model run whose imagined videos are judged too.
+        wm: world-model run whose imagined videos are judged too; or your own: python:MODULE:FACTORY[@ARG] or
+            plugin:NAME[@ARG] (gymnast check-wm --help).
         heldout_fraction: the held-out share of scenes (the world model's, so its videos are unseen); 1 judges
             every episode (but those of evaluation seeds), for a dataset of new scenes (`gymnast collect --first-seed`).
         device: where a learned judge and the world model run: auto (CUDA when torch sees a GPU), cpu, cuda or cuda:N.

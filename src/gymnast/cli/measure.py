@@ -32,8 +32,10 @@ def imagination(
     psnr.png and side-by-side videos.
 
     Args:
-        policy: SFT/RL run (or checkpoint) directory.
-        wm: world-model run (or checkpoint) directory.
+        policy: SFT/RL run (or checkpoint) directory; also lerobot:PATH (a LeRobot pretrained_model folder),
+            or your own: python:MODULE:FACTORY[@ARG] or plugin:NAME[@ARG] (gymnast check-policy --help).
+        wm: world-model run (or checkpoint) directory, or an ensemble; or your own:
+            python:MODULE:FACTORY[@ARG] or plugin:NAME[@ARG] (gymnast check-wm --help).
         reward: a 0/1 judge: judge:RUN or vlm:MODEL@BASE_URL (key from OPENAI_API_KEY).
         out: report directory.
         tasks: task names and/or sets, comma-separated.
@@ -85,8 +87,11 @@ def rl_signal(
 
     Args:
         out: report directory.
-        policy: SFT/RL run (or checkpoint) directory (default: --like's).
-        wm: world-model run (or checkpoint) directory (default: --like's).
+        policy: SFT/RL run (or checkpoint) directory (default: --like's); also lerobot:PATH (a LeRobot
+            pretrained_model folder), or your own: python:MODULE:FACTORY[@ARG] or plugin:NAME[@ARG] (gymnast
+            check-policy --help).
+        wm: world-model run (or checkpoint) directory, or an ensemble (default: --like's); or your own:
+            python:MODULE:FACTORY[@ARG] or plugin:NAME[@ARG] (gymnast check-wm --help).
         reward: a reward of the video alone: judge:RUN or vlm:MODEL@BASE_URL (key from OPENAI_API_KEY);
             or a grounded world model's reward head, state:RUN (from `gymnast train-state`) (default: --like's).
         like: an RL run in imagination whose practice is measured: its policy, world model, reward,
@@ -177,8 +182,11 @@ def worldgym(
     Spearman, settings, seconds) and OUT/worldgym.png, and prints the table.
 
     Args:
-        policy: the SFT/RL run (or checkpoint) the ladder is made of.
-        wm: world-model run the policies are imagined in.
+        policy: the SFT/RL run (or checkpoint) the ladder is made of; also lerobot:PATH (a LeRobot
+            pretrained_model folder), or your own: python:MODULE:FACTORY[@ARG] or plugin:NAME[@ARG] (gymnast
+            check-policy --help).
+        wm: world-model run the policies are imagined in; or your own: python:MODULE:FACTORY[@ARG] or
+            plugin:NAME[@ARG] (gymnast check-wm --help).
         judge: learned-judge run that scores the imagined rollouts.
         out: output directory.
         noise: action-noise std per level (actions span [-1, 1]); 0 is the policy itself, inf random actions.

@@ -79,15 +79,43 @@ def evaluate_command(
     """Evaluate a policy in the real world on held-out seeds: success per task with 95% CIs.
 
     Args:
-        policy: an SFT/RL run directory (its newest checkpoint), 'expert' for the scripted reference, or
-            lerobot:PATH for a LeRobot pretrained_model folder (acts in this process: --workers 1).
+        policy: an SFT/RL run directory (its newest checkpoint), 'expert' for the scripted reference,
+            lerobot:PATH for a LeRobot pretrained_model folder, python:MODULE:FACTORY[@ARG] for your own
+            (FACTORY(ARG) returns it) or plugin:NAME[@ARG] for a factory an installed package registers in
+            the entry-point group gymnast.policies (the last three act in this process: --workers 1).
         out: JSON report (per-episode records included); videos are saved beside it in <name>_videos/.
         config: tasks, episodes, perturbation, gap and workers.
     """
     from gymnast.eval.evaluate import evaluate, format_summary
     from gymnast.policy.load import is_lerobot, load_policy
+    from gymnast.utils.plugins import is_plugin
 
-    # A LeRobot folder is no run directory for the workers to load: it acts in this process.
-    report = evaluate(load_policy(policy) if is_lerobot(policy) else policy, config, out)
+    # A LeRobot folder or a user's factory is no run directory for the workers to load: it acts in this process.
+    report = evaluate(load_policy(policy) if is_lerobot(policy) or is_plugin(policy) else policy, config, out)
     print(format_summary(report))
     print(f"report: {out}")
+
+
+def check_policy(policy: str, batch: int = 2, seed: int = 0) -> None:
+    """Check a policy against the Policy contract that RL and evaluation rely on, and name each breach
+    with what to change: log_prob of the sampled tokens equal to the logp sample() returned (GRPO's
+    ratio starts at 1), a deterministic greedy act(), actions of the declared chunk_size and
+    action_dim, sampling reproducible from the generator given, and the robot state where
+    state_dim > 0. Exits with status 1 when it finds a breach.
+
+    Args:
+        policy: the policy: RUN (an SFT or RL run or checkpoint directory), lerobot:PATH (a LeRobot
+            pretrained_model folder), python:MODULE:FACTORY[@ARG] (your own: FACTORY(ARG) returns it) or
+            plugin:NAME[@ARG] (a factory an installed package registers in the entry-point group
+            gymnast.policies).
+        batch: images per call.
+        seed: of the synthetic images and of the generators.
+    """
+    from gymnast.policy.check import check_policy as check
+    from gymnast.policy.load import load_policy
+    from gymnast.utils.plugins import format_breaches
+
+    breaches = check(load_policy(policy), batch=batch, seed=seed)
+    print(format_breaches(f"policy {policy}", breaches))
+    if breaches:
+        raise SystemExit(1)

@@ -34,10 +34,13 @@ def rl(
 
     Args:
         out: run directory: checkpoints, metrics.jsonl, tensorboard/, videos/, summary.json.
-        policy: the SFT (or RL) run or checkpoint to start from (required unless --resume).
+        policy: the SFT (or RL) run or checkpoint to start from (required unless --resume); also lerobot:PATH
+            (a LeRobot pretrained_model folder), or your own: python:MODULE:FACTORY[@ARG] or plugin:NAME[@ARG]
+            (gymnast check-policy --help).
         env: where rollouts happen: imagined (in --wm), sim (the software simulator, --gap) or real.
         reward: judge:RUN | vlm:MODEL@BASE_URL | verified | sim | sim-dense.
-        wm: the world model run (needed by --env imagined and --reward verified).
+        wm: the world model run or ensemble (needed by --env imagined and --reward verified); or your own:
+            python:MODULE:FACTORY[@ARG] or plugin:NAME[@ARG] (gymnast check-wm --help).
         data: dataset whose scenes are the start states (default: the one the policy was trained on).
         robot_state: with --env imagined, a state model (or ensemble) run stepped beside the world
             model, whose imagined robot state is given to a policy that reads one (observation.state).
@@ -93,8 +96,11 @@ def ladder(
 
     Args:
         out: ladder directory.
-        policy: the policy every rung starts from: an SFT run or checkpoint (required unless --resume).
-        wm: the world model of the imagined rungs (r2, r3, r4, r4s).
+        policy: the policy every rung starts from: an SFT run or checkpoint (required unless --resume);
+            also lerobot:PATH (a LeRobot pretrained_model folder), or your own: python:MODULE:FACTORY[@ARG]
+            or plugin:NAME[@ARG] (gymnast check-policy --help).
+        wm: the world model of the imagined rungs (r2, r3, r4, r4s): a run or ensemble, or your own:
+            python:MODULE:FACTORY[@ARG] or plugin:NAME[@ARG] (gymnast check-wm --help).
         judge: the judge run of the judged rungs (r1, r2, r4).
         state: the state model (or ensemble) run of the state rungs (r1s, r4s).
         rungs: the rungs to run now, in this order, comma-separated, of r0_real, r1_judge_real,
@@ -162,8 +168,12 @@ def dyna(
 
     Args:
         out: run directory.
-        policy: the SFT (or RL) run to start from (required unless --resume).
-        wm: the world-model run imagined RL starts in; fine-tuned every round.
+        policy: the SFT (or RL) run to start from (required unless --resume); also lerobot:PATH (a LeRobot
+            pretrained_model folder), or your own: python:MODULE:FACTORY[@ARG] or plugin:NAME[@ARG] (gymnast
+            check-policy --help).
+        wm: the world-model run imagined RL starts in; fine-tuned every round; or your own:
+            python:MODULE:FACTORY[@ARG] or plugin:NAME[@ARG] (gymnast check-wm --help) (imagined in as given,
+            not fine-tuned).
         judge: the judge run that rewards imagined RL; fine-tuned every round (this or --state).
         state: instead of a judge, a state-model run or ensemble (`gymnast train-state`,
             `gymnast make-ensemble`) whose reward head rewards imagined RL; every member fine-tuned
@@ -234,7 +244,9 @@ def experiment(
         resume: continue the experiment in OUT with the settings saved there (whatever its preset).
         reuse: a stage to take from an earlier run instead of running it, as STAGE=DIR (collect=DATASET,
             sft=RUN, world_model=RUN, judge=RUN, state_model=RUN or an ensemble of them); repeat for
-            several, e.g. --reuse collect=data/mt10 --reuse world_model=runs/wm_full.
+            several, e.g. --reuse collect=data/mt10 --reuse world_model=runs/wm_full. The world model
+            may be one of your own: world_model=python:MODULE:FACTORY[@ARG] or plugin:NAME[@ARG]
+            (imagined in as given; Dyna does not refit it).
         workers: simulator processes (default: the preset's, one per core on 2 cores).
         sentences: a file of `task: sentence` lines, your own wording of the tasks: the language
             check gives the policies these instead of the held-out paraphrases.

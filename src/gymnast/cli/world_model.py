@@ -153,7 +153,9 @@ def eval_wm(
     """Measure a world model's open-loop fidelity and controllability on held-out episodes.
 
     Args:
-        wm: world-model run (or checkpoint) directory.
+        wm: world-model run (or checkpoint) directory, or an ensemble; or your own:
+            python:MODULE:FACTORY[@ARG] or plugin:NAME[@ARG] (gymnast check-wm --help) (measured on the
+            scenes gymnast's own models hold out).
         data: dataset directory; its episodes from held-out scenes are used.
         out: report JSON; side-by-side videos go to <out stem>_videos/.
         max_episodes: evaluate at most this many held-out episodes (0 = all).
@@ -196,7 +198,8 @@ def object_fidelity(
     world model imagines (open-loop, held-out episodes) is from the real one at steps 1, 8, 16, 32, 64, 128.
 
     Args:
-        wm: world-model run (or checkpoint) directory; its held-out scenes are measured.
+        wm: world-model run (or checkpoint) directory; its held-out scenes are measured; or your own:
+            python:MODULE:FACTORY[@ARG] or plugin:NAME[@ARG] (gymnast check-wm --help).
         data: dataset directory.
         out: report JSON (per task and step: centimetres, counts, probe floor, settings, seconds).
         extra_data: more datasets (same image size) to train the probe on and measure.
@@ -231,3 +234,32 @@ def make_ensemble(members: tuple[Path, ...], out: Path) -> None:
         return
     model = write_ensemble(out, members)
     print(f"ensemble of {len(model.members)} world models: {out}")
+
+
+def check_wm(wm: str, batch: int = 2, actions: int = 5, device: str = "cpu", seed: int = 0) -> None:
+    """Check a world model against the WorldModel contract gymnast relies on, and name each breach with
+    what to change: frames uint8 of the declared size, one per action; a state that step() leaves as
+    it was (rollouts branch from it); every random draw from the generator given (reproducible); the
+    declared action width; a batch's rows the same as batches of one; a context shorter than
+    context_frames accepted; and the optional parts a model declares (an ensemble's disagreement,
+    offload() and onload()). Exits with status 1 when it finds a breach.
+
+    Args:
+        wm: the world model: RUN (a world-model run or checkpoint directory, or an ensemble directory),
+            python:MODULE:FACTORY[@ARG] (your own: FACTORY(ARG) returns it) or plugin:NAME[@ARG] (a
+            factory an installed package registers in the entry-point group gymnast.world_models).
+        batch: rollouts per batched call (at least 2).
+        actions: actions per step() call.
+        device: where the model runs: cpu, auto, cuda or cuda:N.
+        seed: of the synthetic frames and actions, and of the generators.
+    """
+    from gymnast.utils.device import resolve_device
+    from gymnast.utils.plugins import format_breaches
+    from gymnast.world_model.base import load_world_model, placed
+    from gymnast.world_model.check import check_world_model
+
+    model = placed(load_world_model(wm), resolve_device(device))
+    breaches = check_world_model(model, batch=batch, actions=actions, seed=seed)
+    print(format_breaches(f"world model {wm}", breaches))
+    if breaches:
+        raise SystemExit(1)

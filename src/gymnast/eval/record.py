@@ -33,8 +33,9 @@ from gymnast.data.collect import CollectConfig, EpisodeJob, collect
 from gymnast.data.lerobot import EpisodeDataset
 from gymnast.data.schema import policy_behaviour
 from gymnast.eval.actors import ImaginedPlanActor, PolicyActor, load_run_policy, load_run_world_model
-from gymnast.policy.load import policy_env_config
+from gymnast.policy.load import is_lerobot, policy_env_config
 from gymnast.utils.checkpoint import resolve_checkpoint
+from gymnast.utils.plugins import is_plugin
 
 logger = logging.getLogger(__name__)
 
@@ -68,20 +69,32 @@ class PolicyActors:
         return ImaginedPlanActor(actor, load_run_world_model(self.world_model), job.env.horizon)
 
 
+def _where(run: str | Path) -> str:
+    """`run` as the workers load it: a run's absolute path, or the name of a LeRobot folder or of a
+    factory of one's own (`load_policy` reads either)."""
+    return str(run) if is_plugin(run) or is_lerobot(run) else str(Path(run).resolve())
+
+
+def _named(run: str | Path) -> bytes:
+    """What names the model `run` loads: its weights' digest, or its factory's name."""
+    return str(run).encode() if is_plugin(run) or is_lerobot(run) else _weights_digest(Path(run))
+
+
 def policy_tag(run: str | Path, temperature: float, world_model: str | Path | None = None) -> str:
     """Eight hex digits naming the newest checkpoint of `run`, the sampling temperature and the
     world model the policy plans in, if any.
 
     A checkpoint is named by the content of its weights, so a moved run keeps its tag and a run
-    trained further gets a new one (an ensemble by its ``ensemble.json``).
+    trained further gets a new one (an ensemble by its ``ensemble.json``); a policy or world model
+    of one's own (`gymnast.utils.plugins`) by the string that names its factory and argument.
 
     Raises:
         FileNotFoundError: no checkpoint in `run` or `world_model`.
     """
-    digest = hashlib.sha256(_weights_digest(Path(run)))
+    digest = hashlib.sha256(_named(run))
     digest.update(f"/temperature={temperature:g}".encode())
     if world_model is not None:
-        digest.update(b"/world_model=" + _weights_digest(Path(world_model)))
+        digest.update(b"/world_model=" + _named(world_model))
     return digest.hexdigest()[:8]
 
 
@@ -118,7 +131,7 @@ def record_policy(
         ValueError: the environment's image size is not the policy's, a negative temperature, or
             `out` holds a dataset recorded with other environment settings.
     """
-    run_dir = str(Path(run).resolve())
+    run_dir = _where(run)
     policy = load_run_policy(run_dir)
     # Fail here, before any worker starts: a policy Meta-World cannot execute, a bad temperature.
     PolicyActor(policy, temperature)
@@ -130,7 +143,7 @@ def record_policy(
         )
     world_model = None
     if imagine_with is not None:
-        world_model = str(Path(imagine_with).resolve())
+        world_model = _where(imagine_with)
         imagined_size = load_run_world_model(world_model).image_size
         if imagined_size != size:
             raise ValueError(f"the world model in {imagine_with} imagines {imagined_size}x{imagined_size} frames, but "

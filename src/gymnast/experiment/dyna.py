@@ -13,7 +13,9 @@ Each round k (1..rounds), from the policy, world model and reward model that rou
    last round takes none (and skips step 3): nothing after it would learn from them.
 3. Fine-tuning: the world model and the reward model each continue from their last weights on their
    own original data plus every round's recorded rollouts (``init`` and ``extra_data`` of
-   `train_world_model`, `train_judge` and `train_state_model`; every member of an ensemble). The
+   `train_world_model`, `train_judge` and `train_state_model`; every member of an ensemble). A world
+   model of one's own (``python:`` or ``plugin:``, `gymnast.utils.plugins`) says nothing of how it
+   is trained, so every round imagines in it as given (`can_be_refit`). The
    rollouts carry Meta-World's per-step success flags and rewards, so the judge's false positives
    (failures it passed) become labelled negatives, and the state model learns the states the
    practised policy reaches, where its reward head was wrong in the direction practice exploited
@@ -45,6 +47,7 @@ from gymnast.experiment.stages import Stages
 from gymnast.rl.config import RL_PRESETS, RLConfig
 from gymnast.utils.atomic import read_json
 from gymnast.utils.checkpoint import has_checkpoint
+from gymnast.utils.plugins import is_plugin
 from gymnast.utils.settings import from_json, saved_settings
 
 logger = logging.getLogger(__name__)
@@ -155,7 +158,8 @@ class DynaInputs:
         if (self.judge is None) == (self.state is None):
             raise ValueError("dyna practises on one reward model: give --judge RUN or --state RUN, not "
                              f"{'both' if self.judge is not None else 'neither'}")
-        runs = [("policy", self.policy), ("wm", self.wm)]
+        # A policy or world model of one's own is no run directory: its factory loads it (RL reads it).
+        runs = [(name, run) for name, run in (("policy", self.policy), ("wm", self.wm)) if not is_plugin(run)]
         if self.state is not None and is_ensemble(self.state):
             runs += [("state", member) for member in member_paths(self.state)]
         else:
@@ -165,8 +169,8 @@ class DynaInputs:
                 raise FileNotFoundError(f"--{name} {run}: no run there (no config.json); dyna fine-tunes a single "
                                         f"{'world-model' if name == 'wm' else name} run"
                                         f"{' or an ensemble of state-model runs' if name == 'state' else ''}")
-        for name, run in runs[1:]:
-            if not saved_settings(run).get("data"):
+        for name, run in runs:
+            if name != "policy" and not saved_settings(run).get("data"):
                 raise ValueError(f"--{name} {run} does not say which dataset it was trained on")
         if self.data is not None and not Path(self.data).is_dir():
             raise FileNotFoundError(f"--data {self.data}: no such directory")
@@ -240,7 +244,7 @@ def run_round(k: int, config: DynaConfig, inputs: DynaInputs, policy: Path, wm: 
         row["rollouts"] = stages.run("rollouts", lambda: record_rollouts(k, rl_run, judge, config, rollouts, progress),
                                      rollouts)
         recorded.append(rollouts)
-        if config.wm_steps:  # else every round imagines in the given world model
+        if config.wm_steps and can_be_refit(inputs.wm):  # else every round imagines in the given world model
             stages.run("world_model", lambda: fine_tune_world_model(inputs.wm, wm, recorded, config.wm_steps, new_wm,
                                                                     progress), new_wm)
             wm = new_wm
@@ -392,12 +396,18 @@ def _evaluate(policy: Path, config: DynaConfig, report: Path) -> dict:
     from gymnast.eval.actors import load_run_policy
     from gymnast.eval.evaluate import EvalConfig, evaluate
 
-    size = load_run_policy(str(Path(policy).resolve())).config.image_size
+    size = load_run_policy(str(policy) if is_plugin(policy) else str(Path(policy).resolve())).config.image_size
     settings = EvalConfig(tasks=config.rl.tasks, episodes=config.eval_episodes, workers=config.workers,
                           runner=config.runner, env=EnvConfig(image_size=size, horizon=config.rl.evaluation_horizon))
     result = evaluate(str(policy), settings, report, progress=False)
     return {**{key: result[key] for key in ("success", "ci_low", "ci_high", "episodes", "successes", "per_task")},
             "eval_real_interactions": result["real_interactions"]}
+
+
+def can_be_refit(wm: str | Path) -> bool:
+    """Whether Dyna fine-tunes the world model `wm` each round: a gymnast run saves how it was
+    trained; a world model of one's own does not, and is kept as given."""
+    return not is_plugin(wm)
 
 
 def _rl_record(summary: dict) -> dict:

@@ -6,7 +6,9 @@ half-way has no record and runs again, and the trainers underneath continue from
 checkpoint, so an interruption costs at most one checkpoint interval.
 
 A stage can also be *reused* from elsewhere (``--reuse world_model=runs/wm``): its record then
-points at that directory and says it was not run here. When another experiment ran that stage, the
+points at that directory and says it was not run here. The world model can also be one of one's
+own (``--reuse world_model=python:MODULE:FACTORY[@ARG]`` or ``plugin:NAME[@ARG]``,
+`gymnast.utils.plugins`), which every stage after it loads by that name. When another experiment ran that stage, the
 record carries what that experiment measured of it (`measured_elsewhere`): a reused judge's real
 rollouts are real interactions the experiment spent too.
 """
@@ -21,6 +23,7 @@ from pathlib import Path
 from gymnast.data.lerobot_v3 import INFO_PATH
 from gymnast.utils.atomic import read_json, write_json
 from gymnast.utils.memory import release_freed_memory
+from gymnast.utils.plugins import is_plugin
 
 logger = logging.getLogger(__name__)
 
@@ -43,6 +46,8 @@ class Stages:
         if unknown:
             raise ValueError(f"--reuse names unknown stages {sorted(unknown)}; reusable stages are {list(REUSABLE)}")
         for name, path in self.reuse.items():
+            if name == "world_model" and is_plugin(path):
+                continue  # its factory loads it
             if not Path(path).is_dir():
                 raise FileNotFoundError(f"--reuse {name}={path}: no such directory")
 

@@ -15,6 +15,7 @@ from gymnast.rl.config import RLConfig, RLRun
 from gymnast.rl.rollout import recorded_elsewhere, tasks_with_starts
 from gymnast.utils.atomic import read_json
 from gymnast.utils.checkpoint import resolve_checkpoint
+from gymnast.utils.plugins import is_plugin
 
 
 def with_tasks_from_data(run_spec: RLRun, config: RLConfig) -> RLConfig:
@@ -59,8 +60,8 @@ def policy_keys(policy_run: str | Path) -> FeatureKeys:
 
 def _policy_configs(policy_run: str | Path) -> list[dict]:
     """The policy run's config.json, then its checkpoint's (whichever exist); none for a LeRobot
-    folder, which records neither the dataset nor gymnast's frame settings."""
-    if is_lerobot(policy_run):
+    folder or a user's own factory, which record neither the dataset nor gymnast's frame settings."""
+    if is_lerobot(policy_run) or is_plugin(policy_run):
         return []
     checkpoint = resolve_checkpoint(Path(policy_run))
     paths = (Path(policy_run) / "config.json", checkpoint / "config.json")

@@ -27,6 +27,7 @@ import logging
 import time
 import warnings
 from collections.abc import Callable
+from contextlib import AbstractContextManager, nullcontext
 from pathlib import Path
 
 import numpy as np
@@ -61,6 +62,7 @@ from gymnast.utils.checkpoint import (load_checkpoint, load_extra, resolve_check
 from gymnast.utils.device import resolve_device, to_device
 from gymnast.utils.metrics import MetricsLog
 from gymnast.utils.optim import warmup_cosine
+from gymnast.utils.plugins import is_plugin
 
 logger = logging.getLogger(__name__)
 
@@ -96,10 +98,10 @@ def robot_state_for(state_dim: int, env: EnvKind, run_spec: RLRun, world_model=N
 
 def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False, progress: bool = True) -> dict:
     """Trains (or resumes) an RL run in `out`; returns the summary (also RUN/summary.json)."""
-    from gymnast.policy.load import load_policy, policy_env_config
+    from gymnast.policy.load import load_policy, policy_env_config, policy_spec
     from gymnast.reward.judges.base import check_judge_sees
     from gymnast.reward.select import make_reward
-    from gymnast.world_model.base import load_world_model
+    from gymnast.world_model.base import load_world_model, offloaded, placed
     from gymnast.world_model.ensemble import EnsembleWorldModel
     from gymnast.world_model.views import check_policy_views
 
@@ -113,11 +115,12 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
     device = resolve_device(config.device)
     policy = load_policy(run_spec.policy).to(device)
     cameras = getattr(policy.config, "cameras", ())
-    world_model = load_world_model(run_spec.wm).to(device) if run_spec.wm else None
+    world_model = placed(load_world_model(run_spec.wm), device) if run_spec.wm else None
     if env.imagined or (run_spec.reward_sees is not None and run_spec.reward_sees.imagined):
         check_policy_views(cameras, world_model, run_spec.policy, run_spec.wm)
     robot_state = robot_state_for(getattr(policy, "state_dim", 0), env, run_spec, world_model)
-    if levers and not isinstance(world_model, EnsembleWorldModel):
+    # A user's own model may report disagreement too: the imagined env finds out at its first step.
+    if levers and not isinstance(world_model, EnsembleWorldModel) and not is_plugin(run_spec.wm):
         raise ValueError(f"{levers[0]} needs a world-model ensemble to disagree (gymnast "
                          f"make-ensemble); {run_spec.wm} is a single world model")
     reward = make_reward(run_spec.reward, world_model)
@@ -164,7 +167,7 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
         config.workers, world_model, stop_above=config.disagreement_stop or None, runner=config.runner, batch=batch,
         robot_state=robot_state)
     sight = RewardSight(envs, env, run_spec.reward_sees, config.truth_groups)
-    resolved = {"rl": dataclasses.asdict(config), "run": run_spec.to_json(), "model": policy.spec(),
+    resolved = {"rl": dataclasses.asdict(config), "run": run_spec.to_json(), "model": policy_spec(policy),
                 "data": str(data) if data else None, "frames": frames}
 
     optimizer = torch.optim.AdamW(learning_parameters(policy, config.freeze), lr=config.lr, weight_decay=0.0)
@@ -269,7 +272,7 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
                                                 reward, draw_starts, config, sampler, actions, optimizer, schedule,
                                                 reference, anchor, critic,
                                                 every_frame=reward.needs.video and run_spec.reward_sees is None,
-                                                sight=sight)
+                                                sight=sight, released=lambda: offloaded(world_model))
             encoded = sum(memory.hits + memory.misses for memory in memories)
             if encoded:  # the share of the images a policy read whose tokens were already computed
                 values["train/vision_reused"] = sum(memory.hits for memory in memories) / encoded
@@ -318,7 +321,8 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
 def rl_step(env: VectorEnv, policy, reward: Reward, draw_starts: Callable[[int, torch.Generator], list[Start]],
             config: RLConfig, sampler: torch.Generator, actions: torch.Generator, optimizer: torch.optim.Optimizer,
             schedule: torch.optim.lr_scheduler.LRScheduler, reference=None, anchor: ImitationAnchor | None = None,
-            critic: CallCritic | None = None, every_frame: bool = True, sight: RewardSight | None = None
+            critic: CallCritic | None = None, every_frame: bool = True, sight: RewardSight | None = None,
+            released: Callable[[], AbstractContextManager] = nullcontext
             ) -> tuple[Rollouts | None, torch.Tensor | None, dict[str, float]]:
     """One RL step, from start states to the policy update.
 
@@ -349,6 +353,8 @@ def rl_step(env: VectorEnv, policy, reward: Reward, draw_starts: Callable[[int, 
             simulator then renders only the frames the policy reads (`collect_rollouts`).
         sight: what the reward sees and where the truth it is held to comes from; None: the
             rollouts' own video, no truth measured.
+        released: a context the policy's update runs in: a world model on a GPU releases its
+            memory there (`gymnast.world_model.base.offloaded`).
 
     Returns:
         (the kept rollouts or None, their (R,) scores or None, metrics), the metrics including
@@ -428,18 +434,19 @@ def rl_step(env: VectorEnv, policy, reward: Reward, draw_starts: Callable[[int, 
             rewards = grpo.penalise_disagreement(scores, batch.disagreement, config.disagreement_penalty)
         advantages, advantage_metrics = grpo.group_advantages(rewards.view(-1, size), config.normalize_std)
         advantages = advantages.reshape(-1)  # (R,)
-        if per_call:
-            step_rewards = torch.cat(kept_steps)  # (R, T)
-            if config.disagreement_penalty > 0:  # MOPO's own form: each imagined step's reward minus its uncertainty
-                step_rewards = step_rewards - config.disagreement_penalty * batch.disagreement
-            returns = grpo.reward_to_go(step_rewards, policy.chunk_size, batch.tokens.shape[1])  # (R, S)
-            if critic is not None:
-                advantages, critic_metrics = critic.advantages_and_fit(batch, returns, config.normalize_std, actions)
-                values |= critic_metrics
-            else:
-                advantages = grpo.call_advantages(returns, batch.token_mask.any(-1), size, config.normalize_std)
-        values |= advantage_metrics | update_policy(policy, optimizer, batch, advantages, config, reference,
-                                                    anchor, actions)
+        with released():  # a world model on a GPU may give the update its memory
+            if per_call:
+                step_rewards = torch.cat(kept_steps)  # (R, T)
+                if config.disagreement_penalty > 0:  # MOPO's own form: each imagined step's reward minus its uncertainty
+                    step_rewards = step_rewards - config.disagreement_penalty * batch.disagreement
+                returns = grpo.reward_to_go(step_rewards, policy.chunk_size, batch.tokens.shape[1])  # (R, S)
+                if critic is not None:
+                    advantages, critic_metrics = critic.advantages_and_fit(batch, returns, config.normalize_std, actions)
+                    values |= critic_metrics
+                else:
+                    advantages = grpo.call_advantages(returns, batch.token_mask.any(-1), size, config.normalize_std)
+            values |= advantage_metrics | update_policy(policy, optimizer, batch, advantages, config, reference,
+                                                        anchor, actions)
     with warnings.catch_warnings():
         # The schedule counts RL steps, those whose rollouts left nothing to learn from included;
         # torch warns when it steps before any optimizer step, as the first such step does.

@@ -19,8 +19,9 @@ policy chooses each chunk from the imagined frames (RL, plans made in imaginatio
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass
-from importlib import import_module
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -28,6 +29,7 @@ import torch
 
 from gymnast.utils.checkpoint import load_model
 from gymnast.utils.device import bf16_autocast, module_device, to_device
+from gymnast.utils.plugins import import_named, is_plugin, load_plugin, missing_attributes
 
 
 class WorldModel(Protocol):
@@ -249,6 +251,12 @@ BACKENDS = {"embedded": "gymnast.world_model.embedded:EmbeddedWorldModel",
             "ensemble": "gymnast.world_model.ensemble:EnsembleWorldModel"}
 """Backend name -> "module:Class", imported only when a checkpoint (or an ensemble directory) asks for it."""
 
+PLUGIN_GROUP = "gymnast.world_models"
+"""The entry-point group where installed packages register world models (``--wm plugin:NAME``)."""
+
+REQUIRED = ("context_frames", "image_size", "action_dim", "init_state", "step")
+"""What gymnast reads off any world model (the `WorldModel` protocol's members)."""
+
 MULTI_VIEW = "gymnast.world_model.views:MultiViewWorldModel"
 """What wraps a backend saved with several cameras (its spec's ``cameras``); named, like the
 backends, because it builds on this module."""
@@ -258,21 +266,27 @@ ENSEMBLE_FILE = "ensemble.json"
 
 
 def load_world_model(run: str | Path, **overrides: Any) -> WorldModel:
-    """The newest checkpoint of a world-model run (or a checkpoint directory), in eval mode; or,
-    for a directory holding ``ensemble.json``, the ensemble of the runs it lists.
+    """The newest checkpoint of a world-model run (or a checkpoint directory), in eval mode; for a
+    directory holding ``ensemble.json``, the ensemble of the runs it lists; or, for
+    ``python:MODULE:FACTORY[@ARG]`` or ``plugin:NAME[@ARG]``, the user's own world model that
+    factory returns (`gymnast.utils.plugins`; ``gymnast check-wm`` checks it keeps the contract).
 
     `overrides` replace fields of the saved model spec that do not change the weights (e.g. the
-    embedded backend's ``reanchor_every``); an ensemble passes them to every member.
+    embedded backend's ``reanchor_every``); an ensemble passes them to every member. A user's own
+    model takes none.
 
     Raises:
         FileNotFoundError: no checkpoint there.
-        ValueError: the checkpoint names an unknown backend.
+        ValueError: the checkpoint names an unknown backend, or a user's model lacks a part of the
+            contract or was given overrides.
     """
+    if is_plugin(run):
+        return _plugin_world_model(str(run), overrides)
 
     def backend(name: Any) -> Any:
         if name not in BACKENDS:
             raise ValueError(f"{run}: model.backend is {name!r}; known backends: {sorted(BACKENDS)}")
-        return _named_class(BACKENDS[name])
+        return import_named(BACKENDS[name])
 
     if (Path(run) / ENSEMBLE_FILE).is_file():
         return backend("ensemble").load(Path(run), **overrides).eval()
@@ -285,10 +299,37 @@ def load_world_model(run: str | Path, **overrides: Any) -> WorldModel:
         return backend(spec.get("backend")).from_spec(spec)
 
     model = load_model(Path(run), build)
-    return _named_class(MULTI_VIEW)(model, cameras).eval() if len(cameras) > 1 else model
+    return import_named(MULTI_VIEW)(model, cameras).eval() if len(cameras) > 1 else model
 
 
-def _named_class(path: str) -> Any:
-    """The class a "module:Class" string names, its module imported now."""
-    module, attribute = path.split(":")
-    return getattr(import_module(module), attribute)
+def _plugin_world_model(value: str, overrides: dict[str, Any]) -> WorldModel:
+    """The world model a ``python:`` or ``plugin:`` factory returns, in eval mode where it is a module."""
+    if overrides:
+        raise ValueError(f"--wm {value}: {', '.join(sorted(overrides))} change(s) a saved gymnast world model; "
+                         "your own world model takes its settings from its factory's argument (@ARG)")
+    model = load_plugin(value, PLUGIN_GROUP)
+    missing = missing_attributes(model, REQUIRED)
+    if missing:
+        raise ValueError(f"--wm {value}: the factory returned a {type(model).__name__}, which lacks {', '.join(missing)} "
+                         "of the WorldModel contract (gymnast.world_model.base.WorldModel; `gymnast check-wm` checks it)")
+    return model.eval() if isinstance(model, torch.nn.Module) else model
+
+
+def placed(model: Any, device: torch.device) -> Any:
+    """`model` on `device`: a module is moved there; a user's model that is not one places itself."""
+    return model.to(device) if isinstance(model, torch.nn.Module) else model
+
+
+@contextmanager
+def offloaded(model: Any) -> Iterator[None]:
+    """Lets a world model release its memory while gymnast trains: ``model.offload()`` on entry and
+    ``model.onload()`` on exit (after an error too), for a model that has them; nothing otherwise."""
+    offload, onload = getattr(model, "offload", None), getattr(model, "onload", None)
+    if offload is None or onload is None:
+        yield
+        return
+    offload()
+    try:
+        yield
+    finally:
+        onload()

@@ -43,10 +43,12 @@ from gymnast.utils.atomic import read_json, write_json
 from gymnast.utils.checkpoint import resolve_checkpoint
 from gymnast.utils.device import resolve_device
 from gymnast.utils.images import split_views
-from gymnast.world_model.base import actions_per_frame, every_nth_frame, grounded_state_dim, load_world_model, rollout
+from gymnast.utils.plugins import is_plugin
+from gymnast.world_model.base import (actions_per_frame, every_nth_frame, grounded_state_dim, load_world_model, placed,
+                                      rollout)
 from gymnast.world_model.controllability import ControllabilityConfig, check_controllability
 from gymnast.world_model.data import split_episodes
-from gymnast.world_model.ensemble import EnsembleWorldModel, is_ensemble, member_paths
+from gymnast.world_model.ensemble import is_ensemble, member_paths
 from gymnast.world_model.grounding import StateSource
 from gymnast.world_model.state_model import load_state_models
 from gymnast.world_model.metrics import PerceptualDistance, masked_psnr, moving_mask, pearson, psnr, ssim, summarize_horizons, to_unit_float
@@ -95,9 +97,8 @@ def evaluate_world_model(wm: Path, data: Path, out: Path, config: WorldModelEval
     """Measures `wm` on the held-out episodes of `data`; writes the report to `out` and returns it."""
     started = time.perf_counter()
     model = load_world_model(wm, **({} if config.reanchor_every is None else {"reanchor_every": config.reanchor_every}))
-    model = model.to(resolve_device(config.device))
-    fraction = heldout_fraction(Path(wm))
-    ensemble = isinstance(model, EnsembleWorldModel)
+    model = placed(model, resolve_device(config.device))
+    fraction = heldout_fraction(wm)
     # A model of one frame per chunk is measured on the frames it imagines, not their repeats.
     measured_every = config.measure_every or actions_per_frame(model)
     cameras = model_cameras(model)
@@ -129,7 +130,7 @@ def evaluate_world_model(wm: Path, data: Path, out: Path, config: WorldModelEval
             imagination = rollout(model, context, actions[None, start:], generator, states)
             imagined = imagination.frames[0]  # (T, H, W, 3)
             real = frames[start + 1 :]
-            if ensemble:
+            if imagination.disagreement is not None:  # an ensemble, or a user's model that says how far to trust a frame
                 rows["disagreement"].append(imagination.disagreement[0].numpy())
             measured = every_nth_frame(len(real), measured_every)
             for name, values in _measure_against_copy(imagined, real, context[0], perceptual, measured).items():
@@ -148,7 +149,7 @@ def evaluate_world_model(wm: Path, data: Path, out: Path, config: WorldModelEval
                 panels = side_by_side(real[:120:3].numpy(), imagined[:120:3].numpy())
                 write_gif(video_dir / f"{name}.gif", panels, fps=dataset.fps // 9, scale=1)
     table = {name: _pad(values) for name, values in rows.items()}  # name -> (N, T_max) with NaN
-    report = {**_summary(table, np.array(full_rollout), measured_every), **(disagreement_error(table) if ensemble else {}), "per_task": {}}
+    report = {**_summary(table, np.array(full_rollout), measured_every), **(disagreement_error(table) if "disagreement" in table else {}), "per_task": {}}
     if cameras:  # the figures above are over the views side by side; these are each view's own
         report["per_camera"] = {camera: _summary({k: _pad(v) for k, v in by_measure.items()}, np.array(full_rollout),
                                                  measured_every)
@@ -190,17 +191,27 @@ def state_source(model, robot_state: Path | None) -> StateSource | None:
     return StateSource(models)
 
 
-def heldout_fraction(wm: Path) -> float:
-    """The held-out share of scenes of a world-model run; of an ensemble, the smallest of its members'."""
+PLUGIN_HELDOUT_FRACTION = 0.1
+"""The held-out share of scenes measured for a user's own world model (`gymnast.utils.plugins`),
+which saves no split of its own: gymnast's default, so its scenes are the ones gymnast's models hold out."""
+
+
+def heldout_fraction(wm: str | Path) -> float:
+    """The held-out share of scenes of a world-model run; of an ensemble, the smallest of its
+    members'; of a user's own model, `PLUGIN_HELDOUT_FRACTION`."""
+    if is_plugin(wm):
+        return PLUGIN_HELDOUT_FRACTION
     if is_ensemble(wm):
         return min(heldout_fraction(member) for member in member_paths(wm))
     return read_json(resolve_checkpoint(wm) / "config.json")["train"]["heldout_fraction"]
 
 
-def frame_fit(wm: Path) -> Fit:
+def frame_fit(wm: str | Path) -> Fit:
     """How a world-model run fitted its dataset's frames to its image size (`gymnast.data.frames`);
-    of an ensemble, its first member's. Runs saved before the choice existed read only frames of
-    their own size, which every fit leaves as they are."""
+    of an ensemble, its first member's; resize for a user's own model. Runs saved before the
+    choice existed read only frames of their own size, which every fit leaves as they are."""
+    if is_plugin(wm):
+        return "resize"
     if is_ensemble(wm):
         return frame_fit(member_paths(wm)[0])
     return read_json(resolve_checkpoint(wm) / "config.json")["train"].get("fit", "resize")

@@ -16,7 +16,7 @@ from tqdm import tqdm
 from gymnast.data.lerobot import EpisodeDataset
 from gymnast.data.schema import Episode
 from gymnast.reward.judges.progress import progress_targets
-from gymnast.world_model.base import load_world_model, rollout
+from gymnast.world_model.base import load_world_model, placed, rollout
 from gymnast.world_model.data import split_episodes, usable_episodes
 from gymnast.world_model.views import model_cameras
 
@@ -68,7 +68,7 @@ def load_videos(dataset: EpisodeDataset, indices: list[int], wm: Path | None, pr
         episodes.append(torch.from_numpy(episode.actions).float())
     if wm is None:
         return videos
-    model = load_world_model(wm).to(device or "cpu")
+    model = placed(load_world_model(wm), device or torch.device("cpu"))
     imagines = model_cameras(model)
     if (len(dataset.cameras) > 1 or imagines) and tuple(dataset.cameras) != imagines:
         raise ValueError(f"{dataset.root} is read with cameras {','.join(dataset.cameras)}, but the world model {wm} "
