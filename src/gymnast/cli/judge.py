@@ -15,6 +15,9 @@ from gymnast.data.frames import Fit
 from gymnast.reward.chat.server import ChatLimits
 from gymnast.reward.spec import RewardSpec
 
+API_KEY_VARIABLE = "GYMNAST_JUDGE_API_KEY"
+"""The environment variable `gymnast serve-judge` reads its API key from when --api-key is not given."""
+
 
 def train_judge(
     out: Path,
@@ -117,25 +120,33 @@ def serve_judge(
     judge: Path,
     port: int = 8000,
     host: str = "127.0.0.1",
+    api_key: str | None = None,
     limits: Annotated[ChatLimits, tyro.conf.arg(name="")] = ChatLimits(),
 ) -> None:
     """Serve the learned judge over the OpenAI chat-completions protocol (POST /v1/chat/completions).
 
     A malformed request, one past the limits, or one that stalls past the read timeout gets a 4xx
     JSON error in the OpenAI shape naming the field at fault; the server logs it and serves on.
+    GET /v1/models says which cameras, image size and order the judge expects.
 
     Args:
         judge: judge run (or checkpoint) directory, from `gymnast train-judge`.
         port: TCP port to listen on.
-        host: address to bind (127.0.0.1: this machine only).
+        host: address to bind (127.0.0.1: this machine only; any other needs an API key).
+        api_key: the key every request must carry as 'Authorization: Bearer KEY' (an OpenAI client's
+            api_key); others get 401. Default: the GYMNAST_JUDGE_API_KEY environment variable, which
+            keeps the key out of the process list; neither: no key, this machine only.
         limits: the largest request body and `n`, and the read timeout.
     """
+    import os
     import time
 
     from gymnast.reward.chat.serve import judge_server
 
-    with judge_server(judge, host, port, limits=limits) as server:
-        print(f"judge: {judge} at {server.url} (model gymnast-judge); Ctrl-C stops", flush=True)
+    key = api_key if api_key is not None else os.environ.get(API_KEY_VARIABLE) or None
+    with judge_server(judge, host, port, limits=limits, api_key=key) as server:
+        needs = "; requests need the API key" if key else ""
+        print(f"judge: {judge} at {server.url} (model gymnast-judge{needs}); Ctrl-C stops", flush=True)
         try:
             while True:
                 time.sleep(3600)
