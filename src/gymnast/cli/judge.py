@@ -14,6 +14,7 @@ from gymnast.config import CameraNames
 from gymnast.data.frames import Fit
 from gymnast.reward.chat.server import ChatLimits
 from gymnast.reward.spec import RewardSpec
+from gymnast.utils.trackers import TrackerNames
 
 API_KEY_VARIABLE = "GYMNAST_JUDGE_API_KEY"
 """The environment variable `gymnast serve-judge` reads its API key from when --api-key is not given."""
@@ -36,6 +37,7 @@ def train_judge(
     hard_negatives: float | None = None,
     hold_steps: int | None = None,
     device: str | None = None,
+    tracker: TrackerNames | None = None,
     keys: Annotated[KeyFlags, tyro.conf.arg(name="")] = KeyFlags(),
 ) -> None:
     """Train the embedded success judge on real episodes (and their re-imaginings with --wm), choose
@@ -66,6 +68,9 @@ def train_judge(
         hold_steps: steps in a row a per-frame judge must see the task done to call a video a success
             (a run reaching the video's end counts as held); default 5; 1 believes any single frame.
         device: auto (CUDA when torch sees a GPU, else the CPU), cpu, cuda or cuda:N; --resume may change it.
+        tracker: where the run also logs its settings, metrics and held-out figures: none, or any of tensorboard and
+            wandb, comma-separated (wandb: the [wandb] extra; WANDB_MODE=offline keeps it on disk);
+            default: none; --resume may change it.
         keys: which dataset features are the actions and the states (default: LeRobot's action and
             observation.state); saved with the run.
     """
@@ -76,7 +81,8 @@ def train_judge(
         "train-judge", out, resume, JUDGE_PRESETS[preset], inputs={"data": data, "wm": wm}, required=("data",),
         overrides={"steps": steps, "kind": kind, "extra_data": extra_data or None, "init": init, "camera": camera,
                    "cameras": cameras or None, "fit": fit, "threshold_tpr": threshold_tpr,
-                   "hard_negatives": hard_negatives, "hold_steps": hold_steps, "device": device, **key_overrides(keys)},
+                   "hard_negatives": hard_negatives, "hold_steps": hold_steps, "device": device, "tracker": tracker,
+                   **key_overrides(keys)},
         saved=lambda: (saved_judge_config(out), saved_inputs(out, "data", "wm")))
     report = train(inputs["data"], out, config, wm=inputs["wm"], resume=resume)
     print(json.dumps({k: v for k, v in report.items() if k.startswith(("real", "imagined"))}, indent=2))
