@@ -65,10 +65,11 @@ def test_settings_metrics_videos_and_plots_reach_tensorboard_and_wandb(tmp_path)
     log.video("rollout/video", 3, VIDEO)
     log.video("wm/video", 3, tmp_path / "clip.mp4")
     log.image("plots/curve", 3, tmp_path / "plot.png")
+    log.log(4, {"train/loss": 0.25})  # after the videos encoded in the background: none of them is out of order
     log.close()
-    assert [json.loads(line)["step"] for line in (run / "metrics.jsonl").read_text().splitlines()] == [1, 2, 3]
+    assert [json.loads(line)["step"] for line in (run / "metrics.jsonl").read_text().splitlines()] == [1, 2, 3, 4]
     events = board(run)
-    assert [event.value for event in events.Scalars("train/loss")] == pytest.approx([1.0, 0.5, 1 / 3])
+    assert [event.value for event in events.Scalars("train/loss")] == pytest.approx([1.0, 0.5, 1 / 3, 0.25])
     assert set(events.Tags()["images"]) == {"rollout/video", "wm/video", "plots/curve"}
     gif = events.Images("rollout/video")[0].encoded_image_string
     assert gif.startswith(b"GIF89a") and Image.open(__import__("io").BytesIO(gif)).n_frames == len(VIDEO)

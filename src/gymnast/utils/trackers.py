@@ -5,7 +5,8 @@ Legend: T frames, H/W image height/width; videos are (T, H, W, 3) uint8 and imag
 ``--tracker`` names any of `TRACKERS`, several at once (``tensorboard,wandb``), or ``none``:
 
 - ``tensorboard``: event files in RUN/tensorboard/ (``tensorboard --logdir RUN``); videos as
-  animated GIFs in the images tab (TensorBoard's own video summary would need moviepy).
+  animated GIFs in the images tab (TensorBoard's own video summary would need moviepy), encoded
+  in a background thread while the run goes on.
 - ``wandb``: a Weights & Biases run (the ``wandb`` extra: ``pip install 'world-gymnast[wandb]'``),
   its files in RUN/wandb/. W&B reads its own environment: ``WANDB_MODE=offline`` keeps everything on
   disk (``wandb sync`` uploads it later), ``WANDB_PROJECT`` names the project (default ``gymnast``).
@@ -20,6 +21,7 @@ W&B continues the same run (its id is kept in RUN/wandb/run_id), ignoring steps 
 from __future__ import annotations
 
 import atexit
+import concurrent.futures
 import importlib.util
 import io
 import json
@@ -156,7 +158,13 @@ def open_trackers(names: Sequence[str], run: Path, resume_step: int | None = Non
 
 
 class TensorBoardTracker:
-    """TensorBoard event files in RUN/tensorboard/."""
+    """TensorBoard event files in RUN/tensorboard/.
+
+    A video's GIF is encoded in a background thread (decoding and encoding an RL group video took
+    most of the trackers' time in a debug step, benchmarks/tracker_overhead.py) and written once a
+    later step is logged, or at `close`: TensorBoard reads a step below one already written as a
+    restarted run and drops what came after it, so events go out in the order of their steps.
+    """
 
     def __init__(self, run: Path, resume_step: int | None = None) -> None:
         from torch.utils.tensorboard import SummaryWriter
@@ -164,28 +172,36 @@ class TensorBoardTracker:
         # purge_step drops the events past the resumed checkpoint (from that step on), as metrics.jsonl does.
         purge = None if resume_step is None else resume_step + 1
         self.writer = SummaryWriter(str(Path(run) / "tensorboard"), purge_step=purge)
+        self.encoder = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="tensorboard-gif")
+        self.pending: list[tuple[int, concurrent.futures.Future]] = []  # (step, its video's summary), in order
 
     def log_config(self, config: Mapping[str, object]) -> None:
         text = json.dumps(config, indent=2, default=str)
         self.writer.add_text("config", "\n".join(f"    {line}" for line in text.splitlines()))  # markdown: code
 
     def log_metrics(self, step: int, values: Mapping[str, float]) -> None:
+        self._write_videos(before=step)
         for key, value in values.items():
             self.writer.add_scalar(key, value, step)
 
     def log_video(self, key: str, step: int, video: Path | np.ndarray, fps: int = 10) -> None:
-        from tensorboard.compat.proto.summary_pb2 import Summary
-
-        frames = preview_frames(video)
-        image = Summary.Image(height=frames.shape[1], width=frames.shape[2], colorspace=3,
-                              encoded_image_string=gif_bytes(frames))
-        self.writer.file_writer.add_summary(Summary(value=[Summary.Value(tag=key, image=image)]), step)
+        self._write_videos(before=step)
+        self.pending.append((step, self.encoder.submit(_gif_summary, key, video)))
 
     def log_image(self, key: str, step: int, image: Path | np.ndarray) -> None:
+        self._write_videos(before=step)
         self.writer.add_image(key, _pixels(image), step, dataformats="HWC")
 
     def close(self) -> None:
+        self._write_videos()
+        self.encoder.shutdown()
         self.writer.close()
+
+    def _write_videos(self, before: int | None = None) -> None:
+        """Writes the encoded videos of the steps before `before` (all of them without it)."""
+        while self.pending and (before is None or self.pending[0][0] < before):
+            step, summary = self.pending.pop(0)
+            self.writer.file_writer.add_summary(summary.result(), step)
 
 
 class WandbTracker:
@@ -229,6 +245,16 @@ class WandbTracker:
         self.run.finish()
 
 
+def _gif_summary(key: str, video: Path | np.ndarray):
+    """A TensorBoard image summary holding `video` as an animated GIF."""
+    from tensorboard.compat.proto.summary_pb2 import Summary
+
+    frames = preview_frames(video)
+    image = Summary.Image(height=frames.shape[1], width=frames.shape[2], colorspace=3,
+                          encoded_image_string=gif_bytes(frames))
+    return Summary(value=[Summary.Value(tag=key, image=image)])
+
+
 def preview_frames(video: Path | np.ndarray) -> np.ndarray:
     """(T', H, W, 3) uint8: at most `GIF_FRAMES` evenly spaced frames of an mp4 or of (T, H, W, 3) frames."""
     if isinstance(video, Path):
@@ -243,7 +269,9 @@ def preview_frames(video: Path | np.ndarray) -> np.ndarray:
 
 def gif_bytes(frames: np.ndarray) -> bytes:
     """An animated GIF of (T, H, W, 3) uint8 frames, looping."""
-    images = [Image.fromarray(frame) for frame in frames]
+    # Each frame's own palette by the fast octree: Pillow's default (median cut, dithered) took 2 s
+    # for 11 frames of an RL group video, 70x as long, to a GIF of the same size.
+    images = [Image.fromarray(frame).quantize(256, method=Image.Quantize.FASTOCTREE) for frame in frames]
     buffer = io.BytesIO()
     images[0].save(buffer, format="GIF", save_all=True, append_images=images[1:], duration=_GIF_MS, loop=0)
     return buffer.getvalue()
