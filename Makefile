@@ -45,7 +45,8 @@ test: $(STAMP)
 	@# tests wait on subprocesses, simulators and timeouts. Each process computes with its share of
 	@# the cores (tests/conftest.py): with torch's default of a thread per core in both, the suite
 	@# took 17.5 minutes on 2 cores; with one each, 11.6. The slowest are listed at the end.
-	$(BIN)/python -m pytest -n $(TEST_PROCESSES) --dist loadfile --durations=25
+	@# W&B (--tracker wandb) offline: nothing reaches the network (tests/conftest.py also sets it).
+	WANDB_MODE=offline $(BIN)/python -m pytest -n $(TEST_PROCESSES) --dist loadfile --durations=25
 
 # The headline experiment on a few tasks: every stage from data to report, then the table.
 demo: $(STAMP)

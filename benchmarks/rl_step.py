@@ -47,7 +47,7 @@ def time_setting(env: str, reward: str, data: Path, steps: int, tasks: str, poli
     of its settings (e.g. starts_per_step, device)."""
     config = dataclasses.replace(
         RL_PRESETS["full"], steps=steps, tasks=tasks, max_rounds=1, keep_low=0.0, keep_high=1.0, eval_episodes=1,
-        real_eval=False, watch_every=0, video_every=10**6, checkpoint_every=10**6, tensorboard=False, **overrides,
+        real_eval=False, watch_every=0, video_every=10**6, checkpoint_every=10**6, tracker=(), **overrides,
     )
     with tempfile.TemporaryDirectory() as out:
         run = RLRun(str(policy), env_kind(env), RewardSpec.parse(reward), str(wm), str(data))

@@ -36,6 +36,14 @@ if _PROCESSES > 1:
 os.environ[CACHE_ENV] = tempfile.mkdtemp(prefix="gymnast-test-cache-")
 atexit.register(shutil.rmtree, os.environ[CACHE_ENV], ignore_errors=True)
 
+# Weights & Biases (--tracker wandb) never reaches the network in the tests: offline, silent, and
+# every folder it keeps (settings, cache, artifacts) in one of the tests' own.
+_WANDB = tempfile.mkdtemp(prefix="gymnast-test-wandb-")
+atexit.register(shutil.rmtree, _WANDB, ignore_errors=True)
+os.environ.update({"WANDB_MODE": "offline", "WANDB_SILENT": "true", "WANDB_CONSOLE": "off", "WANDB_DIR": _WANDB,
+                   "WANDB_CONFIG_DIR": _WANDB, "WANDB_CACHE_DIR": _WANDB, "WANDB_DATA_DIR": _WANDB,
+                   "WANDB_ARTIFACT_DIR": _WANDB, "WANDB_DISABLE_GIT": "true", "WANDB_DISABLE_CODE": "true"})
+
 
 @pytest.fixture(autouse=True)
 def torch_construction_restored(request):

@@ -1,5 +1,6 @@
 """serve-judge under bad input: every malformed, oversized or stalled request gets a 4xx JSON error in
-the OpenAI shape, sent both as raw HTTP and through the real `openai` client, and the server serves on."""
+the OpenAI shape, sent both as raw HTTP and through the real `openai` client, and the server serves on;
+the whole suite runs against judges of one, two and three cameras."""
 
 import base64
 import http.client
@@ -20,6 +21,7 @@ from gymnast.cli import main
 from gymnast.policy.text import InstructionEncoder
 from gymnast.reward.chat.server import ChatLimits, ChatServer
 from gymnast.reward.judges.base import JudgeConfig
+from gymnast.reward.judges.frames import FrameJudge
 from gymnast.reward.judges.video import LearnedJudge
 from gymnast.reward.chat.serve import judge_answer
 
@@ -45,13 +47,20 @@ def messages(*images: bytes | str, text: str = "Task: open the drawer") -> list[
     return [{"role": "user", "content": [{"type": "text", "text": text}, *parts]}]
 
 
-GOOD = {"model": "gymnast-judge", "messages": messages(jpeg(), jpeg())}
+# Six images of one camera each: whole instants of a judge of one, two or three cameras.
+GOOD = {"model": "gymnast-judge", "messages": messages(*[jpeg()] * 6)}
+JUDGES = {  # untrained: only their answers' form matters
+    "video judge, one camera": lambda: LearnedJudge(JudgeConfig(width=32, image_size=SIZE)),
+    "frame judge, two cameras": lambda: FrameJudge(JudgeConfig(width=32, image_size=SIZE, cameras=("front", "gripper"))),
+    "frame judge, three cameras": lambda: FrameJudge(JudgeConfig(width=32, image_size=SIZE,
+                                                                 cameras=("front", "gripper", "hand"))),
+}
 
 
-@pytest.fixture(scope="module")
-def server():
+@pytest.fixture(scope="module", params=JUDGES, ids=str)
+def server(request):
     torch.manual_seed(0)
-    judge = LearnedJudge(JudgeConfig(width=32, image_size=SIZE)).eval()  # untrained: only its answers' form matters
+    judge = JUDGES[request.param]().eval()
     InstructionEncoder()(["load the sentence encoder"])  # before serving: its first load takes seconds
     with ChatServer(judge_answer(judge), limits=LIMITS) as running:
         yield running
@@ -142,7 +151,7 @@ MALFORMED = {
                     post(as_json({"messages": messages(data_url(HUGE_CANVAS.getvalue(), "png"))}))),
     "mixed image sizes": (400, "mixed_image_sizes", "messages", "image 0 is 32x32 but image 1 is 48x32",
                           post(as_json({"messages": messages(jpeg(), jpeg(SIZE, 48))}))),
-    "not the judge's size": (400, "wrong_image_size", "messages", "takes 32x32 images",
+    "not the judge's size": (400, "wrong_image_size", "messages", "got 64x64: resize the frames",
                              post(as_json({"messages": messages(jpeg(64, 64))}))),
     "no task line": (400, "missing_task", "messages", "'Task: <instruction>'",
                      post(as_json({"messages": messages(jpeg(), text="is it done?")}))),
@@ -241,8 +250,8 @@ def test_an_idle_kept_alive_connection_is_not_timed_out_as_a_stalled_request(ser
 def test_a_failing_answer_function_is_a_500_in_the_openai_shape_and_the_server_serves_on():
     calls = []
 
-    def answer(text, frames):
-        calls.append(text)
+    def answer(request):
+        calls.append(request.text)
         if len(calls) == 1:
             raise RuntimeError("the model fell over")
         return "ANSWER: 1"

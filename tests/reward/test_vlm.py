@@ -30,10 +30,10 @@ class Recorder:
         self.calls = []
         self.lock = threading.Lock()
 
-    def __call__(self, text, frames):
+    def __call__(self, request):
         with self.lock:
-            self.calls.append((task(text), frames))
-        return "The drawer moved.\nANSWER: 1" if "open" in task(text) else "Nothing happened.\nANSWER: 0"
+            self.calls.append((task(request.text), request.frames))
+        return "The drawer moved.\nANSWER: 1" if "open" in task(request.text) else "Nothing happened.\nANSWER: 0"
 
 
 def videos(batch=2, steps=7, seed=0):
@@ -78,7 +78,7 @@ def test_each_sample_is_one_request(recorder):
 def test_the_samples_are_majority_voted(answers, expected):
     cycle, lock = itertools.cycle(answers), threading.Lock()
 
-    def answer(text, frames):
+    def answer(request):
         with lock:
             return f"ANSWER: {next(cycle)}"
 

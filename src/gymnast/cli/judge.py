@@ -14,6 +14,10 @@ from gymnast.config import CameraNames
 from gymnast.data.frames import Fit
 from gymnast.reward.chat.server import ChatLimits
 from gymnast.reward.spec import RewardSpec
+from gymnast.utils.trackers import TrackerNames
+
+API_KEY_VARIABLE = "GYMNAST_JUDGE_API_KEY"
+"""The environment variable `gymnast serve-judge` reads its API key from when --api-key is not given."""
 
 
 def train_judge(
@@ -33,6 +37,7 @@ def train_judge(
     hard_negatives: float | None = None,
     hold_steps: int | None = None,
     device: str | None = None,
+    tracker: TrackerNames | None = None,
     keys: Annotated[KeyFlags, tyro.conf.arg(name="")] = KeyFlags(),
 ) -> None:
     """Train the embedded success judge on real episodes (and their re-imaginings with --wm), choose
@@ -64,6 +69,9 @@ def train_judge(
         hold_steps: steps in a row a per-frame judge must see the task done to call a video a success
             (a run reaching the video's end counts as held); default 5; 1 believes any single frame.
         device: auto (CUDA when torch sees a GPU, else the CPU), cpu, cuda or cuda:N; --resume may change it.
+        tracker: where the run also logs its settings, metrics and held-out figures: none, or any of tensorboard and
+            wandb, comma-separated (wandb: the [wandb] extra; WANDB_MODE=offline keeps it on disk);
+            default: none; --resume may change it.
         keys: which dataset features are the actions and the states (default: LeRobot's action and
             observation.state); saved with the run.
     """
@@ -74,7 +82,8 @@ def train_judge(
         "train-judge", out, resume, JUDGE_PRESETS[preset], inputs={"data": data, "wm": wm}, required=("data",),
         overrides={"steps": steps, "kind": kind, "extra_data": extra_data or None, "init": init, "camera": camera,
                    "cameras": cameras or None, "fit": fit, "threshold_tpr": threshold_tpr,
-                   "hard_negatives": hard_negatives, "hold_steps": hold_steps, "device": device, **key_overrides(keys)},
+                   "hard_negatives": hard_negatives, "hold_steps": hold_steps, "device": device, "tracker": tracker,
+                   **key_overrides(keys)},
         saved=lambda: (saved_judge_config(out), saved_inputs(out, "data", "wm")))
     report = train(inputs["data"], out, config, wm=inputs["wm"], resume=resume)
     print(json.dumps({k: v for k, v in report.items() if k.startswith(("real", "imagined"))}, indent=2))
@@ -118,25 +127,33 @@ def serve_judge(
     judge: Path,
     port: int = 8000,
     host: str = "127.0.0.1",
+    api_key: str | None = None,
     limits: Annotated[ChatLimits, tyro.conf.arg(name="")] = ChatLimits(),
 ) -> None:
     """Serve the learned judge over the OpenAI chat-completions protocol (POST /v1/chat/completions).
 
     A malformed request, one past the limits, or one that stalls past the read timeout gets a 4xx
     JSON error in the OpenAI shape naming the field at fault; the server logs it and serves on.
+    GET /v1/models says which cameras, image size and order the judge expects.
 
     Args:
         judge: judge run (or checkpoint) directory, from `gymnast train-judge`.
         port: TCP port to listen on.
-        host: address to bind (127.0.0.1: this machine only).
+        host: address to bind (127.0.0.1: this machine only; any other needs an API key).
+        api_key: the key every request must carry as 'Authorization: Bearer KEY' (an OpenAI client's
+            api_key); others get 401. Default: the GYMNAST_JUDGE_API_KEY environment variable, which
+            keeps the key out of the process list; neither: no key, this machine only.
         limits: the largest request body and `n`, and the read timeout.
     """
+    import os
     import time
 
     from gymnast.reward.chat.serve import judge_server
 
-    with judge_server(judge, host, port, limits=limits) as server:
-        print(f"judge: {judge} at {server.url} (model gymnast-judge); Ctrl-C stops", flush=True)
+    key = api_key if api_key is not None else os.environ.get(API_KEY_VARIABLE) or None
+    with judge_server(judge, host, port, limits=limits, api_key=key) as server:
+        needs = "; requests need the API key" if key else ""
+        print(f"judge: {judge} at {server.url} (model gymnast-judge{needs}); Ctrl-C stops", flush=True)
         try:
             while True:
                 time.sleep(3600)

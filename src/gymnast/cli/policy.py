@@ -11,6 +11,7 @@ from gymnast.cli.flags import KeyFlags, Preset, key_overrides
 from gymnast.cli.settings import resolve, saved_inputs
 from gymnast.config import CameraNames
 from gymnast.data.frames import Fit
+from gymnast.utils.trackers import TrackerNames
 from gymnast.eval.evaluate import EvalConfig
 
 
@@ -30,6 +31,7 @@ def sft(
     robot_state: bool | None = None,
     fit: Fit | None = None,
     device: str | None = None,
+    tracker: TrackerNames | None = None,
     keys: Annotated[KeyFlags, tyro.conf.arg(name="")] = KeyFlags(),
 ) -> None:
     """Behaviour-clone a VLA on N successful expert demonstrations per task.
@@ -55,6 +57,9 @@ def sft(
         fit: how frames that are not the model's square size are fitted: resize (squash the whole
             frame) or crop (the central square); saved with the run.
         device: auto (CUDA when torch sees a GPU, else the CPU), cpu, cuda or cuda:N; --resume may change it.
+        tracker: where the run also logs its settings, metrics: none, or any of tensorboard and
+            wandb, comma-separated (wandb: the [wandb] extra; WANDB_MODE=offline keeps it on disk);
+            default: none; --resume may change it.
         keys: which dataset features are the actions and the states (default: LeRobot's action and
             observation.state); saved with the run.
     """
@@ -64,7 +69,7 @@ def sft(
         "sft", out, resume, SFT_PRESETS[preset], inputs={"data": data}, required=("data",),
         overrides={"demos_per_task": demos_per_task, "steps": steps, "tasks": tasks, "seed": seed,
                    "vla.vision": vision, "camera": camera, "cameras": cameras or None, "policy": policy_type,
-                   "robot_state": robot_state, "fit": fit, "device": device,
+                   "robot_state": robot_state, "fit": fit, "device": device, "tracker": tracker,
                    **key_overrides(keys)},
         saved=lambda: (saved_sft_config(out), saved_inputs(out, "data")))
     checkpoint = train_sft(inputs["data"], out, config, resume=resume)

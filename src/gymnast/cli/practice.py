@@ -15,6 +15,10 @@ from gymnast.config import CameraNames
 from gymnast.envs.kinds import EnvName, env_kind
 from gymnast.reward.spec import RewardSpec
 from gymnast.rl.config import RL_PRESETS, RLConfig
+from gymnast.utils.trackers import TrackerNames
+
+TRACKED_STAGES = ("sft", "world_model", "judge", "state_model", "rl")
+"""The experiment's settings of trainers, each with its `tracker`."""
 
 
 def rl(
@@ -33,7 +37,7 @@ def rl(
     """Fine-tune a policy with GRPO in the world model (imagined), the software simulator or the real world.
 
     Args:
-        out: run directory: checkpoints, metrics.jsonl, tensorboard/, videos/, summary.json.
+        out: run directory: checkpoints, metrics.jsonl, tensorboard/ (--tracker), videos/, summary.json.
         policy: the SFT (or RL) run or checkpoint to start from (required unless --resume); also lerobot:PATH
             (a LeRobot pretrained_model folder), or your own: python:MODULE:FACTORY[@ARG] or plugin:NAME[@ARG]
             (gymnast check-policy --help).
@@ -159,6 +163,7 @@ def dyna(
     workers: int | None = None,
     runner: str | None = None,
     real_rl: bool | None = None,
+    tracker: TrackerNames | None = None,
 ) -> None:
     """World-Gymnast's loop: RL in imagination, a few counted real rollouts of the new policy, the
     world model and the reward model (judge or state model) fine-tuned on them, a real evaluation;
@@ -196,6 +201,8 @@ def dyna(
         workers: simulator processes (default: the preset's).
         runner: where they run: local, ray or ray:ADDRESS (default: the preset's, local).
         real_rl: also run RL in the real world for comparison (default: the preset's, on).
+        tracker: where every round's trainers, the real-world arm and the rounds' figures also log: none,
+            or any of tensorboard and wandb, comma-separated (default: the preset's RL setting).
     """
     from gymnast.experiment.dyna import DYNA_PRESETS, DynaInputs, run_dyna, saved_dyna_settings
     from gymnast.experiment.dyna_report import dyna_table
@@ -211,7 +218,7 @@ def dyna(
                    "rl.keyframes": keyframes, "rl.horizon": horizon, "rl.eval_horizon": eval_horizon,
                    "practice_from_rollouts": practice_from_rollouts,
                    "state_steps": state_steps, "wm_steps": wm_steps, "workers": workers, "runner": runner,
-                   "real_rl": real_rl}, saved=saved, required=("policy", "wm"))
+                   "real_rl": real_rl, "rl.tracker": tracker}, saved=saved, required=("policy", "wm"))
     summary = run_dyna(config, DynaInputs(**inputs), out)
     print(dyna_table(summary))
     print(f"summary: {out / 'summary.json'}, plot: {out / summary['plot']}")
@@ -230,6 +237,7 @@ def experiment(
     judge_rollouts: int | None = None,
     demos_per_task: int | None = None,
     freeze: tuple[str, ...] | None = None,
+    tracker: TrackerNames | None = None,
     status: bool = False,
     report: bool = False,
 ) -> None:
@@ -263,6 +271,8 @@ def experiment(
         freeze: parts of the policy the RL arms leave as SFT made them, by parameter-name prefix
             (default: the preset's, vision: the embedded policies' image encoder; a LeRobot
             policy's are its own, e.g. model.backbone; none: `--freeze` alone).
+        tracker: where every stage's trainer and the report's figures and plots also log: none, or any
+            of tensorboard and wandb, comma-separated (default: each stage's own; RL's is tensorboard).
         status: print where the experiment in OUT stands (the stages finished with their wall times,
             the one under way with its newest checkpoint, those still to run) and exit; nothing runs.
         report: write OUT/report.md and OUT/summary.json from the stages finished so far (an
@@ -291,7 +301,8 @@ def experiment(
     config, _ = resolve("experiment", out, resume, EXPERIMENT_PRESETS[preset],
                         overrides={"workers": workers, "sentences": sentences, "runner": runner, "device": device,
                                    "cameras": cameras, "judge_rollouts": judge_rollouts,
-                                   "sft.demos_per_task": demos_per_task, "rl.freeze": freeze},
+                                   "sft.demos_per_task": demos_per_task, "rl.freeze": freeze,
+                                   **{f"{stage}.tracker": tracker for stage in TRACKED_STAGES}},
                         inputs={}, saved=lambda: (saved_experiment_config(out), {}))
     summary = run_experiment(config, out, parse_reuse(reuse))
     print(format_table(summary))

@@ -29,9 +29,10 @@ from gymnast.utils.settings import saved_settings
 C = TypeVar("C")
 
 
-WHERE_IT_RUNS = frozenset({"device", "runner", "workers"})
-"""Settings of where a run computes, not of what it computes: with --resume they may differ from
-the saved run's (a run started on a GPU can finish on a CPU) and replace its values."""
+WHERE_IT_RUNS = frozenset({"device", "runner", "workers", "tracker"})
+"""Settings of where a run computes or logs, not of what it computes: with --resume they may differ
+from the saved run's (a run started on a GPU can finish on a CPU) and replace its values, in a
+nested setting too (``rl.tracker``)."""
 
 
 def resolve(
@@ -67,8 +68,8 @@ def resolve(
     given = {name: value for name, value in inputs.items() if value is not None}
     if resume:
         config, have_inputs = saved()
-        for name in overrides.keys() & WHERE_IT_RUNS:  # a resumed run may continue on another machine
-            config = _replace(config, name, overrides.pop(name))
+        for name in [name for name in overrides if name.rpartition(".")[2] in WHERE_IT_RUNS]:
+            config = _replace(config, name, overrides.pop(name))  # a resumed run may continue on another machine
         for name, value in (overrides | given).items():
             have = _field(config, name) if name in overrides else have_inputs.get(name)
             if not _same(value, have):
@@ -93,7 +94,7 @@ def saved_inputs(run: Path, *names: str) -> dict[str, Path | None]:
 def flags_of(cls: type, presets: Mapping[str, Any]) -> type:
     """A frozen dataclass with one optional flag per field of the flat dataclass `cls`: the field's
     docstring is its help, and a flag left out (None) keeps the preset's value, which the help lists."""
-    hints, docs = typing.get_type_hints(cls), field_docs(cls)
+    hints, docs = typing.get_type_hints(cls, include_extras=True), field_docs(cls)  # extras: a field's own parser
     fields = []
     for field in dataclasses.fields(cls):
         if dataclasses.is_dataclass(hints[field.name]):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 from typing import Annotated, Literal
 
@@ -11,6 +12,7 @@ from gymnast.cli.flags import GPUPreset, KeyFlags, feature_keys, key_overrides
 from gymnast.cli.settings import resolve, saved_inputs
 from gymnast.config import CameraNames
 from gymnast.data.frames import Fit
+from gymnast.utils.trackers import TrackerNames
 
 
 def train_wm(
@@ -33,6 +35,7 @@ def train_wm(
     camera: str | None = None,
     cameras: CameraNames = (),
     fit: Fit | None = None,
+    tracker: TrackerNames | None = None,
     keys: Annotated[KeyFlags, tyro.conf.arg(name="")] = KeyFlags(),
 ) -> None:
     """Train a world model on every episode of a dataset (held-out scenes excepted).
@@ -69,6 +72,9 @@ def train_wm(
             policy of those cameras sees. Default: --camera alone.
         fit: how frames that are not the model's square size are fitted: resize (squash the whole
             frame) or crop (the central square); saved with the run.
+        tracker: where the run also logs its settings, metrics and held-out videos: none, or any of tensorboard and
+            wandb, comma-separated (wandb: the [wandb] extra; WANDB_MODE=offline keeps it on disk);
+            default: none; --resume may change it.
         keys: which dataset features are the actions and the states (default: LeRobot's action and
             observation.state); saved with the run.
     """
@@ -81,7 +87,7 @@ def train_wm(
                    f"{'flow' if backend == 'flow' else 'model'}.action_dropout": action_dropout,
                    "model.actions_per_frame": actions_per_frame,
                    "grounded": grounded, "state_noise": state_noise, "init": init, "extra_data": extra_data or None, "camera": camera, "cameras": cameras or None, "fit": fit,
-                   **key_overrides(keys)},
+                   "tracker": tracker, **key_overrides(keys)},
         saved=lambda: (saved_train_config(out), saved_inputs(out, "data")))
     checkpoint = train_world_model(inputs["data"], out, config, resume=resume)
     print(f"world model: {checkpoint}")
@@ -98,6 +104,7 @@ def train_state(
     last_action: bool = True,
     extra_data: tuple[Path, ...] = (),
     init: Path | None = None,
+    tracker: TrackerNames = (),
     keys: Annotated[KeyFlags, tyro.conf.arg(name="")] = KeyFlags(),
 ) -> None:
     """Train the grounded state model on a dataset's recorded states, rewards and success flags: the
@@ -118,6 +125,8 @@ def train_state(
         extra_data: more datasets to train on, e.g. the policy's own rollouts (`gymnast collect --policy`).
         init: fine-tune: start from the weights of this state-model run or checkpoint (its architecture
             and normalisation kept), e.g. on the policy's newest rollouts with --extra-data.
+        tracker: where the run also logs its settings and metrics: none, or any of tensorboard and
+            wandb, comma-separated (wandb: the [wandb] extra); with --resume, replaces the run's.
         keys: which dataset features are the actions and the states (default: LeRobot's action and
             observation.state); saved with the run.
     """
@@ -126,11 +135,12 @@ def train_state(
 
     if resume:
         config, data = from_json(StateTrainConfig, saved_settings(out, "train")), Path(saved_settings(out)["data"])
+        config = dataclasses.replace(config, tracker=tracker) if tracker else config
     elif data is None:
         raise ValueError("train-state needs --data (or --resume to continue the run in --out)")
     else:
         config = StateTrainConfig(steps=steps, unroll=unroll, seed=seed, ridge=ridge, last_action=last_action,
-                                  extra_data=extra_data, keys=feature_keys(keys), init=init)
+                                  extra_data=extra_data, keys=feature_keys(keys), init=init, tracker=tracker)
     checkpoint = train_state_model(data, out, config, resume=resume)
     print(f"state model: {checkpoint}; held-out errors: {out / 'eval.json'}")
 

@@ -120,7 +120,7 @@ def _imagined_rl(**changes) -> RLConfig:
 DYNA_PRESETS: dict[str, DynaConfig] = {
     "debug": DynaConfig(rounds=3, rollouts_per_task=1, wm_steps=2, judge_steps=2, eval_episodes=1, workers=1,
                         rl=dataclasses.replace(RL_PRESETS["debug"], real_eval=False, eval_every=0, watch_every=0,
-                                               tensorboard=False)),
+                                               tracker=())),
     # Minutes on 2 cores: one refill-free round of 32 rollouts per step.
     "demo": DynaConfig(rounds=3, rollouts_per_task=8, wm_steps=100, judge_steps=100, eval_episodes=10,
                        rl=_imagined_rl(steps=4, tasks="reach-v3", lr=3e-5, max_rounds=1, watch_every=4)),
@@ -191,12 +191,12 @@ def run_dyna(config: DynaConfig, inputs: DynaInputs, out: Path, progress: bool =
     Raises:
         ValueError: `out` holds a Dyna run started with other settings or inputs.
     """
-    from gymnast.experiment.dyna_report import write_report
+    from gymnast.experiment.dyna_report import track_report, write_report
     from gymnast.utils.checkpoint import write_run_config
 
     inputs.check()
     resolved = {"dyna": dataclasses.asdict(config), "inputs": inputs.to_json()}
-    if (out / "config.json").exists() and saved_settings(out) != json.loads(json.dumps(resolved)):
+    if (out / "config.json").exists() and not _same_run(saved_dyna_settings(out), config, inputs):
         raise ValueError(f"{out} holds a Dyna run with other settings or inputs; continue it with "
                          f"`gymnast dyna --out {out} --resume`, or start a new run in another --out")
     write_run_config(out, resolved)
@@ -217,7 +217,21 @@ def run_dyna(config: DynaConfig, inputs: DynaInputs, out: Path, progress: bool =
                          out / "real_rl") if config.real_rl else None
     summary = summarise(config, rounds, real_rl)
     summary["wall_s"] = time.perf_counter() - began
-    return write_report(summary, out)
+    summary = write_report(summary, out)
+    track_report(summary, out, config.rl.tracker, resolved)
+    return summary
+
+
+def _same_run(saved: tuple[DynaConfig, DynaInputs], config: DynaConfig, inputs: DynaInputs) -> bool:
+    """Whether the run saved in OUT is the one `config` and `inputs` describe; where it logs (its
+    trackers) may change (older runs' settings are read under today's names)."""
+    settings, started_from = saved
+    settings = dataclasses.replace(settings, rl=dataclasses.replace(settings.rl, tracker=config.rl.tracker))
+
+    def as_json(*objects) -> list:
+        return json.loads(json.dumps([dataclasses.asdict(item) for item in objects], default=str))  # paths as strings
+
+    return as_json(settings, started_from) == as_json(config, inputs)
 
 
 def run_round(k: int, config: DynaConfig, inputs: DynaInputs, policy: Path, wm: Path, reward: Path,
@@ -246,15 +260,17 @@ def run_round(k: int, config: DynaConfig, inputs: DynaInputs, policy: Path, wm: 
         recorded.append(rollouts)
         if config.wm_steps and can_be_refit(inputs.wm):  # else every round imagines in the given world model
             stages.run("world_model", lambda: fine_tune_world_model(inputs.wm, wm, recorded, config.wm_steps, new_wm,
-                                                                    progress), new_wm)
+                                                                    progress, config.rl.tracker), new_wm)
             wm = new_wm
         if kind == "judge":
             row["judge"] = stages.run("judge", lambda: fine_tune_judge(inputs.judge, reward, wm, recorded,
-                                                                       config.judge_steps, new_reward, progress),
+                                                                       config.judge_steps, new_reward, progress,
+                                                                       config.rl.tracker),
                                       new_reward)
         else:
             row["state"] = stages.run("state", lambda: fine_tune_state_model(inputs.state, reward, recorded,
-                                                                             config.state_steps, new_reward, progress),
+                                                                             config.state_steps, new_reward, progress,
+                                                                             config.rl.tracker),
                                       new_reward)
         reward = new_reward
     evaluated = stages.run("eval", lambda: _evaluate(rl_run, config, here / "eval.json"))
@@ -284,31 +300,33 @@ def record_rollouts(k: int, policy: Path, judge: Path | None, config: DynaConfig
 
 
 def fine_tune_world_model(original: Path, current: Path, recorded: list[Path], steps: int, out: Path,
-                          progress: bool) -> dict:
-    """The world model `current`, fine-tuned for `steps` on `original`'s data plus every recorded rollout."""
+                          progress: bool, tracker: tuple[str, ...] | None = None) -> dict:
+    """The world model `current`, fine-tuned for `steps` on `original`'s data plus every recorded rollout,
+    logging to the trackers `tracker` (None: the original run's)."""
     from gymnast.world_model.train import saved_train_config, train_world_model
 
     settings = _fine_tuning(saved_train_config(original), steps, current, recorded, validate_every=steps,
-                            video_every=steps)
+                            video_every=steps, **_logging_to(tracker))
     checkpoint = train_world_model(Path(saved_settings(original)["data"]), out, settings, resume=has_checkpoint(out),
                                    progress=progress)
     return {"checkpoint": str(checkpoint)}
 
 
 def fine_tune_judge(original: Path, current: Path, wm: Path, recorded: list[Path], steps: int, out: Path,
-                    progress: bool) -> dict:
+                    progress: bool, tracker: tuple[str, ...] | None = None) -> dict:
     """The judge `current`, fine-tuned for `steps` on `original`'s data plus every recorded rollout (re-imagined
-    by the round's world model when the original judge learned from imagined video too)."""
+    by the round's world model when the original judge learned from imagined video too), logging to `tracker`
+    (None: the original run's)."""
     from gymnast.reward.judges.train import saved_judge_config, train_judge
 
     saved = saved_settings(original)
-    settings = _fine_tuning(saved_judge_config(original), steps, current, recorded)
+    settings = _fine_tuning(saved_judge_config(original), steps, current, recorded, **_logging_to(tracker))
     return train_judge(Path(saved["data"]), out, settings, wm=wm if saved.get("wm") else None, resume=has_checkpoint(out),
                        progress=progress)
 
 
 def fine_tune_state_model(original: Path, current: Path, recorded: list[Path], steps: int, out: Path,
-                          progress: bool) -> dict:
+                          progress: bool, tracker: tuple[str, ...] | None = None) -> dict:
     """The state model `current` (a run, or an ensemble: each member in OUT/member_i, and OUT an
     ensemble of them), fine-tuned for `steps` on `original`'s data plus every recorded rollout;
     returns each member's held-out errors (its eval.json) by member."""
@@ -325,7 +343,8 @@ def fine_tune_state_model(original: Path, current: Path, recorded: list[Path], s
         saved = saved_settings(first)
         base = from_json(StateTrainConfig, saved["train"])
         settings = dataclasses.replace(base, steps=steps, checkpoint_every=min(base.checkpoint_every, steps),
-                                       init=last, extra_data=(*base.extra_data, *recorded))
+                                       init=last, extra_data=(*base.extra_data, *recorded),
+                                       **_logging_to(tracker))
         train_state_model(Path(saved["data"]), member, settings, resume=has_checkpoint(member), progress=progress)
         evaluation = member / "eval.json"
         reports[member.name] = read_json(evaluation) if evaluation.is_file() else None
@@ -333,6 +352,11 @@ def fine_tune_state_model(original: Path, current: Path, recorded: list[Path], s
     if len(members) > 1:
         write_state_ensemble(out, members)
     return reports
+
+
+def _logging_to(tracker: tuple[str, ...] | None) -> dict:
+    """The `tracker` setting of a fine-tuning run (none given: the original run's, kept)."""
+    return {} if tracker is None else {"tracker": tracker}
 
 
 def _fine_tuning(base, steps: int, current: Path, recorded: list[Path], **more):

@@ -8,6 +8,7 @@ from pathlib import Path
 from gymnast.experiment.plots import _figure, _save
 from gymnast.experiment.formatting import ci, pct
 from gymnast.utils.atomic import atomic_path, write_json
+from gymnast.utils.trackers import open_trackers
 
 
 def write_report(summary: dict, out: Path) -> dict:
@@ -18,6 +19,24 @@ def write_report(summary: dict, out: Path) -> dict:
         Path(tmp).write_text(dyna_table(summary) + "\n")
     write_json(out / "summary.json", summary)
     return summary
+
+
+def track_report(summary: dict, out: Path, tracker: tuple[str, ...], settings: dict) -> None:
+    """Each round's real success and training interactions (a step per round), the real-world arm's
+    at the same boundaries, and the plot, to the trackers `tracker` as one run in `out`."""
+    steps: dict[int, dict[str, float]] = {}  # one call a step: W&B takes steps in order
+    for row in summary["rounds"]:
+        steps.setdefault(row["round"], {}).update({
+            "eval/dyna_success": row["success"], "eval/dyna_ci_low": row["ci_low"], "eval/dyna_ci_high": row["ci_high"],
+            "rollout/dyna_real_interactions": row["real_interactions"]})
+    for k, point in enumerate((summary["real_rl"] or {}).get("curve", [])):  # evaluated at every round's boundary
+        steps.setdefault(k, {}).update({"eval/real_rl_success": point["success"],
+                                        "rollout/real_rl_real_interactions": point["real_interactions"]})
+    trackers = open_trackers(tracker, out, kind="dyna", config=settings)
+    for step, values in sorted(steps.items()):
+        trackers.log_metrics(step, values)
+    trackers.log_image("plots/dyna", len(summary["rounds"]) - 1, out / summary["plot"])
+    trackers.close()
 
 
 def dyna_table(summary: dict) -> str:

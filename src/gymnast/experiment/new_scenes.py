@@ -40,7 +40,7 @@ def practice_settings(base: RLConfig, steps: int, starts_per_step: int) -> RLCon
     evaluation between the first and the last (each is one greedy episode on the scene)."""
     return dataclasses.replace(base, steps=steps, starts_per_step=starts_per_step, fresh_scenes=False,
                                keyframes="first", warmup_steps=min(base.warmup_steps, 1), eval_every=0,
-                               watch_every=steps, video_every=steps, checkpoint_every=steps, tensorboard=False)
+                               watch_every=steps, video_every=steps, checkpoint_every=steps, tracker=())
 
 
 def practise(run_spec: RLRun, settings: RLConfig, scenes: list[Scene], out: Path, progress: bool = True) -> list[dict]:

@@ -99,7 +99,22 @@ def _run_experiment(config: ExperimentConfig, out: Path, reuse: dict[str, Path] 
             _evaluate(stages, f"eval_{name}_heldout", policies[name], config, out, config.robustness_episodes, env,
                       progress, instruction_split="heldout", sentences=config.sentences)
         stages.run("worldgym", lambda: _worldgym(stages, config, out, policies, wm, judge, env, progress))
-    return write_report(out, stages, config)
+    summary = write_report(out, stages, config)
+    _track(out, config, summary)
+    return summary
+
+
+def _track(out: Path, config: ExperimentConfig, summary: dict) -> None:
+    """The experiment's settings, each arm's real success and the report's plots, to the trackers
+    of its RL arms (`--tracker`), as one run of its own in `out`."""
+    from gymnast.utils.trackers import open_trackers
+
+    trackers = open_trackers(config.rl.tracker, out, kind="experiment", config=dataclasses.asdict(config))
+    for i, (name, row) in enumerate(summary["arms"].items()):
+        trackers.log_metrics(i, {f"eval/{name}_{key}": row[key] for key in ("success", "ci_low", "ci_high")})
+    for plot in sorted((out / "plots").glob("*.png")):
+        trackers.log_image(f"plots/{plot.stem}", 0, plot)
+    trackers.close()
 
 
 def _models(stages: Stages, config: ExperimentConfig, out: Path, progress: bool
@@ -404,10 +419,16 @@ def _save_settings(out: Path, config: ExperimentConfig) -> None:
                                                                 as_json(config))))
         except (TypeError, ValueError) as error:
             raise ValueError(f"{path}: not an experiment's settings this version can read ({error})") from error
-        if saved != as_json(config):
+        if _trackers_aside(saved) != _trackers_aside(as_json(config)):  # where it logs may change
             raise ValueError(f"{out} holds an experiment with other settings ({path}); use a new --out, the same "
                              f"preset or --resume")
     write_json(path, as_json(config))
+
+
+def _trackers_aside(settings: dict) -> dict:
+    """`settings` without the stages' `tracker` (where they log, not what they compute), at any depth."""
+    return {key: _trackers_aside(value) if isinstance(value, dict) else value
+            for key, value in settings.items() if key != "tracker"}
 
 
 def _filled(saved: dict, current: dict) -> dict:

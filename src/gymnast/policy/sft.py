@@ -37,6 +37,7 @@ from gymnast.utils.device import resolve_device
 from gymnast.utils.distributed import Parallel, data_parallel
 from gymnast.utils.optim import gradient_step, warmup_cosine
 from gymnast.utils.settings import from_json, saved_settings
+from gymnast.utils.trackers import TrackerNames
 
 logger = logging.getLogger(__name__)
 
@@ -84,6 +85,9 @@ class SFTConfig:
     """Steps between checkpoints."""
     log_every: int = 50
     """Steps between metrics lines."""
+    tracker: TrackerNames = ()
+    """Where the run logs besides RUN/metrics.jsonl: none, or any of tensorboard and wandb,
+    comma-separated (gymnast.utils.trackers)."""
     seed: int = 0
     """Seed of initialisation, batch order and augmentation."""
     tasks: str = ""
@@ -248,7 +252,8 @@ def _train(out: Path, config: SFTConfig, model: nn.Module, demos: DemoSet, extra
     schedule = torch.optim.lr_scheduler.LambdaLR(optimizer, warmup_cosine(config.warmup_steps, config.steps))
     sampler = torch.Generator().manual_seed(config.seed)
     resolved = {"sft": dataclasses.asdict(config), "model": model.spec(), **inputs}
-    start, metrics = begin_training(out, resolved, model, optimizer, schedule, sampler, resume, parallel.is_main)
+    start, metrics = begin_training(out, resolved, model, optimizer, schedule, sampler, resume, parallel.is_main,
+                                    config.tracker, "sft")
     model.train()
     bar = tqdm(range(start, config.steps), initial=start, total=config.steps, desc="sft",
                disable=not (progress and parallel.is_main))
@@ -275,6 +280,8 @@ def _train(out: Path, config: SFTConfig, model: nn.Module, demos: DemoSet, extra
             bar.set_postfix(loss=f"{values['train/loss']:.3f}")
         if done % config.checkpoint_every == 0 or done == config.steps:
             checkpoint = save_training(out, done, model, resolved, optimizer, schedule, sampler)
+    if metrics is not None:
+        metrics.close()
     parallel.barrier()  # the others return rank 0's last checkpoint once it is written
     return checkpoint or resolve_checkpoint(out)
 

@@ -17,6 +17,7 @@ from gymnast.envs.tasks import parse_scenes
 from gymnast.envs.workers import parse_runner
 from gymnast.reward.spec import RewardSpec
 from gymnast.utils.settings import saved_settings
+from gymnast.utils.trackers import TrackerNames, check_trackers
 
 
 CREDITS = ("rollout", "reward-to-go", "critic")
@@ -162,8 +163,9 @@ class RLConfig:
     where it reads no others."""
     checkpoint_every: int = 10
     """Steps between checkpoints."""
-    tensorboard: bool = True
-    """Also write TensorBoard event files (RUN/tensorboard/)."""
+    tracker: TrackerNames = ("tensorboard",)
+    """Where the run logs besides RUN/metrics.jsonl: none, or any of tensorboard (RUN/tensorboard/)
+    and wandb, comma-separated (gymnast.utils.trackers)."""
     seed: int = 0
     """Seed of start sampling, rollouts and environment resets."""
 
@@ -172,7 +174,17 @@ class RLConfig:
         """Actions per evaluation episode."""
         return self.eval_horizon or self.horizon
 
+    @staticmethod
+    def upgrade_saved(saved: dict[str, Any]) -> dict[str, Any]:
+        """Settings saved by an earlier version under today's names: before `tracker`, a run said
+        ``tensorboard: true`` (the default) or ``false``."""
+        saved = dict(saved)
+        if "tensorboard" in saved:
+            saved["tracker"] = ["tensorboard"] if saved.pop("tensorboard") else []
+        return saved
+
     def __post_init__(self) -> None:
+        object.__setattr__(self, "tracker", check_trackers(self.tracker))  # a list when read back from JSON
         for name in ("steps", "starts_per_step", "group_size", "horizon", "max_rounds", "minibatches", "micro_batch",
                      "workers", "eval_episodes", "checkpoint_every", "video_every", "imitation_batch", "critic_epochs"):
             if getattr(self, name) < 1:
@@ -262,4 +274,4 @@ def reward_sight(name: str) -> EnvKind | None:
 
 def saved_rl_settings(run: Path) -> tuple[RLRun, RLConfig]:
     """The run and settings an RL run was started with (RUN/config.json), for ``--resume``."""
-    return RLRun.from_json(saved_settings(run, "run")), RLConfig(**saved_settings(run, "rl"))
+    return RLRun.from_json(saved_settings(run, "run")), RLConfig(**RLConfig.upgrade_saved(saved_settings(run, "rl")))

@@ -10,7 +10,7 @@ depends only on what the env kind and the reward declare (`gymnast.envs.kinds.En
 `gymnast.reward.base.RewardNeeds`). Its settings are `gymnast.rl.config`.
 
 Around the loop: atomic checkpoints with every random state and the sampler position (``--resume``
-continues exactly), metrics.jsonl and TensorBoard, rollout videos with their rewards, a
+continues exactly), metrics.jsonl and its trackers (`--tracker`), rollout videos with their rewards, a
 reward-hacking watch that replays imagined actions in the real world, and evaluations on the
 evaluation seeds in the run's own env and in the real world, whose real interactions are counted
 apart from training's.
@@ -38,7 +38,7 @@ from tqdm import tqdm
 from gymnast.config import EnvConfig
 from gymnast.envs.factory import EnvFactory
 from gymnast.envs.kinds import REAL, EnvKind
-from gymnast.envs.metaworld import STATE_DIM
+from gymnast.envs.metaworld import CONTROL_FPS, STATE_DIM
 from gymnast.data.keyframes import KeyframeConfig
 from gymnast.envs.starts import Start, StartSampler, evaluation_starts, own_instruction, scene_starts
 from gymnast.envs.tasks import parse_scenes, resolve_tasks
@@ -61,6 +61,7 @@ from gymnast.utils.checkpoint import (load_checkpoint, load_extra, resolve_check
                                       write_run_config)
 from gymnast.utils.device import resolve_device, to_device
 from gymnast.utils.metrics import MetricsLog
+from gymnast.utils.trackers import open_trackers
 from gymnast.utils.optim import warmup_cosine
 from gymnast.utils.plugins import is_plugin
 
@@ -200,8 +201,8 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
         start_step = trainer["step"]
         logger.info("resumed %s at step %d", out, start_step)
     write_run_config(out, resolved)
-    metrics = MetricsLog(out, resume_step=start_step if resume else None)
-    board = _tensorboard(out, start_step) if config.tensorboard else None
+    resume_step = start_step if resume else None
+    metrics = MetricsLog(out, resume_step, open_trackers(config.tracker, out, resume_step, "rl", resolved))
     if elsewhere:  # no simulator sets up new scenes of another robot: the models' held-out ones
         eval_starts = own_instruction(heldout_starts(pool, config.eval_episodes), config.instruction)
     else:
@@ -212,9 +213,6 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
     def log(step: int, values: dict[str, float]) -> None:
         values = {key: value for key, value in values.items() if np.isfinite(value)}  # NaN: nothing to report
         metrics.log(step, values)
-        for key, value in values.items():
-            if board is not None:
-                board.add_scalar(key, value, step)
 
     def evaluate(step: int) -> None:
         values: dict[str, float] = {}
@@ -298,7 +296,8 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
                 state["watch_real_interactions"] += int(watched.pop("eval/watch_interactions"))
                 values |= watched | {"eval/watch_real_interactions": state["watch_real_interactions"]}
             if batch is not None and video_due:
-                write_group_video(out / "videos" / f"step_{done:06d}.mp4", batch, scores, config.group_size)
+                metrics.video("rollout/group_video", done, write_group_video(
+                    out / "videos" / f"step_{done:06d}.mp4", batch, scores, config.group_size), CONTROL_FPS)
             del batch, scores  # not held through the evaluation and the next step's rollouts
             log(done, values)
             bar.set_postfix(reward=f"{values.get('reward/mean', float('nan')):.2f}", step_s=f"{values['time/step_s']:.1f}")
@@ -313,8 +312,7 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
     finally:  # worker processes and event files are released even when a step fails
         envs.close()
         eval_envs.close()
-        if board is not None:
-            board.close()
+        metrics.close()
     return write_summary(out, run_spec, config, state)
 
 
@@ -594,11 +592,4 @@ def _frozen_copy(policy):
     reference = copy.deepcopy(policy).eval()
     reference.requires_grad_(False)
     return reference
-
-
-def _tensorboard(out: Path, start_step: int):
-    from torch.utils.tensorboard import SummaryWriter
-
-    # purge_step drops events past the resumed checkpoint, as metrics.jsonl does.
-    return SummaryWriter(str(out / "tensorboard"), purge_step=start_step or None)
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import json
 import logging
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import torch
@@ -21,6 +21,7 @@ from torch import nn
 
 from gymnast.utils.atomic import atomic_directory, read_json, write_bytes, write_json
 from gymnast.utils.metrics import MetricsLog
+from gymnast.utils.trackers import open_trackers
 
 logger = logging.getLogger(__name__)
 
@@ -136,17 +137,20 @@ def resume_training(run: Path, model: nn.Module, optimizer: torch.optim.Optimize
 
 def begin_training(run: Path, resolved: dict, model: nn.Module, optimizer: torch.optim.Optimizer,
                    schedule: torch.optim.lr_scheduler.LRScheduler, sampler: torch.Generator, resume: bool,
-                   writes: bool = True) -> tuple[int, MetricsLog | None]:
+                   writes: bool = True, tracker: Sequence[str] = (), kind: str = "") -> tuple[int, MetricsLog | None]:
     """Where a trainer starts: the step to go on from (restored from the run's last checkpoint on
     `resume`, else 0) and, on the process that `writes` the run, its metrics log, with the resolved
-    settings saved at the run's root. The other processes of a distributed run get no log."""
+    settings saved at the run's root and logged to the trackers named in `tracker` (a run of `kind`,
+    `gymnast.utils.trackers.open_trackers`). The other processes of a distributed run get no log."""
     start = resume_training(run, model, optimizer, schedule, sampler) if resume else 0
     if resume:
         logger.info("resumed %s at step %d", run, start)
     if not writes:
         return start, None
     write_run_config(run, resolved)
-    return start, MetricsLog(run, resume_step=start if resume else None)
+    resume_step = start if resume else None
+    trackers = open_trackers(tracker, run, resume_step, kind, resolved)
+    return start, MetricsLog(run, resume_step=resume_step, tracker=trackers)
 
 
 def load_model(run: Path, build: Callable[[dict], nn.Module]) -> nn.Module:

@@ -38,9 +38,13 @@ def from_json(cls: type[T], data: Mapping[str, Any]) -> T:
     """`cls` (a dataclass) from its JSON form: sub-dictionaries become the nested dataclasses, lists
     tuples and strings paths where the field types say so; missing fields keep their defaults.
 
+    A dataclass whose fields were renamed reads its older files through a static method
+    ``upgrade_saved(data) -> data`` that gives the saved fields today's names.
+
     Raises:
         ValueError: `data` has a field that `cls` does not know (saved by another version).
     """
+    data = cls.upgrade_saved(data) if hasattr(cls, "upgrade_saved") else data
     hints = typing.get_type_hints(cls)
     unknown = set(data) - {field.name for field in dataclasses.fields(cls)}
     if unknown:

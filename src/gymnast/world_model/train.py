@@ -43,6 +43,7 @@ from gymnast.utils.device import resolve_device, to_device
 from gymnast.utils.distributed import Parallel, data_parallel
 from gymnast.utils.optim import gradient_step, warmup_cosine
 from gymnast.utils.settings import from_json, saved_settings
+from gymnast.utils.trackers import TrackerNames
 from gymnast.world_model.base import WorldModel, grounded_state_dim, imagined_frame_mask, rollout
 from gymnast.world_model.data import ClipBatch, EpisodeBank, split_episodes
 from gymnast.world_model.views import with_cameras
@@ -81,6 +82,9 @@ class WorldModelTrainConfig:
     """Steps between checkpoints."""
     log_every: int = 25
     """Steps between metrics lines."""
+    tracker: TrackerNames = ()
+    """Where the run logs besides RUN/metrics.jsonl: none, or any of tensorboard and wandb,
+    comma-separated (gymnast.utils.trackers)."""
     seed: int = 0
     """Seed of initialisation and clip sampling."""
     moving_weight: float = 0.0
@@ -234,7 +238,8 @@ def _train(data: Path, out: Path, config: WorldModelTrainConfig, datasets: list[
                 "action_stats": stats.to_dict(), "datasets": counts,
                 "train_episodes": sum(c["train_episodes"] for c in counts),
                 "heldout_episodes": sum(c["heldout_episodes"] for c in counts)}
-    start, metrics = begin_training(out, resolved, model, optimizer, schedule, sampler, resume, parallel.is_main)
+    start, metrics = begin_training(out, resolved, model, optimizer, schedule, sampler, resume, parallel.is_main,
+                                    config.tracker, "train-wm")
     bar = tqdm(range(start, config.steps), initial=start, total=config.steps, desc="train-wm",
                disable=not (progress and parallel.is_main))
     started = time.perf_counter()
@@ -261,9 +266,12 @@ def _train(data: Path, out: Path, config: WorldModelTrainConfig, datasets: list[
             metrics.log(done, values)
             bar.set_postfix(psnr=f"{values['train/psnr']:.1f}", **({"val": f"{values['wm/val_psnr']:.1f}"} if "wm/val_psnr" in values else {}))
         if heldout is not None and (done % config.video_every == 0 or done == config.steps):
-            _write_video(model, heldout, out / "videos" / f"step_{done:06d}.mp4", dataset.fps)
+            video = _write_video(model, heldout, out / "videos" / f"step_{done:06d}.mp4", dataset.fps)
+            metrics.video("wm/heldout_video", done, video, dataset.fps)
         if done % config.checkpoint_every == 0 or done == config.steps:
             checkpoint = save_training(out, done, model, resolved, optimizer, schedule, sampler)
+    if metrics is not None:
+        metrics.close()
     parallel.barrier()  # the others return rank 0's last checkpoint once it is written
     return checkpoint or resolve_checkpoint(out)
 
@@ -453,14 +461,15 @@ def validate(model: WorldModel, clips: ClipBatch) -> dict[str, float]:
 
 
 @torch.no_grad()
-def _write_video(model: WorldModel, heldout: EpisodeBank, path: Path, fps: int) -> None:
-    """The longest held-out episode, imagined from its first frame under its real actions."""
+def _write_video(model: WorldModel, heldout: EpisodeBank, path: Path, fps: int) -> Path:
+    """The longest held-out episode, imagined from its first frame under its real actions; returns `path`."""
     model.eval()
     k = max(range(len(heldout)), key=lambda i: len(heldout.actions[i]))
     frames, actions = heldout.frames[k], heldout.actions[k]
     states = heldout.states[k][None, 1:] if grounded_state_dim(model) else None  # a grounded model at the recorded states
     imagined = rollout(model, frames[None, :1], actions[None], torch.Generator().manual_seed(0), states).frames[0]  # (T, H, W, 3)
     write_side_by_side(path, frames[1:].numpy(), imagined.numpy(), fps)
+    return path
 
 
 def _settings(config: WorldModelTrainConfig) -> dict:

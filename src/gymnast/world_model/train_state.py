@@ -36,6 +36,7 @@ from gymnast.policy.text import InstructionEncoder
 from gymnast.utils.atomic import write_json
 from gymnast.utils.checkpoint import begin_training, resolve_checkpoint, save_training
 from gymnast.utils.optim import gradient_step, warmup_cosine
+from gymnast.utils.trackers import TrackerNames
 from gymnast.world_model.data import split_episodes
 from gymnast.world_model.metrics import pearson
 from gymnast.world_model.state_model import REWARD_SCALE, StateModel, StateModelConfig, load_state_model
@@ -76,6 +77,9 @@ class StateTrainConfig:
     """Steps between checkpoints (and at the end)."""
     seed: int = 0
     """Seed of the initial weights and of the windows drawn."""
+    tracker: TrackerNames = ()
+    """Where the run logs besides RUN/metrics.jsonl: none, or any of tensorboard and wandb,
+    comma-separated (gymnast.utils.trackers)."""
     init: Path | None = None
     """Start from the weights of this state-model run or checkpoint (fine-tuning, e.g. on the
     policy's newest rollouts between rounds of practice) instead of a fresh model: its architecture
@@ -233,7 +237,8 @@ def train_state_model(data: Path, out: Path, config: StateTrainConfig, resume: b
     resolved = {"train": _settings(config), "model": model.spec(), "data": str(data),
                 "train_episodes": len(episodes.lengths),
                 "heldout_episodes": sum(len(chosen) for _, chosen in heldout_sources)}
-    start, metrics = begin_training(out, resolved, model, optimizer, schedule, sampler, resume)
+    start, metrics = begin_training(out, resolved, model, optimizer, schedule, sampler, resume,
+                                    tracker=config.tracker, kind="train-state")
     checkpoint = None
     for step in tqdm(range(start, config.steps), initial=start, total=config.steps, desc="train-state", disable=not progress):
         model.train()
@@ -246,6 +251,7 @@ def train_state_model(data: Path, out: Path, config: StateTrainConfig, resume: b
             metrics.log(step, values)
         if (step + 1) % config.checkpoint_every == 0 or step + 1 == config.steps:
             checkpoint = save_training(out, step + 1, model, resolved, optimizer, schedule, sampler)
+    metrics.close()
     model.eval()
     if heldout:  # the main dataset's held-out scenes, comparable between runs with other extra data
         # Hand and object positions are read where Meta-World keeps them; another robot's states

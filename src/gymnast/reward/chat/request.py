@@ -3,6 +3,10 @@
 `parse_chat_request` turns the bytes of `POST /v1/chat/completions` into the text, images and
 number of choices the server answers, or raises `InvalidRequest` naming the field at fault (in the
 `param` style of the OpenAI API: ``messages[0].content[1].image_url.url``) and what to send instead.
+
+The protocol has no field that names an image, so a client that sends one image per camera names
+them in text: a text part with a line ``Camera: NAME`` names the images after it, up to the next
+such line (`ChatRequest.cameras`).
 """
 
 from __future__ import annotations
@@ -12,6 +16,7 @@ import binascii
 import dataclasses
 import io
 import json
+import re
 from typing import TypeVar
 
 import numpy as np
@@ -20,6 +25,7 @@ from PIL import Image
 # A decoded image costs 3 bytes a pixel whatever its compressed size, so a small file declaring a
 # huge canvas could exhaust memory; robot cameras and VLM inputs stay far below this.
 MAX_IMAGE_PIXELS = 4096 * 4096
+_CAMERA = re.compile(r"^Camera:[ \t]*(\S.*?)\s*$", re.MULTILINE)  # a text line naming the images after it
 
 T = TypeVar("T")
 
@@ -48,6 +54,9 @@ class ChatRequest:
     """The text parts of all messages, joined by newlines."""
     frames: list[np.ndarray]
     """The images of all messages in order, each (H, W, 3) uint8."""
+    cameras: list[str | None]
+    """The camera each image was named under: the last ``Camera: NAME`` line of the text before it
+    (None where no text before it names one)."""
     choices: int
     """How many answers to return (`n`)."""
     model: str | None
@@ -75,12 +84,13 @@ def parse_chat_request(body: bytes, max_choices: int) -> ChatRequest:
     model = request.get("model")
     if model is not None and not isinstance(model, str):
         raise InvalidRequest(f"'model' must be a string, got a JSON {_json_type(model)}", "model", "invalid_type")
-    text, frames = read_messages(request.get("messages"))
-    return ChatRequest(text, frames, _choices(request.get("n"), max_choices), model)
+    text, frames, cameras = read_messages(request.get("messages"))
+    return ChatRequest(text, frames, cameras, _choices(request.get("n"), max_choices), model)
 
 
-def read_messages(messages: object) -> tuple[str, list[np.ndarray]]:
-    """The text parts of a request's `messages` joined by newlines, and their images in order.
+def read_messages(messages: object) -> tuple[str, list[np.ndarray], list[str | None]]:
+    """The text parts of a request's `messages` joined by newlines, their images in order, and the
+    camera each image was named under (`ChatRequest.cameras`).
 
     Raises:
         InvalidRequest: `messages` is not a non-empty list of {role, content} objects whose content
@@ -93,22 +103,26 @@ def read_messages(messages: object) -> tuple[str, list[np.ndarray]]:
         got = "an empty list" if isinstance(messages, list) else f"a JSON {_json_type(messages)}"
         raise InvalidRequest(f"'messages' must be a non-empty list of {{\"role\": ..., \"content\": ...}} objects, "
                              f"got {got}", "messages", "invalid_type")
-    texts, frames = [], []
+    texts, frames, cameras, camera = [], [], [], None
     for i, message in enumerate(messages):
         where = f"messages[{i}]"
         _require(message, dict, where, "an object with 'role' and 'content'")
         _require(message.get("role"), str, f"{where}.role", "a string such as \"user\"")
         content = message.get("content")
         if isinstance(content, str):
-            texts.append(content)
-            continue
-        if content is not None:  # an assistant message may carry no content
+            content = [{"type": "text", "text": content}]
+        elif content is not None:  # an assistant message may carry no content
             _require(content, list, f"{where}.content", "a string or a list of text and image_url parts")
         for j, part in enumerate(content or []):
             text, frame = _read_part(part, f"{where}.content[{j}]")
-            texts += [text] if text is not None else []
-            frames += [frame] if frame is not None else []
-    return "\n".join(texts), frames
+            if text is not None:
+                texts.append(text)
+                named = _CAMERA.findall(text)
+                camera = named[-1] if named else camera
+            if frame is not None:
+                frames.append(frame)
+                cameras.append(camera)
+    return "\n".join(texts), frames, cameras
 
 
 def _read_part(part: object, where: str) -> tuple[str | None, np.ndarray | None]:

@@ -8,12 +8,19 @@ shows (rate limits, server errors, slow or malformed answers), one per request, 
 Every request gets an answer: a malformed one (see `gymnast.reward.chat.request`), one past the
 `ChatLimits`, or one that stalls gets a 4xx JSON error in the OpenAI shape
 (``{"error": {"message", "type", "param", "code"}}``), is logged, and the server serves on.
+
+With an API key, every request must carry it as the OpenAI clients send theirs (``Authorization:
+Bearer KEY``); one without it is answered 401 from its headers, before its body is read. A server
+without a key listens on this machine only: anyone who can reach a wider address could otherwise
+spend its compute and read its model's answers.
 """
 
 from __future__ import annotations
 
 import collections
 import dataclasses
+import hmac
+import ipaddress
 import json
 import logging
 import re
@@ -21,16 +28,14 @@ import socket
 import threading
 import time
 import uuid
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 
-import numpy as np
-
-from gymnast.reward.chat.request import InvalidRequest, parse_chat_request
+from gymnast.reward.chat.request import ChatRequest, InvalidRequest, parse_chat_request
 
 logger = logging.getLogger(__name__)
 
-Answer = Callable[[str, list[np.ndarray]], str]
+Answer = Callable[[ChatRequest], str]
 
 # How long a kept-alive connection may wait for its next request. Longer than the keep-alive expiry
 # of common clients (httpx: 5 s), so that a client never reuses a connection the server is closing.
@@ -90,6 +95,8 @@ class _Handler(BaseHTTPRequestHandler):
                 return self.send_error(414, "the request line is longer than 64 KiB")
             if not self.parse_request():
                 return  # parse_request has answered (through send_error)
+            if (refusal := self._unauthorized()) is not None:
+                return self._reject(refusal, unread_body=True, headers={"WWW-Authenticate": "Bearer"})
             method = getattr(self, f"do_{self.command}", None)
             if method is None:
                 return self.send_error(405, f"method {self.command} is not supported; use GET or POST")
@@ -104,12 +111,27 @@ class _Handler(BaseHTTPRequestHandler):
             self.close_connection = True
 
     def handle_expect_100(self) -> bool:
-        # Invite the body only when it will be read, so that a client with a body past the limit
-        # gets the 413 before it sends anything.
+        # Invite the body only when it will be read, so that a client with a body past the limit, or
+        # without the key, gets its 413 or 401 before it sends anything.
         length = self.headers.get("Content-Length", "")
-        if _BYTE_COUNT.fullmatch(length) and int(length) <= self.server.chat.limits.max_body_bytes:
+        if (_BYTE_COUNT.fullmatch(length) and int(length) <= self.server.chat.limits.max_body_bytes
+                and self._unauthorized() is None):
             return super().handle_expect_100()
         return True
+
+    def _unauthorized(self) -> InvalidRequest | None:
+        """The 401 of a request without the server's API key (None: it carries the key, or none is set)."""
+        key = self.server.chat.api_key
+        if key is None:
+            return None
+        scheme, _, sent = self.headers.get("Authorization", "").strip().partition(" ")
+        if scheme.lower() != "bearer" or not sent.strip():
+            return InvalidRequest("this server needs an API key: send it as the header 'Authorization: Bearer KEY' "
+                                  "(the api_key of an OpenAI client)", code="missing_api_key", status=401)
+        if not hmac.compare_digest(sent.strip().encode(), key.encode()):  # in constant time: no timing hints
+            return InvalidRequest("the API key sent is not this server's (the key itself is not repeated here); "
+                                  "send the key the server was started with", code="invalid_api_key", status=401)
+        return None
 
     def send_error(self, code: int, message: str | None = None, explain: str | None = None) -> None:
         """http.server's own rejections (bad request line or headers, unknown method) in the OpenAI shape."""
@@ -135,14 +157,14 @@ class _Handler(BaseHTTPRequestHandler):
                        self.path if self.command else "-", status, message)
         self._json(status, {"error": {"message": message, "type": kind, "param": param, "code": code}}, headers)
 
-    def _reject(self, error: InvalidRequest, unread_body: bool = False) -> None:
-        """Answer `error`; with `unread_body` the connection closes, after a lingering read of what the
-        client still sends: closing on unread bytes resets the connection, and the reset can destroy the
-        answer before the client reads it."""
-        kind = "not_found_error" if error.status == 404 else "invalid_request_error"
+    def _reject(self, error: InvalidRequest, unread_body: bool = False, headers: dict[str, str] | None = None) -> None:
+        """Answer `error` (with `headers`); with `unread_body` the connection closes, after a lingering
+        read of what the client still sends: closing on unread bytes resets the connection, and the
+        reset can destroy the answer before the client reads it."""
+        kind = {401: "authentication_error", 404: "not_found_error"}.get(error.status, "invalid_request_error")
         try:
             self._error(error.status, error.message, kind, error.code, error.param,
-                        {"Connection": "close"} if unread_body else None)
+                        ({"Connection": "close"} if unread_body else {}) | (headers or {}))
             self.wfile.flush()
         except OSError:  # the client is gone, or stopped reading: nobody is left to answer
             unread_body = True
@@ -207,7 +229,8 @@ class _Handler(BaseHTTPRequestHandler):
         if self.path.rstrip("/") != "/v1/models":
             return self._reject(InvalidRequest(f"no route GET {self.path}; GET /v1/models lists the model",
                                                code="not_found", status=404))
-        model = {"id": self.server.chat.model, "object": "model", "created": 0, "owned_by": "gymnast"}
+        chat = self.server.chat
+        model = {"id": chat.model, "object": "model", "created": 0, "owned_by": "gymnast", **chat.card}
         self._json(200, {"object": "list", "data": [model]})
 
     def do_POST(self) -> None:
@@ -230,7 +253,7 @@ class _Handler(BaseHTTPRequestHandler):
             time.sleep(float(fault.removeprefix("slow:")))
         try:
             request = parse_chat_request(body, chat.limits.max_choices)
-            contents = ["the robot looks nice" if fault == "garbage" else chat.answer(request.text, request.frames)
+            contents = ["the robot looks nice" if fault == "garbage" else chat.answer(request)
                         for _ in range(request.choices)]
         except InvalidRequest as error:
             return self._reject(error)
@@ -262,28 +285,51 @@ class _Server(ThreadingHTTPServer):
         logger.debug("chat server: error while serving %s", client_address, exc_info=True)
 
 
+def is_local(host: str) -> bool:
+    """Whether `host` names this machine alone (a loopback address, or a name that resolves only to one)."""
+    try:
+        addresses = {info[4][0] for info in socket.getaddrinfo(host, None)}
+    except (socket.gaierror, UnicodeError):  # a name that does not resolve: binding to it fails anyway
+        return False
+    return bool(addresses) and all(ipaddress.ip_address(address.split("%")[0]).is_loopback for address in addresses)
+
+
 class ChatServer:
     """An OpenAI-compatible chat-completions server around an answer function.
 
     Args:
-        answer: `answer(text, frames)` gets a request's text (all text parts joined) and its images,
-            each (H, W, 3) uint8, and returns the assistant's reply; called once per choice (`n`),
-            from the server's threads, so it must be thread-safe.
-        host: interface to listen on.
+        answer: `answer(request)` gets a request's text (all text parts joined), its images, each
+            (H, W, 3) uint8, and the cameras they were named under (`ChatRequest`), and returns the
+            assistant's reply (or raises `InvalidRequest`, answered with its 4xx); called once per
+            choice (`n`), from the server's threads, so it must be thread-safe.
+        host: interface to listen on; an address other machines can reach needs `api_key`.
         port: port to listen on; 0 picks a free one (see `url`).
         faults: failures to inject, consumed one per chat request in order: "429", "500",
             "slow:SECONDS" (delay, then answer), "garbage" (a reply with no ANSWER line),
             "invalid_json" (a 200 whose body is not JSON).
         model: the model name that `GET /v1/models` lists.
         limits: the largest body and `n`, and the read timeout.
+        api_key: the key every request must carry (``Authorization: Bearer KEY``); None: none needed.
+        card: more fields of the model that `GET /v1/models` lists (what it expects of a request).
+
+    Raises:
+        ValueError: an empty `api_key`, or `host` reachable from other machines without one.
 
     Attributes:
         requests_served: chat-completion requests received so far, faulted ones included.
     """
 
     def __init__(self, answer: Answer, host: str = "127.0.0.1", port: int = 0, faults: Sequence[str] = (),
-                 model: str = "gymnast-judge", limits: ChatLimits = ChatLimits()) -> None:
-        self.answer, self.host, self.model, self.limits = answer, host, model, limits
+                 model: str = "gymnast-judge", limits: ChatLimits = ChatLimits(), api_key: str | None = None,
+                 card: Mapping[str, object] | None = None) -> None:
+        if api_key is not None and not api_key.strip():
+            raise ValueError("the chat server's API key is empty; give a key, or none on this machine only")
+        if api_key is None and not is_local(host):
+            raise ValueError(f"refusing to serve on {host} without an API key: every machine that can reach that "
+                             "address could send requests and read the answers; give a key (--api-key, or the "
+                             "GYMNAST_JUDGE_API_KEY environment variable) or bind to 127.0.0.1")
+        self.answer, self.host, self.model, self.limits, self.api_key = answer, host, model, limits, api_key
+        self.card = dict(card or {})
         self.faults = collections.deque(faults)
         self.requests_served = 0
         self._lock = threading.Lock()

@@ -43,6 +43,7 @@ from gymnast.utils.checkpoint import begin_training, load_model, save_training, 
 from gymnast.utils.device import resolve_device
 from gymnast.utils.optim import gradient_step, warmup_cosine
 from gymnast.utils.settings import from_json, saved_settings
+from gymnast.utils.trackers import TrackerNames
 from gymnast.world_model.data import split_episodes
 
 logger = logging.getLogger(__name__)
@@ -122,6 +123,9 @@ class JudgeTrainConfig:
     """Steps between checkpoints."""
     log_every: int = 25
     """Steps between metrics lines."""
+    tracker: TrackerNames = ()
+    """Where the run logs besides RUN/metrics.jsonl: none, or any of tensorboard and wandb,
+    comma-separated (gymnast.utils.trackers)."""
     seed: int = 0
     """Seed of initialisation and sampling."""
     device: str = "auto"
@@ -298,7 +302,8 @@ def train_judge(data: Path, out: Path, config: JudgeTrainConfig, wm: Path | None
     settings = {**dataclasses.asdict(config), "extra_data": [str(path) for path in config.extra_data],
                 "init": None if config.init is None else str(config.init)}
     resolved = {"train": settings, "model": judge.spec(), "data": str(data), "wm": str(wm) if wm else None}
-    start, metrics = begin_training(out, resolved, judge, optimizer, schedule, sampler, resume)
+    start, metrics = begin_training(out, resolved, judge, optimizer, schedule, sampler, resume,
+                                    tracker=config.tracker, kind="train-judge")
     pool = FramePool(train_videos, config.ambiguous_steps, config.kind == "progress") if config.kind != "video" else None
     per_frame_loss = progress_loss if config.kind == "progress" else frame_loss
     hard_share = config.hard_negatives if config.kind == "frames" else 0.0  # the others have no verdict per frame
@@ -337,6 +342,10 @@ def train_judge(data: Path, out: Path, config: JudgeTrainConfig, wm: Path | None
                "train_episodes": sum(map(len, train_ids)),
                "seconds": round(time.perf_counter() - started, 1)}
     write_json(out / "metrics.json", report)
+    # The held-out figures go to the trackers; metrics.json, not metrics.jsonl, is their record.
+    metrics.tracker.log_metrics(config.steps, {f"eval/{key}": value for key, value in report.items()
+                                               if isinstance(value, (int, float)) and not isinstance(value, bool)})
+    metrics.close()
     return report
 
 
