@@ -150,12 +150,7 @@ def plot_ladder_curves(summary: dict, path: Path) -> Path:
         axes.plot(steps, [point["success"] for point in record["curve"]], marker="o", label=name)
         axes.fill_between(steps, [p["ci_low"] for p in record["curve"]], [p["ci_high"] for p in record["curve"]],
                           alpha=0.1)
-    axes.set_xlabel("RL step")
-    axes.set_ylabel("real-world success")
-    axes.set_ylim(0, 1.05)
-    axes.set_title("The learning ladder: real success by step (95% CI)", fontsize=10)
-    axes.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.0, 1.0))
-    return _save(plt, figure, path)
+    return _by_step(plt, figure, axes, "real-world success", "The learning ladder: real success by step (95% CI)", path)
 
 
 def plot_ladder_agreement(summary: dict, path: Path) -> Path:
@@ -165,10 +160,16 @@ def plot_ladder_agreement(summary: dict, path: Path) -> Path:
         points = [row for row in record["agreement_by_step"] if row.get("agreement") is not None]
         if points:
             axes.plot([row["step"] for row in points], [row["agreement"] for row in points], marker=".", label=name)
+    return _by_step(plt, figure, axes, "reward verdict = real outcome",
+                    "Does the reward still tell the truth as the policy moves?", path)
+
+
+def _by_step(plt, figure, axes, ylabel: str, title: str, path: Path) -> Path:
+    """Labels a plot of rates against RL steps, one line per rung, and saves it."""
     axes.set_xlabel("RL step")
-    axes.set_ylabel("reward verdict = real outcome")
+    axes.set_ylabel(ylabel)
     axes.set_ylim(0, 1.05)
-    axes.set_title("Does the reward still tell the truth as the policy moves?", fontsize=10)
+    axes.set_title(title, fontsize=10)
     axes.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.0, 1.0))
     return _save(plt, figure, path)
 
