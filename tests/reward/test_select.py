@@ -16,7 +16,8 @@ from gymnast.reward.verified import VerifiedReward
 from gymnast.reward.chat.vlm import VLMJudge, VLMJudgeConfig
 from gymnast.world_model.embedded import EmbeddedWorldModel, EmbeddedWorldModelConfig
 
-SPECS = ["judge:runs/judge", "state:runs/state", "vlm:gpt-4o@http://127.0.0.1:9/v1", "verified", "sim", "sim-dense"]
+SPECS = ["judge:runs/judge", "state:runs/state", "vlm:gpt-4o@http://127.0.0.1:9/v1", "verified", "sim", "sim-dense",
+         "all:judge:runs/judge+state:runs/state"]
 
 
 def _tiny_world_model() -> EmbeddedWorldModel:
@@ -60,7 +61,8 @@ def test_a_state_reward_loads_its_state_model_run(tmp_path):
     assert reward.needs.start_state and not reward.binary
 
 
-@pytest.mark.parametrize("spec", ["judge", "judge:", "state:", "vlm:gpt-4o", "vlm:@http://x", "dense", ""])
+@pytest.mark.parametrize("spec", ["judge", "judge:", "state:", "vlm:gpt-4o", "vlm:@http://x", "dense", "",
+                                  "all:judge:a+dense"])
 def test_malformed_names_list_the_valid_forms(spec):
     with pytest.raises(ValueError, match="vlm:MODEL@BASE_URL"):
         RewardSpec.parse(spec)
@@ -130,3 +132,12 @@ def test_the_verified_reward_is_refused_outside_imagination_and_without_demonstr
     check_fits(verified, "verified", IMAGINED)
     with pytest.raises(ValueError, match="fresh scenes have none"):
         check_fits(verified, "verified", IMAGINED, demonstrations=False)
+
+
+def test_a_consensus_is_named_by_two_rewards_or_more_none_a_consensus():
+    spec = RewardSpec.parse("all:judge:a+sim")
+    assert spec.kind == "all" and spec.members == (RewardSpec.judge("a"), RewardSpec("sim"))
+    with pytest.raises(ValueError, match="at least two"):
+        RewardSpec.parse("all:judge:a")
+    with pytest.raises(ValueError, match="consensus of consensuses"):
+        RewardSpec("all", members=(spec, RewardSpec("sim")))

@@ -42,7 +42,8 @@ def rl(
             (a LeRobot pretrained_model folder), or your own: python:MODULE:FACTORY[@ARG] or plugin:NAME[@ARG]
             (gymnast check-policy --help).
         env: where rollouts happen: imagined (in --wm), sim (the software simulator, --gap) or real.
-        reward: judge:RUN | vlm:MODEL@BASE_URL | verified | sim | sim-dense.
+        reward: judge:RUN | state:RUN | vlm:MODEL@BASE_URL | verified | sim | sim-dense, or all:REWARD+REWARD
+            (success only where every one reads success, e.g. all:judge:RUN+state:RUN).
         wm: the world model run or ensemble (needed by --env imagined and --reward verified); or your own:
             python:MODULE:FACTORY[@ARG] or plugin:NAME[@ARG] (gymnast check-wm --help).
         data: dataset whose scenes are the start states (default: the one the policy was trained on).

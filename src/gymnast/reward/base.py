@@ -114,6 +114,22 @@ class VerdictReward(Reward, Protocol):
         ...
 
 
+def read_verdict(reward: Reward, frames: torch.Tensor, instructions: Sequence[str],
+                 context: RewardContext) -> torch.Tensor:
+    """(B,) float the reward's 0/1 verdict on B rollouts, NaN where it could not score: a binary
+    reward's score, or a `VerdictReward`'s own reading of success.
+
+    Raises:
+        ValueError: a continuous reward that reads no verdict (the verified reward, a progress judge).
+    """
+    if reward.binary:
+        scores = reward.score(frames, instructions, context).float().reshape(-1)
+        return (scores > 0.5).float().masked_fill(~torch.isfinite(scores), float("nan"))
+    if isinstance(reward, VerdictReward):
+        return reward.verdict(instructions, context).float().reshape(-1)
+    raise ValueError(f"{type(reward).__name__} gives degrees, not a verdict of success")
+
+
 def env_mismatch(needs: RewardNeeds, env: EnvKind, demonstrations: bool = True) -> str | None:
     """Why a reward that `needs` these cannot score rollouts of `env` (starting from scenes with
     `demonstrations` or not), or None when it can."""

@@ -28,6 +28,11 @@ def make_reward(spec: RewardSpec, world_model: WorldModel | None = None) -> Rewa
         ValueError: `verified` without a world model.
         FileNotFoundError: `judge:RUN` where RUN has no checkpoint.
     """
+    if spec.kind == "all":
+        from gymnast.reward.consensus import ConsensusReward
+
+        return ConsensusReward([make_reward(member, world_model) for member in spec.members],
+                               [str(member) for member in spec.members])
     if spec.kind == "judge":
         from gymnast.reward.judges.train import load_judge
 

@@ -26,7 +26,7 @@ import torch
 
 from gymnast.envs.factory import EnvFactory
 from gymnast.envs.kinds import REAL, EnvKind
-from gymnast.reward.base import Reward, VerdictReward
+from gymnast.reward.base import Reward, VerdictReward, read_verdict
 from gymnast.rl.evaluate import replay_actions
 from gymnast.rl.rollout import Rollouts, reward_context
 
@@ -117,7 +117,7 @@ def reward_verdicts(reward: Reward, seen: Rollouts, scores: torch.Tensor, size: 
         parts = []
         for first in range(0, len(seen.starts), size):
             block = seen.select(torch.arange(first, min(first + size, len(seen.starts))))
-            parts.append(reward.verdict(block.instructions, reward_context(block)).float().reshape(-1))
+            parts.append(read_verdict(reward, block.rendered, block.instructions, reward_context(block)))
         return torch.cat(parts)
     if reward.needs.simulator_success and seen.success is not None:
         return seen.success.float()

@@ -126,7 +126,7 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
                          f"make-ensemble); {run_spec.wm} is a single world model")
     reward = make_reward(run_spec.reward, world_model)
     check_judge_sees(reward, cameras, policy.config.image_size, run_spec.reward.run, f"the policy {run_spec.policy}")
-    if isinstance(reward, torch.nn.Module):  # a learned judge
+    if isinstance(reward, torch.nn.Module) or hasattr(reward, "members"):  # a learned judge, or a consensus of some
         reward.to(device)
     from_dataset = not config.fresh_scenes and config.scenes is None
     # The reward reads the rollouts, or their replays in the world it sees.

@@ -72,13 +72,14 @@ def check_judge_sees(reward, cameras: Sequence[str], image_size: int, judge: str
     Said before a run starts rather than at its first video; a reward other than a learned judge
     (a VLM, the simulator's, the verified reward) is not checked here.
     """
-    if not isinstance(reward, ThresholdJudge):
-        return
-    config = reward.config
-    if _several(cameras) != _several(config.cameras) or image_size != config.image_size:
-        raise ValueError(f"the judge {judge} scores {_views(config.cameras, config.image_size)}, but {source} shows "
-                         f"{_views(cameras, image_size)}; train a judge on those views (`gymnast train-judge "
-                         "--cameras` on a dataset recorded at that size) or give another --reward")
+    for member in getattr(reward, "members", [reward]):  # a consensus: each of its judges
+        if not isinstance(member, ThresholdJudge):
+            continue
+        config = member.config
+        if _several(cameras) != _several(config.cameras) or image_size != config.image_size:
+            raise ValueError(f"the judge {judge} scores {_views(config.cameras, config.image_size)}, but {source} "
+                             f"shows {_views(cameras, image_size)}; train a judge on those views (`gymnast train-judge "
+                             "--cameras` on a dataset recorded at that size) or give another --reward")
 
 
 def _several(cameras: Sequence[str]) -> tuple[str, ...]:
