@@ -58,6 +58,15 @@ def test_the_ladder_swaps_one_part_per_rung_and_holds_each_reward_to_the_real_ou
     assert summary["r0_real"]["real_interactions"] > 0
     assert write_ladder_index(tmp_path / "ladder")["scarce"]["reach"]["r0_real"] == summary["r0_real"]
 
+    # The practice arm after the fix: any `gymnast rl` run with the ladder's recipe in OUT/fixed.
+    main(["rl", "--policy", str(POLICY), "--env", "imagined", "--wm", str(WORLD_MODEL), "--preset", "debug",
+          "--reward", f"all:judge:{JUDGE}+sim", "--reward-sees", "real", "--fresh-scenes", "--truth-groups", "1",
+          "--out", str(out / "fixed")])
+    main(_ladder(out, "r0_real", models=False))
+    fixed = json.loads((out / "summary.json").read_text())["fixed"]
+    assert fixed["finished"] and fixed["reward"] == f"all:judge:{JUDGE}+sim" and "the fix" in fixed["what"]
+    assert "| fixed |" in (out / "ladder.md").read_text()
+
 
 def test_a_rung_whose_model_is_missing_is_refused_before_any_rung_trains(tmp_path, capsys):
     out = tmp_path / "ladder"

@@ -14,11 +14,12 @@ from __future__ import annotations
 from pathlib import Path
 
 from gymnast.experiment.formatting import pct
-from gymnast.experiment.rungs import RUNGS, Rung, rung_dir
+from gymnast.experiment.rungs import FIXED, RUNGS, Rung, rung_dir
 from gymnast.experiment.plots import _figure, _save
-from gymnast.rl.config import RLConfig
+from gymnast.rl.config import RLConfig, RLRun
 from gymnast.utils.atomic import read_json, write_bytes, write_json
 from gymnast.utils.metrics import read_metrics
+from gymnast.utils.settings import saved_settings
 
 TRUTH = ("agreement", "false_success", "missed_success", "truth_success", "truth_signal", "truth_rollouts")
 """The ``reward/`` metrics of each step that `agreement_by_step` keeps."""
@@ -60,10 +61,11 @@ def _evaluation(line: dict, prefix: str) -> dict:
 
 
 def ladder_summary(out: Path, config: RLConfig) -> dict:
-    """The ladder's summary.json: ``sft`` (every rung's step-0 evaluation) and one entry per rung of
-    OUT that has evaluated, in the ladder's order."""
+    """The ladder's summary.json: ``sft`` (every rung's step-0 evaluation), one entry per rung of
+    OUT that has evaluated, in the ladder's order, and ``fixed``: the practice arm after the fix,
+    a `gymnast rl` run with the ladder's recipe in OUT/fixed (`fixed_arm`), where there is one."""
     summary: dict = {}
-    for rung in RUNGS.values():
+    for rung in (*RUNGS.values(), *filter(None, [fixed_arm(out)])):
         record = rung_record(rung, rung_dir(out, rung), config.steps)
         if record is None:
             continue
@@ -75,6 +77,17 @@ def ladder_summary(out: Path, config: RLConfig) -> dict:
                               "curve": [first]}
         summary[rung.name] = record
     return summary
+
+
+def fixed_arm(out: Path) -> Rung | None:
+    """OUT/fixed as a rung: the RL run whose settings OUT/fixed/config.json holds (any env, reward
+    and lever a user fixes the broken rung with), or None where there is none."""
+    if not (rung_dir(out, FIXED) / "config.json").is_file():
+        return None
+    run = RLRun.from_json(saved_settings(rung_dir(out, FIXED), "run"))
+    sees = f", the reward seeing {run.reward_sees}" if run.reward_sees else ""
+    return Rung(FIXED.name, run.env, str(run.reward), run.reward_sees,
+                f"the fix: --env {run.env} --reward {run.reward}{sees}")
 
 
 def mean_agreement(record: dict, key: str = "agreement") -> float | None:
@@ -117,7 +130,7 @@ def write_ladder_report(out: Path, config: RLConfig) -> dict:
              "false successes: the share of its successes that fail for real (mean over steps); signal: the "
              "correlation of its group advantages with the real outcomes (mean over steps).", "",
              ladder_table(summary), "", "| rung | what it swaps |", "|---|---|",
-             *[f"| {name} | {RUNGS[name].what} |" for name in summary if name in RUNGS], "",
+             *[f"| {name} | {summary[name]['what']} |" for name in summary if name != "sft"], "",
              "Plots: curves.png (real success by step), agreement.png (agreement by step).", ""]
     write_bytes(out / "ladder.md", "\n".join(lines).encode())
     return summary

@@ -19,7 +19,7 @@ class Rung:
     Attributes:
         name: the rung's key in summary.json and its run directory.
         env: where the rollouts run (and so what the policy sees).
-        reward: who gives the reward (one of `REWARDS`).
+        reward: who gives the reward (one of `REWARDS`; the fixed arm's is its whole reward spec).
         sees: where the reward's video comes from (None: the rollouts' own).
         what: the rung in words, for the report.
     """
@@ -46,6 +46,12 @@ RUNGS: dict[str, Rung] = {rung.name: rung for rung in (
     Rung("r4_imagined", IMAGINED, "judge", None, "imagination: imagined frames, the judge on imagined video"),
     Rung("r4s_imagined_state", IMAGINED, "state", None, "imagination with the state model's reward"),
 )}
+
+
+FIXED = Rung("fixed", IMAGINED, "", None, "the practice arm after the fix")
+"""Where a ladder keeps the practice arm after the fix: OUT/fixed, a `gymnast rl` run with the
+ladder's recipe and whatever lever mends the rung where learning died (its env and reward are read
+from its own settings)."""
 
 
 def rung_dir(out: Path, rung: Rung) -> Path:
