@@ -23,10 +23,13 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 
+from gymnast.data.lerobot_format import is_list
+
 logger = logging.getLogger(__name__)
 
 _SPEC_COLUMNS = ("timestamp", "frame_index", "episode_index", "index", "task_index")
 """The bookkeeping columns LeRobot writes in every data file."""
+_VECTOR_DTYPES = ("float16", "float32", "float64")
 
 
 @dataclass(frozen=True)
@@ -51,7 +54,7 @@ class Deviation:
 
     def __str__(self) -> str:
         more = f" (and {self.count - 1} more files)" if self.count > 1 else ""
-        return f"{self.path}{more}: {self.field}: {self.found}: {self.decision}"
+        return f"{self.path}{more}: {self.found}; {self.decision}"
 
 
 class Deviations:
@@ -73,6 +76,14 @@ class Deviations:
             return
         self._found[key] = Deviation(str(path), field, found, decision, blocking)
         logger.warning("%s", self._found[key])
+
+    def merge(self, other: Deviations) -> None:
+        """Record every deviation of `other` here (its counts kept), without logging them again."""
+        for deviation in other:
+            key = (deviation.field, deviation.decision)
+            known = self._found.get(key)
+            count = deviation.count + (known.count if known is not None else 0)
+            self._found[key] = Deviation(**{**(known or deviation).__dict__, "count": count})
 
     def __iter__(self) -> Iterator[Deviation]:
         return iter(self._found.values())
@@ -103,8 +114,12 @@ def check_rows(table: pa.Table, path: Path, fps: float, features: dict, notes: D
                   "ignored")
     for name in names:
         kind = table.schema.field(name).type
-        if _is_list(kind) and _is_list(kind.value_type):
+        if is_list(kind) and is_list(kind.value_type):
             notes.add(path, name, f"{name!r} is stored as nested lists ({kind})", "flattened to one vector per row")
+        declared = features.get(name)
+        if (not is_list(kind) and isinstance(declared, dict) and declared.get("dtype") in _VECTOR_DTYPES
+                and name not in _SPEC_COLUMNS and not name.startswith("next.") and name != "action_is_pad"):
+            notes.add(path, name, f"{name!r} is stored as plain numbers, not lists", "read as vectors of width 1")
     if "timestamp" in names and table.num_rows > 1 and fps > 0:
         _check_timestamps(table, path, fps, notes)
 
@@ -126,10 +141,6 @@ def _check_timestamps(table: pa.Table, path: Path, fps: float, notes: Deviations
     elif not regular:
         notes.add(path, "timestamp", f"timestamps step by {np.median(steps):.4g} s, not 1/fps = {1 / fps:.4g} s",
                   f"frames placed by frame_index at {fps:g} fps")
-
-
-def _is_list(kind: pa.DataType) -> bool:
-    return pa.types.is_list(kind) or pa.types.is_fixed_size_list(kind) or pa.types.is_large_list(kind)
 
 
 _MISSING_DECISIONS = {

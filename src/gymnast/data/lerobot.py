@@ -224,6 +224,15 @@ class EpisodeDataset:
             views = {name: fit_frames(frames, *self._fit) for name, frames in views.items()}
         return tile_views(list(views.values()))
 
+    def video_files(self, key: str) -> list[Path]:
+        """The video file of each episode of camera feature `key` (any camera of the dataset, read or not).
+
+        Raises:
+            DatasetError: the camera's files cannot be located.
+        """
+        refs = self._reader.episode_refs(self.root, self.info, key, Deviations())
+        return [ref.video_path for ref in refs if ref.video_path is not None]
+
     def _episode(self, i: int) -> tuple[EpisodeRef, pa.Table, dict[str, EpisodeRef]]:
         """Episode ``i``'s reference, its data rows and every camera's reference by name."""
         if not 0 <= i < len(self._refs):
@@ -242,19 +251,24 @@ class EpisodeDataset:
         if camera is not None:
             key = camera_key(features, camera, info_path)
             return key, self._named_refs(key, camera)
-        reasons = []
+        reasons, errors = [], []
         for key in camera_features(features):
             try:
                 refs = self._reader.episode_refs(self.root, self.info, key, self.deviations)
             except DatasetError as e:
                 reasons.append(f"{key!r}: {e}")
+                errors.append(e)
                 continue
             lacking = lacking_frames(refs, key)
             if not lacking:
                 return key, refs
             reasons.append(f"{key!r}: {lacking}")
         if not reasons:
-            raise DatasetError(f"{info_path}: no feature of dtype 'video' or 'image' in 'features'")
+            raise DatasetError(f"{info_path}: no feature of dtype 'video' or 'image' in 'features'; a camera is a "
+                               "feature of dtype 'video' (mp4 files) or 'image' (images in the rows)")
+        if len(errors) == len(reasons) and len({str(e).replace(repr(k), "") for e, k in
+                                                 zip(errors, camera_features(features))}) == 1:
+            raise errors[0]  # the episode list itself, not any camera: say it as it is
         raise DatasetError(f"{self.root}: no camera has frames to read; " + "; ".join(reasons))
 
     def _named_refs(self, key: str, camera: str) -> list[EpisodeRef]:

@@ -101,7 +101,7 @@ def match_frames_to_rows(frames: np.ndarray, n_rows: int, ref: EpisodeRef, key: 
         what = "short of" if len(frames) < n_rows else "longer than"
         decision = ("the last frame is repeated" if len(frames) < n_rows else "the extra frames at the end are dropped")
         found = f"episode {ref.index} has {len(frames)} frames for {n_rows} data rows (video {what} its rows)"
-        (notes or Deviations()).add(source, key or "frames", found, f"matched by position within {tolerance} "
+        (notes if notes is not None else Deviations()).add(source, key or "frames", found, f"matched by position within {tolerance} "
                                     f"frame{'s' * (tolerance > 1)}: {decision}")
         if len(frames) < n_rows:
             frames = np.concatenate([frames, np.repeat(frames[-1:], n_rows - len(frames), axis=0)])
@@ -126,7 +126,7 @@ def decode_images(table: pa.Table, name: str, path: Path, notes: Deviations | No
         if not isinstance(data, bytes):
             raise DatasetError(f"{path}: field {name!r} has a row without image bytes")
         try:
-            images.append(_to_rgb(Image.open(io.BytesIO(data)), path, name, notes or Deviations()))
+            images.append(_to_rgb(Image.open(io.BytesIO(data)), path, name, notes if notes is not None else Deviations()))
         except (OSError, ValueError, Image.DecompressionBombError) as e:
             raise DatasetError(f"{path}: field {name!r}: cannot decode an image: {e}") from e
     if not images or len({image.shape for image in images}) > 1:

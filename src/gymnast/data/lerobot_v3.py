@@ -84,7 +84,8 @@ def info_field(info: Mapping, name: str, kind: type | tuple[type, ...], path: Pa
     """A required field of ``info.json`` with the expected Python type."""
     value = info.get(name)
     if not isinstance(value, kind) or isinstance(value, bool):  # bool is an int, never a count
-        raise DatasetError(f"{path}: field {name!r} is {value!r}, expected {kind}")
+        kinds = " or ".join(k.__name__ for k in (kind if isinstance(kind, tuple) else (kind,)))
+        raise DatasetError(f"{path}: field {name!r} is {value!r}, expected {'a number' if kinds == 'int or float' else kinds}")
     return value
 
 
