@@ -134,10 +134,10 @@ def _check_codecs(dataset: EpisodeDataset, notes: Deviations) -> None:
             continue
         try:
             with av.open(str(path)) as container:
-                codec = container.streams.video[0].codec_context.name
-                pix_fmt = container.streams.video[0].codec_context.pix_fmt or ""
-        except (OSError, IndexError, av.error.FFmpegError):
-            continue  # reading the episodes names an unreadable file
+                context = container.streams.video[0].codec_context
+                codec, pix_fmt = context.name, context.pix_fmt or ""
+        except (OSError, IndexError, AttributeError, av.error.FFmpegError):
+            continue  # no stream, or none described: reading the episodes names the unreadable file
         described = next((features[key][k] for k in ("info", "video_info") if isinstance(features[key].get(k), dict)), {})
         declared = described.get("video.codec")
         if declared is not None and str(declared).lower() not in (codec, {"hevc": "h265"}.get(codec), {"h264": "avc1"}.get(codec)):

@@ -151,8 +151,10 @@ def _decode(ref: EpisodeRef, key: str, start: float, end: float, may_lack: int) 
         return decode_video(ref.video_path, start, end, may_lack=may_lack)
     except FileNotFoundError as e:
         raise MissingFile(f"episode {ref.index}, field {key!r}: {e}") from e
-    except (ValueError, OSError, av.error.FFmpegError) as e:
+    except (ValueError, OSError, av.error.FFmpegError) as e:  # decode_video's messages name the file
         raise DatasetError(f"episode {ref.index}, field {key!r}: {e}") from e
+    except (AttributeError, TypeError, IndexError) as e:  # PyAV meeting a damaged stream description
+        raise DatasetError(f"episode {ref.index}, field {key!r}: {ref.video_path}: cannot decode video: {e}") from e
 
 
 def _first_repeated(frames: np.ndarray) -> bool:
@@ -170,7 +172,7 @@ def _video_repeats_first(path: Path, n_rows: int) -> bool:
                 return False
             two = 2 / float(streams[0].average_rate)
         return _first_repeated(decode_video(path, 0.0, two))
-    except (OSError, ValueError, av.error.FFmpegError):
+    except (OSError, ValueError, AttributeError, TypeError, IndexError, av.error.FFmpegError):
         return False  # the decode that follows names the file
 
 
