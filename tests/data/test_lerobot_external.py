@@ -213,5 +213,5 @@ def test_a_video_two_frames_short_is_an_error_naming_the_file(tmp_path):
     written = write_v21(tmp_path, lengths=(6,))
     video = tmp_path / "videos/chunk-000/observation.images.top/episode_000000.mp4"
     encode_video(video, written[0][1][:-2], FPS)
-    with pytest.raises(DatasetError, match=re.escape(f"{video}: episode 0 has 4 frames for 6 data rows")):
+    with pytest.raises(DatasetError, match=re.escape(f"{video}: camera 'observation.images.top' of episode 0 has 4 frames for 6 data rows")):
         EpisodeDataset(tmp_path).load(0)

@@ -94,7 +94,8 @@ def match_frames_to_rows(frames: np.ndarray, n_rows: int, ref: EpisodeRef, key: 
     source = ref.video_path or ref.data_path
     tolerance = frame_tolerance(n_rows)
     if abs(len(frames) - n_rows) > tolerance or not len(frames):
-        raise DatasetError(f"{source}: episode {ref.index} has {len(frames)} frames for {n_rows} data rows "
+        camera = f"camera {key!r} of " if key else ""
+        raise DatasetError(f"{source}: {camera}episode {ref.index} has {len(frames)} frames for {n_rows} data rows "
                            f"(more than the {tolerance} frame{'s' * (tolerance > 1)} of tolerance); re-encode the "
                            "video with one frame per row, or leave the episode out of meta/episodes")
     if len(frames) != n_rows:

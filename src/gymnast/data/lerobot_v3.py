@@ -118,7 +118,7 @@ def read_episode_rows(
             check_info_columns(schema, path)
         table = read_parquet(path, [n for n in schema.names if keep(n) or n == "episode_index"])
         for name in required:
-            if table.column(name).null_count:
+            if name in table.column_names and table.column(name).null_count:
                 raise DatasetError(f"{path}: field {name!r} has empty (null) values")
         rows += [(path, row) for row in table.to_pylist() if row["episode_index"] < total]
     rows.sort(key=lambda item: item[1]["episode_index"])
