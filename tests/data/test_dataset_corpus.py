@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 from dataset_corpus import CORPUS, build
 
@@ -83,3 +84,13 @@ def test_a_dataset_whose_meaning_is_clear_trains_every_model_at_debug_size(name,
                              "--no-real-eval", "--watch-every", "0"], capsys)
         assert code == 0, err
         assert json.loads((out / "summary.json").read_text())["real_interactions"] == 0
+
+
+@pytest.mark.parametrize("name", CLEAR)
+def test_frames_decoded_alone_are_those_of_the_whole_episode(name, corpus):
+    dataset = EpisodeDataset(corpus[name])
+    for i in range(len(dataset)):
+        frames = dataset.load(i).observed_frames
+        np.testing.assert_array_equal(dataset.first_frame(i), frames[0])
+        np.testing.assert_array_equal(dataset.frames(i, 1, 3), frames[1:3])
+        np.testing.assert_array_equal(dataset.frames(i, len(frames) - 2, len(frames)), frames[-2:])

@@ -12,8 +12,9 @@ Legend: L rows (frames) of one episode, N frames decoded, H/W image height/width
 
 from __future__ import annotations
 
-import functools
+import contextlib
 import io
+from collections.abc import Iterator
 from pathlib import Path
 
 import av
@@ -24,7 +25,7 @@ from PIL import Image
 
 from gymnast.data.deviations import Deviations
 from gymnast.data.lerobot_format import DatasetError, EpisodeRef, MissingFile, require_columns
-from gymnast.utils.video import decode_video
+from gymnast.utils.video import VideoFile
 
 _REPEAT_LEVEL = 1.0
 """Mean absolute difference (of 255) below which a video's first two frames are the same frame
@@ -50,8 +51,8 @@ def decode_episode(ref: EpisodeRef, rows: pa.Table, key: str, fps: float, notes:
     start, end = ref.video_span
     if ref.rows is None:  # a file of its own (v2.x): read one frame past the rows, to tell a repeated first frame
         end = start + (n_rows + 1) / fps
-    # The counts are checked against the rows below, within the tolerance.
-    frames = _decode(ref, key, start, end, may_lack=n_rows + 1)
+    with _video(ref, key) as video:  # the counts are checked against the rows below, within the tolerance
+        frames = video.decode(start, end, may_lack=n_rows + 1)
     if len(frames) > n_rows and _first_repeated(frames):
         notes.add(ref.video_path, key, "a video starts with its first frame twice", "the repeat is dropped")
         frames = frames[1:]
@@ -65,12 +66,13 @@ def decode_range(ref: EpisodeRef, rows: pa.Table, key: str, fps: float, first: i
     if ref.video_path is None:
         return decode_images(rows.slice(first, stop - first), key, ref.data_path, notes)
     n_rows, rate = rows.num_rows, fps
-    shift = 1 if ref.rows is None and _video_repeats_first(ref.video_path, n_rows) else 0
     # A range to the end may lack frames the file does not have; a frame before it stands in for them.
     to_end = stop == n_rows
     lead = min(first, frame_tolerance(n_rows)) if to_end else 0
-    start = ref.video_span[0] + (first - lead + shift) / rate
-    frames = _decode(ref, key, start, ref.video_span[0] + (stop + shift) / rate, may_lack=frame_tolerance(n_rows) if to_end else 0)
+    with _video(ref, key) as video:  # one open for the probe and the range
+        shift = 1 if ref.rows is None and _repeats_first(video, n_rows) else 0
+        start, end = ref.video_span[0] + (first - lead + shift) / rate, ref.video_span[0] + (stop + shift) / rate
+        frames = video.decode(start, end, may_lack=frame_tolerance(n_rows) if to_end else 0)
     wanted = stop - first + lead
     if len(frames) < wanted:
         if wanted - len(frames) > frame_tolerance(n_rows):
@@ -147,12 +149,16 @@ def _to_rgb(image: Image.Image, path: Path, name: str, notes: Deviations) -> np.
     return np.asarray(image.convert("RGB"))
 
 
-def _decode(ref: EpisodeRef, key: str, start: float, end: float, may_lack: int) -> np.ndarray:
+@contextlib.contextmanager
+def _video(ref: EpisodeRef, key: str) -> Iterator[VideoFile]:
+    """The episode's video file, open; what opening or decoding it raises becomes an error naming the
+    episode and the field (the body decodes, and raises nothing of its own)."""
     try:
-        return decode_video(ref.video_path, start, end, may_lack=may_lack)
+        with VideoFile(ref.video_path) as video:
+            yield video
     except FileNotFoundError as e:
         raise MissingFile(f"episode {ref.index}, field {key!r}: {e}") from e
-    except (ValueError, OSError, av.error.FFmpegError) as e:  # decode_video's messages name the file
+    except (ValueError, OSError, av.error.FFmpegError) as e:  # VideoFile's messages name the file
         raise DatasetError(f"episode {ref.index}, field {key!r}: {e}") from e
     except (AttributeError, TypeError, IndexError) as e:  # PyAV meeting a damaged stream description
         raise DatasetError(f"episode {ref.index}, field {key!r}: {ref.video_path}: cannot decode video: {e}") from e
@@ -162,17 +168,14 @@ def _first_repeated(frames: np.ndarray) -> bool:
     return len(frames) > 1 and np.abs(frames[0].astype(np.int16) - frames[1]).mean() < _REPEAT_LEVEL
 
 
-@functools.lru_cache(maxsize=256)
-def _video_repeats_first(path: Path, n_rows: int) -> bool:
-    """Whether the episode's own video holds one frame more than its rows and starts with a repeat
-    (decided as `decode_episode` decides it, from the stream's frame count and its first two frames)."""
+def _repeats_first(video: VideoFile, n_rows: int) -> bool:
+    """Whether an episode's own video holds one frame more than its rows and starts with a repeat
+    (decided as `decode_episode` decides it): the stream's declared frame count, read with the open,
+    says whether the first two frames need decoding, which only such a video pays for."""
+    if video.frames != n_rows + 1:
+        return False
     try:
-        with av.open(str(path)) as container:
-            streams = container.streams.video
-            if not streams or streams[0].frames != n_rows + 1 or not streams[0].average_rate:
-                return False
-            two = 2 / float(streams[0].average_rate)
-        return _first_repeated(decode_video(path, 0.0, two))
+        return _first_repeated(video.decode(0.0, 2 / video.rate))
     except (OSError, ValueError, AttributeError, TypeError, IndexError, av.error.FFmpegError):
         return False  # the decode that follows names the file
 
