@@ -137,6 +137,7 @@ class EpisodeDataset:
                                    "size: read one of them (--camera NAME)")
         self._fit: tuple[int, Fit] | None = None
         self._tables: OrderedDict[Path, pa.Table] = OrderedDict()
+        self._checked: set[Path] = set()  # data files checked for deviations (shared with `fitted` copies)
 
     def fitted(self, size: int, fit: Fit) -> EpisodeDataset:
         """The same dataset, its frames fitted to `size` x `size` by `fit` (`gymnast.data.frames.fit_frames`)."""
@@ -296,12 +297,14 @@ class EpisodeDataset:
         return episode_info(ref, column_vector(self._rows(ref), "next.success", ref.data_path, bool))
 
     def _rows(self, ref: EpisodeRef) -> pa.Table:
-        """The episode's rows of its data file (the last files read stay cached; a file read for the
-        first time is checked for deviations, `gymnast.data.deviations.check_rows`)."""
+        """The episode's rows of its data file (the last files read stay cached; a file is checked for
+        deviations once, the first time it is read, `gymnast.data.deviations.check_rows`)."""
         table = self._tables.pop(ref.data_path, None)
         if table is None:
             table = read_parquet(ref.data_path)
-            check_rows(table, ref.data_path, self.fps, self.info["features"], self.deviations)
+            if ref.data_path not in self._checked:
+                check_rows(table, ref.data_path, self.fps, self.info["features"], self.deviations)
+                self._checked.add(ref.data_path)
         self._tables[ref.data_path] = table
         while len(self._tables) > _CACHED_DATA_FILES:
             self._tables.popitem(last=False)
