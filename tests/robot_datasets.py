@@ -15,7 +15,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from gymnast.utils.video import encode_video
+from gymnast.utils.video import DEFAULT_CODEC, VideoCodec, encode_video
 
 TASKS = ("pick up the red cube", "put the cube in the bowl")
 
@@ -46,6 +46,7 @@ def write_robot_dataset(
     without_video: Sequence[str] = (),
     short_video: bool = False,
     action_scale: float = 1.0,
+    codec: VideoCodec = DEFAULT_CODEC,
 ) -> Path:
     """Write a dataset of `episodes` episodes of `steps` + 1 rows each and return `root`.
 
@@ -62,6 +63,7 @@ def write_robot_dataset(
         short_video: the last episode's video of each camera lacks its last frame (a recorder
             that wrote one frame fewer than it logged).
         action_scale: actions are drawn uniformly from [-scale, scale] (a robot's own units).
+        codec: how the videos are encoded (``info.json`` says ``h264`` whatever it is, as some recorders do).
     """
     rng = np.random.default_rng(0)
     rows = steps + 1
@@ -109,14 +111,14 @@ def write_robot_dataset(
             videos[camera].append(frames[:-1] if short_video and e == episodes - 1 else frames)
     tasks = [TASKS[e % len(TASKS)] for e in range(episodes)]
     if v3:
-        _write_v3_files(root, tables, videos, tasks, without_video, fps)
+        _write_v3_files(root, tables, videos, tasks, without_video, fps, codec)
     else:
-        _write_v21_files(root, tables, videos, tasks, without_video, fps)
+        _write_v21_files(root, tables, videos, tasks, without_video, fps, codec)
     return root
 
 
 def _write_v21_files(root: Path, tables: list[pa.Table], videos: dict, tasks: list[str],
-                     without_video: Sequence[str], fps: int) -> None:
+                     without_video: Sequence[str], fps: int, codec: VideoCodec) -> None:
     (root / "meta/tasks.jsonl").write_text("".join(json.dumps({"task_index": i, "task": t}) + "\n"
                                                    for i, t in enumerate(TASKS)))
     lines = []
@@ -125,13 +127,13 @@ def _write_v21_files(root: Path, tables: list[pa.Table], videos: dict, tasks: li
         pq.write_table(table, root / f"data/chunk-000/episode_{e:06d}.parquet")
         for camera, frames in videos.items():
             if camera not in without_video:
-                encode_video(root / f"videos/chunk-000/observation.images.{camera}/episode_{e:06d}.mp4", frames[e], fps)
+                encode_video(root / f"videos/chunk-000/observation.images.{camera}/episode_{e:06d}.mp4", frames[e], fps, codec)
         lines.append(json.dumps({"episode_index": e, "tasks": [tasks[e]], "length": table.num_rows}))
     (root / "meta/episodes.jsonl").write_text("\n".join(lines) + "\n")
 
 
 def _write_v3_files(root: Path, tables: list[pa.Table], videos: dict, tasks: list[str],
-                    without_video: Sequence[str], fps: int) -> None:
+                    without_video: Sequence[str], fps: int, codec: VideoCodec) -> None:
     (root / "data/chunk-000").mkdir(parents=True)
     pq.write_table(pa.concat_tables(tables), root / "data/chunk-000/file-000.parquet")
     task_table = pa.table({"task_index": pa.array(range(len(TASKS)), pa.int64()), "task": list(TASKS)})
@@ -148,7 +150,7 @@ def _write_v3_files(root: Path, tables: list[pa.Table], videos: dict, tasks: lis
     for camera, episodes in videos.items():
         prefix = f"videos/observation.images.{camera}/"
         if camera not in without_video:
-            encode_video(root / f"{prefix}chunk-000/file-000.mp4", np.concatenate(episodes), fps,
+            encode_video(root / f"{prefix}chunk-000/file-000.mp4", np.concatenate(episodes), fps, codec,
                          keyframes=np.cumsum([0] + [len(f) for f in episodes[:-1]]))
         starts = np.cumsum([0] + [t.num_rows for t in tables[:-1]]) / fps
         meta[prefix + "chunk_index"] = [0] * len(tables)

@@ -16,7 +16,8 @@ from data_helpers import make_episode, smooth_frames
 from PIL import Image
 
 from gymnast.data.lerobot import DatasetError, EpisodeDataset, LeRobotWriter
-from gymnast.data.lerobot_format import EpisodeRef, match_frames_to_rows
+from gymnast.data.lerobot_format import EpisodeRef
+from gymnast.data.lerobot_frames import match_frames_to_rows
 from gymnast.data.schema import EpisodeInfo
 from gymnast.utils.video import encode_video, psnr
 
@@ -125,10 +126,18 @@ def test_v21_dataset_without_rewards_or_success_flags(tmp_path):
 
 def test_v21_missing_data_file_names_it(tmp_path):
     write_v21(tmp_path)
-    missing = tmp_path / "data/chunk-000/episode_000001.parquet"
+    missing = tmp_path / "data/chunk-000/episode_000000.parquet"  # the first: not a dataset cut to its first episodes
     missing.unlink()
     with pytest.raises(FileNotFoundError, match=re.escape(str(missing))):
-        EpisodeDataset(tmp_path).load(1)
+        EpisodeDataset(tmp_path).load(0)
+
+
+def test_v21_dataset_cut_to_its_first_episodes_reads_those_with_a_deviation(tmp_path):
+    write_v21(tmp_path)
+    (tmp_path / "data/chunk-000/episode_000001.parquet").unlink()
+    dataset = EpisodeDataset(tmp_path)
+    assert len(dataset) == 1 and dataset.load(0).length == 4
+    assert any("data files exist for the first 1" in str(d) for d in dataset.deviations)
 
 
 def test_v3_dataset_without_gymnast_columns_gets_the_defaults(tmp_path):
@@ -204,5 +213,5 @@ def test_a_video_two_frames_short_is_an_error_naming_the_file(tmp_path):
     written = write_v21(tmp_path, lengths=(6,))
     video = tmp_path / "videos/chunk-000/observation.images.top/episode_000000.mp4"
     encode_video(video, written[0][1][:-2], FPS)
-    with pytest.raises(DatasetError, match=re.escape(f"{video}: expected 6 frames")):
+    with pytest.raises(DatasetError, match=re.escape(f"{video}: camera 'observation.images.top' of episode 0 has 4 frames for 6 data rows")):
         EpisodeDataset(tmp_path).load(0)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from data_helpers import smooth_frames
 
-from gymnast.utils.video import CODEC_PRESETS, decode_video, encode_video, psnr, video_info
+from gymnast.utils.video import CODEC_PRESETS, VideoFile, decode_video, encode_video, psnr, video_info
 
 
 def numbered_frames(n: int, size: int = 32) -> np.ndarray:
@@ -54,6 +54,15 @@ def test_decoding_a_time_range_returns_exactly_its_frames(tmp_path, keyframes):
         assert frame_ids(decoded) == list(range(first, stop)), (first, stop)
         assert psnr(frames[first:stop], decoded).mean >= 45.0
 
+
+
+@pytest.mark.parametrize("keyframes", [(0, 13, 40), ()], ids=["episode-keyframes", "no-keyframes"])
+def test_one_open_video_decodes_several_ranges_as_separate_opens_do(tmp_path, keyframes):
+    encode_video(tmp_path / "a.mp4", numbered_frames(60), fps=80, keyframes=keyframes)
+    with VideoFile(tmp_path / "a.mp4") as video:
+        assert (video.frames, video.rate) == (60, 80)
+        for first, stop in [(0, 2), (21, 38), (0, 13), (59, 60), (0, 60), (14, 15)]:  # back to the start, and on
+            assert frame_ids(video.decode(first / 80, stop / 80)) == list(range(first, stop)), (first, stop)
 
 def test_psnr_per_frame_and_mean():
     a = np.zeros((2, 4, 4, 3), np.uint8)

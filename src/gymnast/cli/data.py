@@ -70,13 +70,17 @@ def inspect(
     episodes: int = 10,
     camera: str | None = None,
     keys: Annotated[KeyFlags, tyro.conf.arg(name="")] = KeyFlags(),
+    check: bool = False,
 ) -> None:
-    """Summarise a dataset (v3.0 or v2.1): episodes, the features read, success by task and behaviour,
-    codec error. A dataset whose features are named otherwise gets the candidates for the actions,
-    the states and the cameras instead, and the flags that read them.
+    """Summarise a dataset (v3.0, v2.1 or v2.0): episodes, the features read, success by task and behaviour,
+    codec error, and what reading it assumed where it departs from the LeRobot specification. A dataset
+    whose features are named otherwise gets the candidates for the actions, the states and the cameras
+    instead, and the flags that read them.
 
     Args:
         data: dataset directory.
+        check: instead, read the whole dataset as training would and list every deviation from the LeRobot
+            specification with the decision it leads to; exits with status 1 where training cannot proceed.
         sheet: also write a PNG contact sheet (first, middle and last frame of a few episodes).
         episodes: how many episodes the contact sheet shows.
         camera: the dataset camera to read, by name (front: observation.images.front) or by feature key
@@ -88,6 +92,14 @@ def inspect(
     from gymnast.data.lerobot import EpisodeDataset
     from gymnast.data.summary import describe_candidates, describe_dataset, write_episode_sheet
 
+    if check:
+        from gymnast.data.check import check_dataset, format_check
+
+        report = check_dataset(data, camera, feature_keys(keys))
+        print(format_check(data, report))
+        if report.blocking:
+            raise SystemExit(1)
+        return
     try:
         dataset = EpisodeDataset(data, camera, keys=feature_keys(keys))
     except FeatureNotFound:  # the usual case of a dataset published elsewhere: say what to pass

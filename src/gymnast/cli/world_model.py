@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import logging
 from pathlib import Path
 from typing import Annotated, Literal
 
@@ -13,6 +14,8 @@ from gymnast.cli.settings import resolve, saved_inputs
 from gymnast.config import CameraNames
 from gymnast.data.frames import Fit
 from gymnast.utils.trackers import TrackerNames
+
+logger = logging.getLogger(__name__)
 
 
 def train_wm(
@@ -36,6 +39,7 @@ def train_wm(
     cameras: CameraNames = (),
     fit: Fit | None = None,
     tracker: TrackerNames | None = None,
+    heldout_fraction: float | None = None,
     keys: Annotated[KeyFlags, tyro.conf.arg(name="")] = KeyFlags(),
 ) -> None:
     """Train a world model on every episode of a dataset (held-out scenes excepted).
@@ -75,6 +79,8 @@ def train_wm(
         tracker: where the run also logs its settings, metrics and held-out videos: none, or any of tensorboard and
             wandb, comma-separated (wandb: the [wandb] extra; WANDB_MODE=offline keeps it on disk);
             default: none; --resume may change it.
+        heldout_fraction: share of scenes kept out of training for eval-wm (the preset's: 0.1); a dataset
+            of a few episodes, where 0.1 holds out none, needs more (the warning says how much).
         keys: which dataset features are the actions and the states (default: LeRobot's action and
             observation.state); saved with the run.
     """
@@ -87,8 +93,12 @@ def train_wm(
                    f"{'flow' if backend == 'flow' else 'model'}.action_dropout": action_dropout,
                    "model.actions_per_frame": actions_per_frame,
                    "grounded": grounded, "state_noise": state_noise, "init": init, "extra_data": extra_data or None, "camera": camera, "cameras": cameras or None, "fit": fit,
-                   "tracker": tracker, **key_overrides(keys)},
+                   "tracker": tracker, "heldout_fraction": heldout_fraction, **key_overrides(keys)},
         saved=lambda: (saved_train_config(out), saved_inputs(out, "data")))
+    if not resume and config.heldout_fraction:
+        hint = _heldout_hint(inputs["data"], config.heldout_fraction, config.camera, config.keys)
+        if hint:
+            logger.warning("%s: eval-wm will have nothing to measure", hint)
     checkpoint = train_world_model(inputs["data"], out, config, resume=resume)
     print(f"world model: {checkpoint}")
 
@@ -191,6 +201,11 @@ def eval_wm(
                                   controllability=ControllabilityConfig(scenes=control_scenes), reanchor_every=reanchor_every,
                                   camera=camera, device=device, keys=feature_keys(keys), robot_state=robot_state,
                                   measure_every=measure_every)
+    from gymnast.world_model.evaluate import heldout_fraction
+
+    hint = _heldout_hint(data, heldout_fraction(wm), camera, feature_keys(keys))
+    if hint:
+        raise ValueError(f"{hint}; or evaluate on other episodes of the robot")
     report = evaluate_world_model(wm, data, out, config)
     print(format_report(report))
     print(f"report: {out}")
@@ -273,3 +288,21 @@ def check_wm(wm: str, batch: int = 2, actions: int = 5, device: str = "cpu", see
     print(format_breaches(f"world model {wm}", breaches))
     if breaches:
         raise SystemExit(1)
+
+
+def _heldout_hint(data: Path, fraction: float, camera: str | None, keys) -> str | None:
+    """Where `fraction` holds out no scene of `data`, a message saying so and which fraction would hold
+    out one (`--heldout-fraction F` of train-wm); None where it holds out some."""
+    from gymnast.data.lerobot import EpisodeDataset
+    from gymnast.world_model.data import is_heldout, split_episodes, usable_episodes
+
+    infos = EpisodeDataset(data, camera, keys=keys).episodes
+    if split_episodes(infos, fraction)[1]:
+        return None
+    usable = usable_episodes(infos)
+    message = f"{data} has no held-out episodes at held-out fraction {fraction} (of its {len(usable)} scenes)"
+    for percent in range(1, 100):  # the scene hash is fixed: the smallest share that holds one out
+        held = [i for i in usable if is_heldout(infos[i], percent / 100)]
+        if held and len(held) < len(usable):
+            return f"{message}; train-wm --heldout-fraction {percent / 100:g} holds out episodes {held}"
+    return message

@@ -21,8 +21,8 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from gymnast.data.lerobot_format import (DatasetError, FeatureKeys, aggregate_stats, column_matrix, column_vector,
-                                         read_parquet)
+from gymnast.data.lerobot_format import (DatasetError, FeatureKeys, MissingFile, aggregate_stats, column_matrix,
+                                         column_vector, read_parquet)
 
 STATS_PATH = "meta/stats.json"
 _NAMES = ("min", "max", "mean", "std")
@@ -81,7 +81,7 @@ def read_action_stats(root: Path, dim: int, data_paths: Iterable[Path], key: str
     `data_paths` (rows gymnast marks ``action_is_pad`` are not actions and are left out).
 
     Raises:
-        FileNotFoundError: a data file is missing.
+        MissingFile: a data file is missing.
         DatasetError: the stats file or a data file lacks the field or has the wrong width; the
             message names the file and the field.
     """
@@ -112,7 +112,7 @@ def read_action_stats(root: Path, dim: int, data_paths: Iterable[Path], key: str
 
 def _columns(path: Path) -> list[str]:
     if not path.is_file():
-        raise FileNotFoundError(f"parquet file not found: {path}")
+        raise MissingFile(f"parquet file not found: {path}")
     try:
         return pq.read_schema(path).names
     except (pa.ArrowException, OSError) as e:

@@ -14,6 +14,7 @@ from collections.abc import Collection, Mapping
 from pathlib import Path
 from typing import Literal
 
+from gymnast.data.deviations import Deviations
 from gymnast.data.lerobot_format import CAMERA_PREFIX, DatasetError, image_key
 
 CAMERA_DTYPES = ("video", "image")
@@ -109,3 +110,42 @@ def suggestion(role: Role, features: Mapping, taken: Collection[str] = ()) -> st
 def _find_camera(features: Mapping, camera: str) -> str | None:
     """The camera feature named `camera` (short names first, as before whole keys were taken), or None."""
     return next((key for key in (image_key(camera), camera) if key in camera_features(features)), None)
+
+
+def image_shape(feature: Mapping, key: str, info_path: Path, notes: Deviations) -> tuple[int, int, int]:
+    """(H, W, 3) of a camera feature's frames as they are read (always RGB).
+
+    LeRobot gives ``shape`` [H, W, C] (or channels first, named so). Published datasets may give it
+    only in the stream description (``info`` or, in v2.0, ``video_info``: ``video.height``,
+    ``video.width``, ``video.channels``), or give one channel (grayscale, depth) or four (RGBA);
+    such frames are read as RGB, with a deviation recorded.
+
+    Raises:
+        DatasetError: no usable size anywhere (the message names the field and the fix).
+    """
+    shape, names = feature.get("shape"), feature.get("names")
+    if isinstance(shape, list) and len(shape) == 3 and all(_positive_int(s) for s in shape):
+        if isinstance(names, list) and names and names[0] in ("channel", "channels"):
+            shape = [shape[1], shape[2], shape[0]]
+    else:
+        described = next((feature[k] for k in ("info", "video_info") if isinstance(feature.get(k), dict)), {})
+        height, width = described.get("video.height"), described.get("video.width")
+        if not (_positive_int(height) and _positive_int(width)):
+            raise DatasetError(f"{info_path}: features[{key!r}].shape is {shape!r}, expected [H, W, 3]; give the "
+                               f"camera's frame size there (or as video.height and video.width under its 'info')")
+        channels = described.get("video.channels", 3)
+        shape = [height, width, channels if _positive_int(channels) else 3]
+        notes.add(info_path, f"features.{key}.shape", f"the shape of {key!r} is {feature.get('shape')!r}",
+                  f"taken from its stream description: {shape}")
+    if shape[2] != 3:
+        if shape[2] not in (1, 2, 4):
+            raise DatasetError(f"{info_path}: features[{key!r}] has {shape[2]} channels; a camera has 1 (grayscale, "
+                               "depth), 3 (RGB) or 4 (RGBA)")
+        kind = "grayscale or depth" if shape[2] < 3 else "RGBA"
+        notes.add(info_path, f"features.{key}.shape", f"camera {key!r} has {shape[2]} channels ({kind})",
+                  "read as RGB (grey repeated to 3 channels, alpha dropped)")
+    return shape[0], shape[1], 3
+
+
+def _positive_int(value: object) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool) and value > 0

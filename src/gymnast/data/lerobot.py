@@ -33,7 +33,8 @@ import pyarrow.parquet as pq
 
 from gymnast.data import lerobot_v3, lerobot_v21
 from gymnast.data.action_stats import ActionStats, read_action_stats
-from gymnast.data.features import camera_features, camera_key, camera_name, vector_width
+from gymnast.data.deviations import Deviations, check_rows
+from gymnast.data.features import camera_features, camera_key, camera_name, image_shape, vector_width
 from gymnast.data.frames import Fit, fit_frames
 from gymnast.data.lerobot_format import (
     DatasetError,
@@ -41,17 +42,15 @@ from gymnast.data.lerobot_format import (
     FeatureKeys,
     assemble_episode,
     column_vector,
-    decode_images,
     episode_columns,
     episode_info,
     has_info_columns,
-    match_frames_to_rows,
     read_parquet,
 )
+from gymnast.data.lerobot_frames import decode_episode, decode_range, lacking_frames
 from gymnast.data.lerobot_writer import LeRobotWriter
 from gymnast.data.schema import Episode, EpisodeColumns, EpisodeInfo
 from gymnast.utils.images import tile_views
-from gymnast.utils.video import decode_video
 
 __all__ = ["SUPPORTED_VERSIONS", "DatasetError", "EpisodeDataset", "FeatureKeys", "LeRobotWriter"]
 
@@ -86,6 +85,9 @@ class EpisodeDataset:
         camera_shape: (H, W, 3) of the camera's frames as stored.
         image_shape: (H, W, 3) of the frames `load` returns: `camera_shape`, or square once `fitted`.
         action_dim: width A of the action feature.
+        deviations: where the dataset departs from the LeRobot specification and what reading it
+            assumed (`gymnast.data.deviations`), as met so far: opening it finds those of its
+            metadata, reading episodes those of their files.
 
     Raises:
         FileNotFoundError: ``meta/info.json`` or a metadata file is missing.
@@ -99,7 +101,7 @@ class EpisodeDataset:
 
     def __init__(self, root: str | Path, camera: str | None = None, cameras: Sequence[str] | None = None,
                  keys: FeatureKeys = FeatureKeys()) -> None:
-        self.root, self.keys = Path(root), keys
+        self.root, self.keys, self.deviations = Path(root), keys, Deviations()
         info_path = self.root / lerobot_v3.INFO_PATH
         self.info = lerobot_v3.load_info(self.root)
         self.version = self.info.get("codebase_version")
@@ -110,13 +112,17 @@ class EpisodeDataset:
             )
         features = lerobot_v3.info_field(self.info, "features", dict, info_path)
         self.fps = lerobot_v3.info_field(self.info, "fps", (int, float), info_path)
+        if not 0 < self.fps < 10_000:
+            raise DatasetError(f"{info_path}: field 'fps' is {self.fps!r}, expected the frame rate of the rows and videos")
         self.action_dim = vector_width(features, keys.action_key, "action", info_path)
         if not (keys.reads_default_state and keys.state_key not in features):  # LeRobot's may be absent
             vector_width(features, keys.state_key, "state", info_path, taken=(keys.action_key,))
         names = _check_cameras(camera, cameras)
         self.image_key, self._refs = self._camera_refs(features, names[0] if names else None, info_path)
         self.camera_key = camera_name(self.image_key)
-        self.camera_shape = _image_shape(features[self.image_key], self.image_key, info_path)
+        if not self._refs:
+            raise DatasetError(f"{self.root}: the dataset has no episodes (its episode metadata lists none)")
+        self.camera_shape = image_shape(features[self.image_key], self.image_key, info_path, self.deviations)
         self.image_shape = self.camera_shape
         view_keys = [camera_key(features, name, info_path) for name in names[1:]]
         self.cameras = (self.camera_key, *map(camera_name, view_keys))
@@ -124,12 +130,14 @@ class EpisodeDataset:
         self.available_cameras = {camera_name(key): key for key in camera_features(features)}
         self._view_refs = {camera_name(key): self._named_refs(key, name) for key, name in zip(view_keys, names[1:])}
         for name, key in zip(self.cameras[1:], view_keys):
-            shape = _image_shape(features[key], key, info_path)
+            shape = image_shape(features[key], key, info_path, self.deviations)
             if shape != self.camera_shape:
                 raise DatasetError(f"{info_path}: camera {name!r} has frames of shape {shape} but camera "
-                                   f"{self.camera_key!r} has {self.camera_shape}; cameras read together need one size")
+                                   f"{self.camera_key!r} has {self.camera_shape}; cameras read together need one "
+                                   "size: read one of them (--camera NAME)")
         self._fit: tuple[int, Fit] | None = None
         self._tables: OrderedDict[Path, pa.Table] = OrderedDict()
+        self._checked: set[Path] = set()  # data files checked for deviations (shared with `fitted` copies)
 
     def fitted(self, size: int, fit: Fit) -> EpisodeDataset:
         """The same dataset, its frames fitted to `size` x `size` by `fit` (`gymnast.data.frames.fit_frames`)."""
@@ -171,10 +179,10 @@ class EpisodeDataset:
                 or size from the primary's (it names the camera, the episode and the file).
         """
         ref, rows, refs = self._episode(i)
-        views = {name: _decode_frames(refs[name], rows, key) for name, key in self._camera_features.items()}
+        # Each camera's frames matched to the rows (`gymnast.data.lerobot_frames`), then fitted.
+        views = {name: decode_episode(refs[name], rows, key, self.fps, self.deviations)
+                 for name, key in self._camera_features.items()}
         _check_views(views, refs)
-        # Matched to the rows per camera (they have one count, so alike), then fitted.
-        views = {name: match_frames_to_rows(frames, rows.num_rows, refs[name]) for name, frames in views.items()}
         if self._fit is not None:
             views = {name: fit_frames(frames, *self._fit) for name, frames in views.items()}
         return assemble_episode(ref, rows, views[self.camera_key], views, self.keys)
@@ -210,12 +218,21 @@ class EpisodeDataset:
         if not 0 <= first < stop <= rows.num_rows:
             raise IndexError(f"frames [{first}, {stop}) are outside episode {i} of {self.root}, "
                              f"which has {rows.num_rows} frames")
-        views = {name: _decode_frame_range(refs[name], rows, key, self.fps, first, stop)
+        views = {name: decode_range(refs[name], rows, key, self.fps, first, stop, self.deviations)
                  for name, key in self._camera_features.items()}
         _check_views(views, refs)
         if self._fit is not None:
             views = {name: fit_frames(frames, *self._fit) for name, frames in views.items()}
         return tile_views(list(views.values()))
+
+    def video_files(self, key: str) -> list[Path]:
+        """The video file of each episode of camera feature `key` (any camera of the dataset, read or not).
+
+        Raises:
+            DatasetError: the camera's files cannot be located.
+        """
+        refs = self._reader.episode_refs(self.root, self.info, key, Deviations())
+        return [ref.video_path for ref in refs if ref.video_path is not None]
 
     def _episode(self, i: int) -> tuple[EpisodeRef, pa.Table, dict[str, EpisodeRef]]:
         """Episode ``i``'s reference, its data rows and every camera's reference by name."""
@@ -235,19 +252,24 @@ class EpisodeDataset:
         if camera is not None:
             key = camera_key(features, camera, info_path)
             return key, self._named_refs(key, camera)
-        reasons = []
+        reasons, errors = [], []
         for key in camera_features(features):
             try:
-                refs = self._reader.episode_refs(self.root, self.info, key)
+                refs = self._reader.episode_refs(self.root, self.info, key, self.deviations)
             except DatasetError as e:
                 reasons.append(f"{key!r}: {e}")
+                errors.append(e)
                 continue
-            lacking = _lacking_frames(refs, key)
+            lacking = lacking_frames(refs, key)
             if not lacking:
                 return key, refs
             reasons.append(f"{key!r}: {lacking}")
         if not reasons:
-            raise DatasetError(f"{info_path}: no feature of dtype 'video' or 'image' in 'features'")
+            raise DatasetError(f"{info_path}: no feature of dtype 'video' or 'image' in 'features'; a camera is a "
+                               "feature of dtype 'video' (mp4 files) or 'image' (images in the rows)")
+        if len(errors) == len(reasons) and len({str(e).replace(repr(k), "") for e, k in
+                                                 zip(errors, camera_features(features))}) == 1:
+            raise errors[0]  # the episode list itself, not any camera: say it as it is
         raise DatasetError(f"{self.root}: no camera has frames to read; " + "; ".join(reasons))
 
     def _named_refs(self, key: str, camera: str) -> list[EpisodeRef]:
@@ -256,8 +278,8 @@ class EpisodeDataset:
         Raises:
             DatasetError: the camera lacks frames (the message names the camera and what it lacks).
         """
-        refs = self._reader.episode_refs(self.root, self.info, key)
-        lacking = _lacking_frames(refs, key)
+        refs = self._reader.episode_refs(self.root, self.info, key, self.deviations)
+        lacking = lacking_frames(refs, key)
         if lacking:
             missing = [ref.index for ref in refs if ref.video_path is not None and not ref.video_path.is_file()]
             episode = f" (it holds episode {missing[0]}'s frames)" if missing else ""
@@ -275,22 +297,41 @@ class EpisodeDataset:
         return episode_info(ref, column_vector(self._rows(ref), "next.success", ref.data_path, bool))
 
     def _rows(self, ref: EpisodeRef) -> pa.Table:
-        """The episode's rows of its data file (the last files read stay cached)."""
+        """The episode's rows of its data file (the last files read stay cached; a file is checked for
+        deviations once, the first time it is read, `gymnast.data.deviations.check_rows`)."""
         table = self._tables.pop(ref.data_path, None)
         if table is None:
             table = read_parquet(ref.data_path)
+            if ref.data_path not in self._checked:
+                check_rows(table, ref.data_path, self.fps, self.info["features"], self.deviations)
+                self._checked.add(ref.data_path)
         self._tables[ref.data_path] = table
         while len(self._tables) > _CACHED_DATA_FILES:
             self._tables.popitem(last=False)
         if ref.rows is not None:
-            index = column_vector(table, "index", ref.data_path, np.int64)
-            table = table.filter(pa.array((index >= ref.rows[0]) & (index < ref.rows[1])))
+            table = _episode_rows(table, ref)
         if table.num_rows != ref.length:
             raise DatasetError(
                 f"{ref.data_path}: episode {ref.index} should have {ref.length} rows "
                 f"(per {ref.meta_path}), found {table.num_rows}"
             )
         return table
+
+
+def _episode_rows(table: pa.Table, ref: EpisodeRef) -> pa.Table:
+    """An episode's rows of a shared (v3.0) data file: by the global ``index`` LeRobot writes, else
+    (a file without it) by ``episode_index``.
+
+    Raises:
+        DatasetError: the file has neither column.
+    """
+    if "index" in table.column_names:
+        index = column_vector(table, "index", ref.data_path, np.int64)
+        return table.filter(pa.array((index >= ref.rows[0]) & (index < ref.rows[1])))
+    if "episode_index" in table.column_names:
+        return table.filter(pa.array(column_vector(table, "episode_index", ref.data_path, np.int64) == ref.index))
+    raise DatasetError(f"{ref.data_path}: fields 'index' and 'episode_index' are both missing, so the rows of episode "
+                       f"{ref.index} cannot be told apart in a file shared by several episodes; add either column")
 
 
 def _check_cameras(camera: str | None, cameras: Sequence[str] | None) -> tuple[str, ...]:
@@ -301,35 +342,6 @@ def _check_cameras(camera: str | None, cameras: Sequence[str] | None) -> tuple[s
     if not names or len(set(names)) < len(names) or camera not in (None, names[0]):
         raise ValueError(f"cameras must be distinct names, starting with camera={camera!r} if given; got {list(names)}")
     return names
-
-
-def _decode_frames(ref: EpisodeRef, rows: pa.Table, key: str) -> np.ndarray:
-    """The (N, H, W, 3) frames of camera feature `key` in one episode, as stored."""
-    if ref.video_path is None:
-        return decode_images(rows, key, ref.data_path)
-    try:
-        # One frame of tolerance, as LeRobot's timestamp matching has; `match_frames_to_rows`
-        # pairs the frames with the rows and warns.
-        return decode_video(ref.video_path, *ref.video_span, may_lack=1)
-    except ValueError as e:
-        raise DatasetError(f"episode {ref.index}, field {key!r}: {e}") from e
-
-
-def _decode_frame_range(ref: EpisodeRef, rows: pa.Table, key: str, fps: float, first: int, stop: int) -> np.ndarray:
-    """The (stop - first, H, W, 3) frames of camera feature `key` of data rows [first, stop) of one
-    episode, as stored."""
-    if ref.video_path is None:
-        return decode_images(rows.slice(first, stop - first), key, ref.data_path)
-    start = ref.video_span[0]
-    # A video one frame short of the rows pairs its last frame with the last row too, as in `load`:
-    # a range to the end reads one frame more before it, which stands in for a missing last one.
-    to_end = stop == rows.num_rows
-    lead = 1 if to_end and first > 0 else 0
-    try:
-        frames = decode_video(ref.video_path, start + (first - lead) / fps, start + stop / fps, may_lack=int(to_end))
-    except ValueError as e:
-        raise DatasetError(f"episode {ref.index}, field {key!r}: {e}") from e
-    return match_frames_to_rows(frames, stop - first + lead, ref)[lead:]
 
 
 def _check_views(views: dict[str, np.ndarray], refs: dict[str, EpisodeRef]) -> None:
@@ -346,30 +358,3 @@ def _check_views(views: dict[str, np.ndarray], refs: dict[str, EpisodeRef]) -> N
                 f"{ref.video_path or ref.data_path}: camera {name!r} of episode {ref.index} has frames "
                 f"{frames.shape} (count, H, W, 3) but camera {primary!r} has {expected.shape}"
             )
-
-
-def _lacking_frames(refs: list[EpisodeRef], key: str) -> str | None:
-    """What keeps the episodes from having frames of camera `key` (a missing video file or image
-    column, named), or None when every episode has them."""
-    for path in dict.fromkeys(ref.video_path for ref in refs if ref.video_path is not None):
-        if not path.is_file():
-            return f"video file {path} does not exist"
-    if refs and refs[0].video_path is None and refs[0].data_path.is_file():
-        path = refs[0].data_path  # image features are columns, and every data file has the same ones
-        try:
-            names = pq.read_schema(path).names
-        except (pa.ArrowException, OSError) as e:
-            raise DatasetError(f"{path}: cannot read parquet file: {e}") from e
-        if key not in names:
-            return f"{path} has no field {key!r}"
-    return None
-
-
-def _image_shape(feature: dict, key: str, info_path: Path) -> tuple[int, int, int]:
-    """(H, W, 3) from a feature's shape, which some datasets give channels-first."""
-    shape, names = feature.get("shape"), feature.get("names") or []
-    if not (isinstance(shape, list) and len(shape) == 3 and all(isinstance(s, int) for s in shape)):
-        raise DatasetError(f"{info_path}: features[{key!r}].shape is {shape!r}, expected [H, W, 3]")
-    if names and names[0] in ("channel", "channels"):
-        shape = [shape[1], shape[2], shape[0]]
-    return tuple(shape)

@@ -10,8 +10,6 @@ size, A action dimensions, H/W image height/width, K episodes.
 from __future__ import annotations
 
 import dataclasses
-import io
-import logging
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,11 +18,8 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
-from PIL import Image
 
 from gymnast.data.schema import EXTERNAL, Episode, EpisodeColumns, EpisodeInfo
-
-logger = logging.getLogger(__name__)
 
 GYMNAST_PREFIX = "gymnast/"
 KEY_COLUMN = "gymnast/key"
@@ -44,7 +39,11 @@ ACTION_NAMES = ["dx", "dy", "dz", "gripper_effort"]
 
 
 class DatasetError(ValueError):
-    """A dataset file is unreadable or malformed; the message names the file and the field."""
+    """A dataset file is unreadable or malformed; the message names the file, the field and what would fix it."""
+
+
+class MissingFile(DatasetError, FileNotFoundError):
+    """A file the dataset's metadata points to is not there; the message names it."""
 
 
 @dataclass(frozen=True)
@@ -102,10 +101,10 @@ class EpisodeRef:
 def read_parquet(path: Path, columns: Sequence[str] | None = None) -> pa.Table:
     """Read a parquet file; a missing or unreadable file raises an error naming it."""
     if not path.is_file():
-        raise FileNotFoundError(f"parquet file not found: {path}")
+        raise MissingFile(f"parquet file not found: {path}")
     try:
         return pq.read_table(path, columns=columns)
-    except (pa.ArrowException, OSError) as e:
+    except (pa.ArrowException, OSError, ValueError) as e:
         raise DatasetError(f"{path}: cannot read parquet file: {e}") from e
 
 
@@ -117,13 +116,22 @@ def require_columns(table: pa.Table, names: Sequence[str], path: Path) -> None:
 
 
 def column_matrix(table: pa.Table, name: str, path: Path) -> np.ndarray:
-    """A list-of-numbers column as an (L, D) float32 array."""
+    """A vector column as an (L, D) float32 array: lists of numbers, nested lists of numbers
+    (flattened, row by row) or, for D = 1, plain numbers."""
     require_columns(table, [name], path)
     column = table.column(name).combine_chunks()
-    kind = column.type
-    if not _is_list(kind) or not compatible_type(kind.value_type, pa.float64()):
-        raise DatasetError(f"{path}: field {name!r} has type {kind}, expected a list of numbers")
-    values = column.flatten().to_numpy(zero_copy_only=False).astype(np.float32)
+    if not is_list(column.type):
+        if not (pa.types.is_floating(column.type) or pa.types.is_integer(column.type)):
+            raise DatasetError(f"{path}: field {name!r} has type {column.type}, expected a list of numbers")
+        return column.to_numpy(zero_copy_only=False).astype(np.float32).reshape(-1, 1)
+    values = column
+    while is_list(values.type):
+        if values.null_count:
+            raise DatasetError(f"{path}: field {name!r} has empty (null) rows")
+        values = values.flatten()
+    if not compatible_type(values.type, pa.float64()):
+        raise DatasetError(f"{path}: field {name!r} has type {column.type}, expected a list of numbers")
+    values = values.to_numpy(zero_copy_only=False).astype(np.float32)
     if len(column) == 0:
         return values.reshape(0, 0)
     if len(values) % len(column):
@@ -135,12 +143,14 @@ def column_vector(table: pa.Table, name: str, path: Path, dtype: type) -> np.nda
     """A scalar column as an (L,) array; also accepts LeRobot's one-element lists."""
     require_columns(table, [name], path)
     kind = table.schema.field(name).type
-    if _is_list(kind):
+    if is_list(kind):
         kind, values = kind.value_type, table.column(name).combine_chunks().flatten()
     else:
         values = table.column(name)
     if not compatible_type(kind, pa.bool_() if dtype is bool else pa.float64()):
         raise DatasetError(f"{path}: field {name!r} has type {kind}, expected {dtype.__name__}")
+    if values.null_count:
+        raise DatasetError(f"{path}: field {name!r} has {values.null_count} empty (null) values")
     array = values.to_numpy(zero_copy_only=False).astype(dtype)
     if len(array) != table.num_rows:
         raise DatasetError(f"{path}: field {name!r} has {len(array)} values for {table.num_rows} rows")
@@ -299,7 +309,7 @@ def check_info_columns(schema: pa.Schema, path: Path) -> None:
             raise DatasetError(f"{path}: field {name!r} has type {schema.field(name).type}, expected {kind}")
 
 
-def _is_list(kind: pa.DataType) -> bool:
+def is_list(kind: pa.DataType) -> bool:
     return pa.types.is_list(kind) or pa.types.is_fixed_size_list(kind) or pa.types.is_large_list(kind)
 
 
@@ -330,42 +340,6 @@ def episode_info(ref: EpisodeRef, successes: np.ndarray | None) -> EpisodeInfo:
             raise DatasetError(f"{ref.meta_path}: episode {ref.index}: {e}") from e
     success = bool(successes.any()) if successes is not None else True
     return EpisodeInfo(ref.task, ref.task, success, "expert", 0.0, ref.index, EXTERNAL)
-
-
-def decode_images(table: pa.Table, name: str, path: Path) -> np.ndarray:
-    """Frames stored in the rows (LeRobot ``image`` features: structs of encoded image bytes)."""
-    require_columns(table, [name], path)
-    column = table.column(name).combine_chunks()
-    if not pa.types.is_struct(column.type) or column.type.get_field_index("bytes") < 0:
-        raise DatasetError(f"{path}: field {name!r} has type {column.type}, expected struct<bytes, path>")
-    try:
-        images = [
-            np.asarray(Image.open(io.BytesIO(b)).convert("RGB")) for b in column.field("bytes").to_pylist()
-        ]
-    except (OSError, TypeError) as e:
-        raise DatasetError(f"{path}: field {name!r}: cannot decode an image: {e}") from e
-    return np.stack(images)
-
-
-def match_frames_to_rows(frames: np.ndarray, n_rows: int, ref: EpisodeRef) -> np.ndarray:
-    """The L frames of an episode's L data rows, allowing a video one frame short or long.
-
-    Some recorders write one video frame fewer (or more) than data rows. LeRobot matches each row
-    to the video frame nearest its timestamp within a tolerance of one frame period; with frames
-    and rows both at the dataset's fps, that pairs every row with its own frame and the odd one at
-    the end with its neighbour: the last frame is repeated, or the extra one dropped, with a
-    warning. A larger mismatch is an error naming the file.
-    """
-    source = ref.video_path or ref.data_path
-    if abs(len(frames) - n_rows) > 1 or not len(frames):
-        raise DatasetError(f"{source}: episode {ref.index} has {len(frames)} frames for {n_rows} data rows "
-                           "(more than the one frame of tolerance)")
-    if len(frames) != n_rows:
-        logger.warning("%s: episode %d has %d frames for %d data rows; matched by timestamp within one frame "
-                       "(the last row %s)", source, ref.index, len(frames), n_rows,
-                       "reuses the last frame" if len(frames) < n_rows else "drops the extra frame")
-        frames = np.concatenate([frames, frames[-1:]]) if len(frames) < n_rows else frames[:n_rows]
-    return frames
 
 
 def episode_columns(ref: EpisodeRef, rows: pa.Table, keys: FeatureKeys = FeatureKeys()) -> EpisodeColumns:
@@ -410,10 +384,9 @@ def assemble_episode(
     ref: EpisodeRef, rows: pa.Table, frames: np.ndarray, views: Mapping[str, np.ndarray] | None = None,
     keys: FeatureKeys = FeatureKeys(),
 ) -> Episode:
-    """Build an `Episode` from its L data rows (`episode_columns`) and L frames (and every
+    """Build an `Episode` from its L data rows (`episode_columns`) and their L frames (and every
     camera's, `views`, the primary's being `frames`: `Episode.views`)."""
     columns = episode_columns(ref, rows, keys)
-    frames = match_frames_to_rows(frames, rows.num_rows, ref)
     try:
         return Episode(frames, columns.states, columns.env_states, columns.actions, columns.rewards,
                        columns.successes, columns.info, dict(views or {}))

@@ -16,16 +16,19 @@ from typing import Any
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from gymnast.data.deviations import Deviations
 from gymnast.data.lerobot_format import (
     ACTION_NAMES,
     STATE_NAMES,
     DatasetError,
     EpisodeRef,
+    MissingFile,
     check_info_columns,
     compatible_type,
     has_info_columns,
     read_parquet,
 )
+from gymnast.data.lerobot_paths import PathTemplate
 
 CODEBASE_VERSION = "v3.0"
 INFO_PATH = "meta/info.json"
@@ -39,6 +42,7 @@ VIDEO_PATH = "videos/{video_key}/" + CHUNK_FILE + ".mp4"
 DEFAULT_CHUNKS_SIZE = 1000
 DEFAULT_DATA_FILE_SIZE_IN_MB = 100
 DEFAULT_VIDEO_FILE_SIZE_IN_MB = 500
+_NAMES = ("chunk_index", "file_index", "video_key")
 
 _INT, _FLOAT = pa.int64(), pa.float64()
 INDEX_COLUMNS = {
@@ -66,7 +70,7 @@ def load_info(root: Path) -> dict:
     """Read ``meta/info.json``; errors name the file."""
     path = root / INFO_PATH
     if not path.is_file():
-        raise FileNotFoundError(f"no LeRobot dataset at {root}: {path} not found")
+        raise MissingFile(f"no LeRobot dataset at {root}: {path} not found")
     try:
         info = json.loads(path.read_text())
     except (json.JSONDecodeError, UnicodeDecodeError) as e:
@@ -80,7 +84,8 @@ def info_field(info: Mapping, name: str, kind: type | tuple[type, ...], path: Pa
     """A required field of ``info.json`` with the expected Python type."""
     value = info.get(name)
     if not isinstance(value, kind) or isinstance(value, bool):  # bool is an int, never a count
-        raise DatasetError(f"{path}: field {name!r} is {value!r}, expected {kind}")
+        kinds = " or ".join(k.__name__ for k in (kind if isinstance(kind, tuple) else (kind,)))
+        raise DatasetError(f"{path}: field {name!r} is {value!r}, expected {'a number' if kinds == 'int or float' else kinds}")
     return value
 
 
@@ -89,6 +94,7 @@ def read_episode_rows(
     info: Mapping,
     required: Mapping[str, pa.DataType] = INDEX_COLUMNS,
     keep: Callable[[str], bool] = lambda name: not name.startswith("stats/"),
+    notes: Deviations | None = None,
 ) -> list[tuple[Path, dict]]:
     """The committed episodes' metadata rows, in episode order, each with the file it came from.
 
@@ -98,6 +104,9 @@ def read_episode_rows(
         required: columns every episode-metadata file must have, with their types.
         keep: which columns to read (per-episode stats are skipped by default: they are large and
             only the writer's recovery needs them).
+        notes: where a reader records deviations; given, episode rows for only the first of the
+            ``total_episodes`` (a dataset cut to some of its episodes) are read with a note
+            rather than refused (the writer, which restores commits, gives none).
     """
     total = info_field(info, "total_episodes", int, root / INFO_PATH)
     rows = []
@@ -108,43 +117,62 @@ def read_episode_rows(
         if has_info_columns(schema.names):
             check_info_columns(schema, path)
         table = read_parquet(path, [n for n in schema.names if keep(n) or n == "episode_index"])
+        for name in required:
+            if name in table.column_names and table.column(name).null_count:
+                raise DatasetError(f"{path}: field {name!r} has empty (null) values")
         rows += [(path, row) for row in table.to_pylist() if row["episode_index"] < total]
     rows.sort(key=lambda item: item[1]["episode_index"])
     found = [row["episode_index"] for _, row in rows]
-    if found != list(range(total)):
+    if notes is not None and found and found == list(range(len(found))) and len(found) < total:
+        notes.add(root / EPISODES_DIR, "total_episodes", f"info.json lists {total} episodes, the episode metadata "
+                  f"{len(found)}", f"those {len(found)} are read (a dataset cut to its first episodes)")
+    elif found != list(range(total)):
         missing = sorted(set(range(total)) - set(found))[:5]
         raise DatasetError(
             f"{root / EPISODES_DIR}: info.json lists {total} episodes but the episode metadata has "
-            f"{len(found)} rows below that index (missing e.g. {missing}, or duplicates)"
+            f"{len(found)} rows below that index (missing e.g. {missing}, or duplicates); set info.json's "
+            "'total_episodes' to the episodes there are"
         )
     return rows
 
 
-def episode_refs(root: Path, info: Mapping, image_key: str) -> list[EpisodeRef]:
+def episode_refs(root: Path, info: Mapping, image_key: str, notes: Deviations) -> list[EpisodeRef]:
     """Locate every committed episode of a v3.0 dataset; ``image_key`` is the camera feature read."""
     info_path = root / INFO_PATH
-    data_template = info_field(info, "data_path", str, info_path)
+    data_template = PathTemplate.read(info, "data_path", DATA_PATH, _NAMES, info_path, notes)
     is_video = info["features"][image_key].get("dtype") == "video"
-    video_template = info_field(info, "video_path", str, info_path) if is_video else None
+    video_template = PathTemplate.read(info, "video_path", VIDEO_PATH, _NAMES, info_path, notes) if is_video else None
     required = INDEX_COLUMNS | (video_columns(image_key) if is_video else {})
     prefix = f"videos/{image_key}/"
     refs = []
-    for path, row in read_episode_rows(root, info, required):
+    for path, row in read_episode_rows(root, info, required, notes=notes):
         index, tasks = row["episode_index"], row.get("tasks")
         if isinstance(tasks, str):
             tasks = [tasks]
-        if not (isinstance(tasks, list) and tasks and isinstance(tasks[0], str)):
+        if not (isinstance(tasks, list) and tasks and all(isinstance(t, str) for t in tasks)):
             raise DatasetError(
                 f"{path}: field 'tasks' of episode {index} is {tasks!r}, expected a list of strings"
             )
-        data = data_template.format(chunk_index=row["data/chunk_index"], file_index=row["data/file_index"])
+        if len(tasks) > 1:
+            notes.add(path, "tasks", f"episodes list several tasks (e.g. {tasks[:3]})", "the first is the episode's instruction")
+        names = {"chunk_index": row["data/chunk_index"], "file_index": row["data/file_index"], "video_key": image_key}
+        data = data_template.format(names)
         video, span = None, (0.0, 0.0)
         if video_template is not None:
-            chunk, file = row[prefix + "chunk_index"], row[prefix + "file_index"]
-            video = root / video_template.format(video_key=image_key, chunk_index=chunk, file_index=file)
+            names = {"chunk_index": row[prefix + "chunk_index"], "file_index": row[prefix + "file_index"],
+                     "video_key": image_key}
+            video = root / video_template.format(names)
             span = (row[prefix + "from_timestamp"], row[prefix + "to_timestamp"])
+            if not 0 <= span[0] < span[1]:
+                raise DatasetError(f"{path}: episode {index}'s {prefix}from_timestamp and to_timestamp are {span}, "
+                                   "expected 0 <= from < to (seconds inside its video file)")
         rows = (row["dataset_from_index"], row["dataset_to_index"])
         refs.append(EpisodeRef(index, row["length"], tasks[0], root / data, rows, video, span, row, path))
+    present = [ref for ref in refs if ref.data_path.is_file()]
+    if present and len(present) < len(refs) and present == refs[: len(present)]:
+        notes.add(root / EPISODES_DIR, "episodes", f"it lists {len(refs)} episodes; data files exist for the first "
+                  f"{len(present)}", f"those {len(present)} are read (a dataset cut to its first episodes)")
+        refs = present
     return refs
 
 
@@ -256,7 +284,7 @@ def read_tasks(path: Path) -> dict[str, int]:
 def _read_schema(path: Path) -> pa.Schema:
     try:
         return pq.read_schema(path)
-    except (pa.ArrowException, OSError) as e:
+    except (pa.ArrowException, OSError, ValueError) as e:
         raise DatasetError(f"{path}: cannot read parquet file: {e}") from e
 
 

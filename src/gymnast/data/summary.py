@@ -34,6 +34,7 @@ def describe_dataset(dataset: EpisodeDataset) -> str:
         lines.append(f"video: {json.dumps(recorded['codec'])}, decoded-vs-raw PSNR "
                      f"min {recorded['video_psnr_db']['min']:.1f} dB, mean {recorded['video_psnr_db']['mean']:.1f} dB")
     lines.append(format_success_table(success_table(dataset.episodes)))
+    lines += [f"assumed: {deviation.found}; {deviation.decision}" for deviation in dataset.deviations]
     return "\n".join(lines)
 
 

@@ -160,32 +160,82 @@ def decode_video(path: str | Path, start: float = 0.0, end: float | None = None,
         ValueError: the file cannot be decoded, or holds fewer frames than the range asks for
             (a truncated file); the message names the file.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"video file not found: {path}")
-    try:
-        with av.open(str(path)) as container:
-            if not container.streams.video:
-                raise ValueError(f"{path}: no video stream")
-            stream = container.streams.video[0]
-            rate = stream.average_rate or stream.guessed_rate
+    with VideoFile(path) as video:
+        return video.decode(start, end, may_lack)
+
+
+class VideoFile:
+    """An mp4 opened once to decode several ranges of its first video stream (`decode_video` for each).
+
+        with VideoFile(path) as video:
+            if video.frames == 61: first_two = video.decode(0.0, 2 / video.rate)
+            frames = video.decode(10 / video.rate, 20 / video.rate)
+
+    Attributes:
+        path: the video file.
+        rate: frames per second of the stream.
+        frames: the number of frames the stream declares (0 where it declares none).
+
+    Raises:
+        FileNotFoundError: the file does not exist.
+        ValueError: it cannot be opened or has no video stream with a frame rate (the message names it).
+    """
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        if not self.path.is_file():
+            raise FileNotFoundError(f"video file not found: {self.path}")
+        try:
+            self._container = av.open(str(self.path))
+        except av.error.FFmpegError as e:
+            raise ValueError(f"{self.path}: cannot decode video: {e}") from e
+        try:
+            if not self._container.streams.video:
+                raise ValueError(f"{self.path}: no video stream")
+            self._stream = self._container.streams.video[0]
+            rate = self._stream.average_rate or self._stream.guessed_rate
             if not rate:
-                raise ValueError(f"{path}: the video stream has no frame rate")
-            first = round(Fraction(start) * rate)
-            stop = None if end is None else round(Fraction(end) * rate)
-            frames = _decode_range(container, stream, rate, first, stop, path)
-            expected = stream.frames - first if stop is None and stream.frames else None
-    except av.error.FFmpegError as e:
-        raise ValueError(f"{path}: cannot decode video: {e}") from e
-    wanted = expected if stop is None else stop - first
-    if wanted is not None and not wanted - may_lack <= len(frames) <= wanted:
-        raise ValueError(
-            f"{path}: expected {wanted} frames from t={start:.4f}s to "
-            f"{'the end' if end is None else f't={end:.4f}s'}, decoded {len(frames)} (truncated file?)"
-        )
-    if not frames:
-        raise ValueError(f"{path}: no frames in [{start}, {end})")
-    return np.stack(frames)
+                raise ValueError(f"{self.path}: the video stream has no frame rate")
+        except BaseException:
+            self._container.close()
+            raise
+        self.rate: Fraction = rate
+        self.frames: int = self._stream.frames
+        self._decoded = False
+
+    def decode(self, start: float = 0.0, end: float | None = None, may_lack: int = 0) -> np.ndarray:
+        """The (N, H, W, 3) uint8 RGB frames whose timestamps lie in ``[start, end)``, as `decode_video`.
+
+        Raises:
+            ValueError: as `decode_video`.
+        """
+        first = round(Fraction(start) * self.rate)
+        stop = None if end is None else round(Fraction(end) * self.rate)
+        try:
+            if self._decoded and first == 0:
+                self._container.seek(0, stream=self._stream)  # back to the start after an earlier range
+            self._decoded = True
+            frames = _decode_range(self._container, self._stream, self.rate, first, stop, self.path)
+        except av.error.FFmpegError as e:
+            raise ValueError(f"{self.path}: cannot decode video: {e}") from e
+        wanted = (self.frames - first if self.frames else None) if stop is None else stop - first
+        if wanted is not None and not wanted - may_lack <= len(frames) <= wanted:
+            raise ValueError(
+                f"{self.path}: expected {wanted} frames from t={start:.4f}s to "
+                f"{'the end' if end is None else f't={end:.4f}s'}, decoded {len(frames)} (truncated file?)"
+            )
+        if not frames:
+            raise ValueError(f"{self.path}: no frames in [{start}, {end})")
+        return np.stack(frames)
+
+    def close(self) -> None:
+        self._container.close()
+
+    def __enter__(self) -> VideoFile:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
 
 
 def _decode_range(container, stream, rate: Fraction, first: int, stop: int | None, path: Path) -> list:
