@@ -51,7 +51,9 @@ def test_success_only_where_every_member_reads_it_and_nan_where_one_could_not_sc
                              ["judge:a", "state:b"])
     scores = reward.score(torch.zeros(5, 2, 4, 4, 3, dtype=torch.uint8), ["t"] * 5, RewardContext())
     assert scores[:4].tolist() == [1.0, 0.0, 0.0, 1.0] and scores[4].isnan()
-    assert reward.metrics()["reward/consensus_agreement"] == 0.75  # they differ on the second of four scored
+    reward.score(torch.zeros(5, 2, 4, 4, 3, dtype=torch.uint8), ["t"] * 5, RewardContext())  # a step's next group
+    assert reward.metrics()["reward/consensus_agreement"] == 0.75  # they differ on the second of four, each time
+    assert reward.metrics() == {}  # counted afresh after each report
     assert reward.binary and reward.needs.start_state and reward.needs.video
 
 

@@ -46,15 +46,15 @@ class ConsensusReward:
         self.needs = RewardNeeds(**{field: any(getattr(m.needs, field) for m in members)
                                     for field in ("world_model", "simulator_success", "reference_actions", "start_state",
                                                   "video")})
-        self._agreement: float | None = None
+        self._agreed, self._scored = 0, 0  # since the last `metrics()`: a step's groups are scored one at a time
 
     def score(self, frames: torch.Tensor, instructions: Sequence[str], context: RewardContext) -> torch.Tensor:
         """(B,) 1.0 where every member reads success, 0.0 where one does not, NaN where one could not score."""
         verdicts = torch.stack([read_verdict(member, frames, instructions, context) for member in self.members])  # (M, B)
         scored = torch.isfinite(verdicts).all(dim=0)  # (B,)
-        if scored.any():
-            said = verdicts[:, scored] > 0.5
-            self._agreement = (said.all(dim=0) | ~said.any(dim=0)).float().mean().item()
+        said = verdicts[:, scored] > 0.5  # (M, B')
+        self._agreed += int((said.all(dim=0) | ~said.any(dim=0)).sum())
+        self._scored += int(scored.sum())
         agreed = verdicts.amin(dim=0)
         return torch.where(scored, agreed, torch.full_like(agreed, float("nan")))
 
@@ -66,9 +66,10 @@ class ConsensusReward:
         return self
 
     def metrics(self) -> dict[str, float]:
-        """``reward/consensus_agreement``: the share of the last scored rollouts whose members agreed;
-        and every member's own metrics."""
-        values = {} if self._agreement is None else {"reward/consensus_agreement": self._agreement}
+        """``reward/consensus_agreement``: the share of the rollouts scored since the last call whose
+        members agreed; and every member's own metrics."""
+        values = {"reward/consensus_agreement": self._agreed / self._scored} if self._scored else {}
+        self._agreed, self._scored = 0, 0
         for member in self.members:
             values |= member.metrics()
         return values
