@@ -99,3 +99,29 @@ def test_what_the_reward_sees_is_saved_with_the_run_and_old_runs_saw_their_own()
     saved = run.to_json()
     del saved["reward_sees"]
     assert RLRun.from_json(saved).reward_sees is None
+
+
+def test_imagined_rollouts_are_re_imagined_only_in_another_world_model(imagined_and_real):
+    envs, imagined, _ = imagined_and_real
+    with pytest.raises(ValueError, match="leave --reward-sees out"):
+        RewardSight(envs, IMAGINED, sees=IMAGINED)
+    chunk = imagined.actions.shape[1] // imagined.observations.shape[1]  # K actions per policy call
+    other = EnvFactory(IMAGINED, chunk, CONFIG, "mild", workers=1,
+                       world_model=load_world_model(WORLD_MODEL))  # a second copy stands in for another model
+    try:
+        seen, _ = RewardSight(envs, IMAGINED, sees=IMAGINED, replays=other).seen(imagined)
+        assert seen.success is None and seen.frames.shape == imagined.frames.shape
+        # the same model re-imagining the same actions from the same start gives the same video back
+        assert (seen.frames.float() - imagined.frames.float()).abs().mean() < 1
+    finally:
+        other.close()
+
+
+def test_a_reward_world_model_is_refused_without_imagined_replays(rl_dataset, tmp_path, capsys):
+    from gymnast.cli import main
+
+    with pytest.raises(SystemExit):
+        main(["rl", "--policy", str(POLICY), "--env", "imagined", "--wm", str(WORLD_MODEL), "--reward", f"judge:{JUDGE}",
+              "--reward-wm", str(WORLD_MODEL), "--out", str(tmp_path / "run"), "--data", str(rl_dataset),
+              "--preset", "debug"])
+    assert "--reward-sees imagined" in capsys.readouterr().err

@@ -30,6 +30,7 @@ def rl(
     data: Path | None = None,
     robot_state: Path | None = None,
     reward_sees: Literal["own", "real", "imagined", "sim"] | None = None,
+    reward_wm: Path | None = None,
     preset: GPUPreset = "full",
     resume: bool = False,
     config: Annotated[RLFlags, tyro.conf.arg(name="")] = RLFlags(),
@@ -52,7 +53,10 @@ def rl(
         reward_sees: what the reward reads: own (the rollouts' own video; the default), or the same
             actions from the same starts replayed in another world: real (the real world's verdict
             on imagined actions, counted as real interactions) or imagined (the world model's
-            re-imagining of real actions, --wm); one rung of `gymnast ladder`.
+            re-imagining of real actions, --wm, or of imagined ones in --reward-wm); one rung of
+            `gymnast ladder`.
+        reward_wm: with --reward-sees imagined, another world model the reward's replays are imagined
+            in: one that did not show the policy the frames it acted on (a run, or your own forms as --wm).
         preset: debug (seconds), demo (minutes), full or gpu (400 steps of 256 rollouts; docs/gpu.md).
         resume: continue the run in OUT from its last checkpoint, with the settings, policy, env,
             reward, world model and data saved there.
@@ -71,7 +75,8 @@ def rl(
         "rl", out, resume, RL_PRESETS[preset], overrides=dataclasses.asdict(config), saved=saved,
         inputs={"policy": policy, "env": None if env is None else env_kind(env),
                 "reward": None if reward is None else RewardSpec.parse(reward), "wm": wm, "data": data,
-                "robot_state": robot_state, "reward_sees": None if reward_sees is None else reward_sight(reward_sees)},
+                "robot_state": robot_state, "reward_sees": None if reward_sees is None else reward_sight(reward_sees),
+                "reward_wm": reward_wm},
         required=("policy", "env", "reward"))
     run_spec = RLRun(**{name: str(value) if isinstance(value, Path) else value for name, value in inputs.items()})
     if not resume and config.tasks is None:  # the preset's tasks may not be in the data

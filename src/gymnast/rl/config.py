@@ -250,11 +250,15 @@ class RLRun:
     from the same starts are replayed there (`gymnast.rl.sight.RewardSight`): ``real`` gives a
     simulator's verdict on imagined actions, ``imagined`` the world model's re-imagining of real ones."""
 
+    reward_wm: str | None = None
+    """With ``reward_sees`` imagined: the world model the reward's replays are imagined in, when not
+    ``wm`` (a model that did not show the policy the frames it acted on)."""
+
     def to_json(self) -> dict[str, Any]:
         """The run as RUN/config.json keeps it: the env and the reward as the command line names them."""
         return {"policy": self.policy, "env": self.env.name, "reward": str(self.reward), "wm": self.wm,
                 "data": self.data, "robot_state": self.robot_state,
-                "reward_sees": self.reward_sees.name if self.reward_sees else OWN_SIGHT}
+                "reward_sees": self.reward_sees.name if self.reward_sees else OWN_SIGHT, "reward_wm": self.reward_wm}
 
     @classmethod
     def from_json(cls, saved: dict[str, Any]) -> RLRun:

@@ -44,15 +44,21 @@ class RewardSight:
         truth_groups: groups of each step's first round whose actions are replayed in the real
             world to measure the reward against the real outcome, where it is not known anyway
             (0: none).
+        replays: where imagined replays run when not in `envs`' world model: another world model,
+            which did not show the policy the frames it acted on, so that a policy practising in
+            imagination is judged on a re-imagining whose errors it could not have chosen its
+            actions by (None: `envs`').
     """
 
     envs: EnvFactory
     env: EnvKind
     sees: EnvKind | None = None
     truth_groups: int = 0
+    replays: EnvFactory | None = None
 
     def __post_init__(self) -> None:
-        if self.sees is not None and self.sees.name == self.env.name:
+        another_model = self.replays is not None and self.sees is not None and self.sees.imagined
+        if self.sees is not None and self.sees.name == self.env.name and not another_model:
             raise ValueError(f"the reward sees the rollouts of --env {self.env} themselves: leave --reward-sees out "
                              f"instead of replaying them in {self.sees}")
         if self.sees is not None and self.sees.imagined and self.envs.world_model is None:
@@ -71,7 +77,8 @@ class RewardSight:
         """
         if self.sees is None:
             return rollouts, 0
-        replay = replay_actions(self.envs.get(self.sees, len(rollouts.starts)), rollouts.starts, rollouts.actions,
+        where = self.replays if self.replays is not None and self.sees.imagined else self.envs
+        replay = replay_actions(where.get(self.sees, len(rollouts.starts)), rollouts.starts, rollouts.actions,
                                 rollouts.lengths)
         replayed = dataclasses.replace(rollouts, rendered=replay.frames, hold=1, success=replay.success,
                                        env_rewards=replay.rewards, disagreement=None, env_states=None)

@@ -37,7 +37,7 @@ from tqdm import tqdm
 
 from gymnast.config import EnvConfig
 from gymnast.envs.factory import EnvFactory
-from gymnast.envs.kinds import REAL, EnvKind
+from gymnast.envs.kinds import IMAGINED, REAL, EnvKind
 from gymnast.envs.metaworld import CONTROL_FPS, STATE_DIM
 from gymnast.data.keyframes import KeyframeConfig
 from gymnast.envs.starts import Start, StartSampler, evaluation_starts, own_instruction, scene_starts
@@ -167,7 +167,16 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
         env, policy.chunk_size, dataclasses.replace(env_config, horizon=config.evaluation_horizon), config.gap,
         config.workers, world_model, stop_above=config.disagreement_stop or None, runner=config.runner, batch=batch,
         robot_state=robot_state)
-    sight = RewardSight(envs, env, run_spec.reward_sees, config.truth_groups)
+    replays = None  # the reward's own world model: its replays are not the loop the policy acted in
+    if run_spec.reward_wm is not None:
+        if run_spec.reward_sees is None or not run_spec.reward_sees.imagined:
+            raise ValueError("--reward-wm is the world model the reward's replays are imagined in: give it with "
+                             "--reward-sees imagined")
+        reward_world_model = placed(load_world_model(run_spec.reward_wm), device)
+        check_policy_views(cameras, reward_world_model, run_spec.policy, run_spec.reward_wm)
+        replays = EnvFactory(IMAGINED, policy.chunk_size, env_config, config.gap, config.workers, reward_world_model,
+                             runner=config.runner, batch=batch)
+    sight = RewardSight(envs, env, run_spec.reward_sees, config.truth_groups, replays)
     resolved = {"rl": dataclasses.asdict(config), "run": run_spec.to_json(), "model": policy_spec(policy),
                 "data": str(data) if data else None, "frames": frames}
 
@@ -312,6 +321,8 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
     finally:  # worker processes and event files are released even when a step fails
         envs.close()
         eval_envs.close()
+        if replays is not None:
+            replays.close()
         metrics.close()
     return write_summary(out, run_spec, config, state)
 
