@@ -64,7 +64,7 @@ def test_the_ladder_swaps_one_part_per_rung_and_holds_each_reward_to_the_real_ou
           "--out", str(out / "fixed")])
     main(_ladder(out, "r0_real", models=False))
     fixed = json.loads((out / "summary.json").read_text())["fixed"]
-    assert fixed["finished"] and fixed["reward"] == f"all:judge:{JUDGE}+sim" and "the fix" in fixed["what"]
+    assert fixed["finished"] and fixed["reward"] == f"all:judge:{JUDGE}+sim" and "a fix" in fixed["what"]
     assert "| fixed |" in (out / "ladder.md").read_text()
 
 

@@ -62,10 +62,10 @@ def _evaluation(line: dict, prefix: str) -> dict:
 
 def ladder_summary(out: Path, config: RLConfig) -> dict:
     """The ladder's summary.json: ``sft`` (every rung's step-0 evaluation), one entry per rung of
-    OUT that has evaluated, in the ladder's order, and ``fixed``: the practice arm after the fix,
-    a `gymnast rl` run with the ladder's recipe in OUT/fixed (`fixed_arm`), where there is one."""
+    OUT that has evaluated, in the ladder's order, then the practice arms after a fix: `gymnast rl`
+    runs with the ladder's recipe in OUT/fixed and OUT/fixed_<lever> (`fixed_arms`), where there are."""
     summary: dict = {}
-    for rung in (*RUNGS.values(), *filter(None, [fixed_arm(out)])):
+    for rung in (*RUNGS.values(), *fixed_arms(out)):
         record = rung_record(rung, rung_dir(out, rung), config.steps)
         if record is None:
             continue
@@ -79,15 +79,19 @@ def ladder_summary(out: Path, config: RLConfig) -> dict:
     return summary
 
 
-def fixed_arm(out: Path) -> Rung | None:
-    """OUT/fixed as a rung: the RL run whose settings OUT/fixed/config.json holds (any env, reward
-    and lever a user fixes the broken rung with), or None where there is none."""
-    if not (rung_dir(out, FIXED) / "config.json").is_file():
-        return None
-    run = RLRun.from_json(saved_settings(rung_dir(out, FIXED), "run"))
-    sees = f", the reward seeing {run.reward_sees}" if run.reward_sees else ""
-    return Rung(FIXED.name, run.env, str(run.reward), run.reward_sees,
-                f"the fix: --env {run.env} --reward {run.reward}{sees}")
+def fixed_arms(out: Path) -> list[Rung]:
+    """OUT/fixed and every OUT/fixed_<lever> as rungs: the RL runs whose settings their config.json
+    holds (any env, reward and lever a user mends the broken rung with), by name."""
+    arms = []
+    for where in sorted(out.glob(f"{FIXED.name}*")):
+        if not (where / "config.json").is_file() or (where.name != FIXED.name and not where.name.startswith("fixed_")):
+            continue
+        run = RLRun.from_json(saved_settings(where, "run"))
+        sees = f", the reward seeing {run.reward_sees}" if run.reward_sees else ""
+        other = f" in {run.reward_wm}" if run.reward_wm else ""
+        arms.append(Rung(where.name, run.env, str(run.reward), run.reward_sees,
+                         f"a fix: --env {run.env} --reward {run.reward}{sees}{other}"))
+    return arms
 
 
 def mean_agreement(record: dict, key: str = "agreement") -> float | None:

@@ -49,9 +49,9 @@ RUNGS: dict[str, Rung] = {rung.name: rung for rung in (
 
 
 FIXED = Rung("fixed", IMAGINED, "", None, "the practice arm after the fix")
-"""Where a ladder keeps the practice arm after the fix: OUT/fixed, a `gymnast rl` run with the
-ladder's recipe and whatever lever mends the rung where learning died (its env and reward are read
-from its own settings)."""
+"""Where a ladder keeps the practice arm after the fix: OUT/fixed (and OUT/fixed_<lever> for other
+levers tried), a `gymnast rl` run with the ladder's recipe and whatever lever mends the rung where
+learning died (its env and reward are read from its own settings)."""
 
 
 def rung_dir(out: Path, rung: Rung) -> Path:
