@@ -2,6 +2,7 @@
 rung, the real outcome held against each rung's reward at every step, reruns that continue."""
 
 import json
+import os
 from pathlib import Path
 
 import pytest
@@ -93,7 +94,7 @@ def test_a_rung_claimed_by_a_live_process_is_left_to_it_and_a_dead_ones_claim_is
 
     where = tmp_path / "r0_real"
     with claimed(where) as mine:
-        assert mine and (where / CLAIM).read_text().split()[1] == str(__import__("os").getpid())
+        assert mine and (where / CLAIM).read_text().split()[1] == str(os.getpid())
         with claimed(where) as again:  # the same rung asked for twice: the second waits its turn elsewhere
             assert not again
     assert not (where / CLAIM).exists()  # released
@@ -107,3 +108,10 @@ def test_a_rung_claimed_by_a_live_process_is_left_to_it_and_a_dead_ones_claim_is
         live.wait()
     with claimed(where) as mine:  # its process has ended: the claim is stale
         assert mine
+    (where / CLAIM).write_text("another-machine 1")  # another machine's claim on a rung that went quiet
+    with claimed(where) as mine:
+        assert not mine  # just written: it may be at work
+    os.utime(where / CLAIM, (0, 0))
+    with claimed(where) as mine:
+        assert mine
+

@@ -32,6 +32,7 @@ import dataclasses
 import logging
 import os
 import socket
+import time
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -139,7 +140,8 @@ def claimed(where: Path) -> Iterator[bool]:
     """Claims a rung's directory for this process while the block runs: yields False where another
     live process holds it, so that several ladder processes (on one machine, or on several sharing
     the directory) can run the rungs of one ladder side by side, each taking the next free rung.
-    A claim left by a process of this host that no longer runs is taken over."""
+    A claim left by a process of this host that no longer runs is taken over, and one of another
+    machine whose rung has written nothing for `CLAIM_QUIET_S`."""
     where.mkdir(parents=True, exist_ok=True)
     path, me = where / CLAIM, f"{socket.gethostname()} {os.getpid()}"
     for _ in range(2):
@@ -161,14 +163,21 @@ def claimed(where: Path) -> Iterator[bool]:
     yield False
 
 
+CLAIM_QUIET_S = 3600.0
+"""A claim of another machine counts as abandoned when its rung has written nothing for this long
+(a step writes its metrics within minutes)."""
+
+
 def _stale(path: Path) -> bool:
-    """Whether the claim at `path` was left by a process of this host that has ended."""
+    """Whether the claim at `path` was left by a process of this host that has ended, or by another
+    machine's whose rung has been quiet for `CLAIM_QUIET_S` (its process cannot be checked from here)."""
     try:
         host, pid = path.read_text().split()
     except (OSError, ValueError):
         return True  # unreadable or half-written: nobody holds it
     if host != socket.gethostname():
-        return False  # another machine's: it cannot be checked from here
+        written = max(p.stat().st_mtime for p in (path, path.parent / "metrics.jsonl") if p.exists())
+        return time.time() - written > CLAIM_QUIET_S
     try:
         os.kill(int(pid), 0)
     except ProcessLookupError:
