@@ -410,7 +410,8 @@ def rl_step(env: VectorEnv, policy, reward: Reward, draw_starts: Callable[[int, 
                 began = time.perf_counter()
                 truth, spent = sight.truth(rollouts, seen, size)
                 values["reward/truth_interactions"] += spent
-                values |= reward_truth_metrics(reward_verdicts(reward, seen, scores, size), truth, scores, size)
+                if torch.isfinite(truth).any():  # a reward's verdict is read only where there is a truth to hold it to
+                    values |= reward_truth_metrics(reward_verdicts(reward, seen, scores, size), truth, scores, size)
                 values["time/truth_s"] = time.perf_counter() - began
             if rollouts.disagreement is not None:
                 values |= disagreement_metrics(rollouts, config)
