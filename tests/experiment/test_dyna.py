@@ -184,3 +184,22 @@ def test_dyna_practises_on_exactly_one_reward_model(models, state_ensemble, tmp_
         DynaInputs(POLICY, models["wm"]).check()
     with pytest.raises(FileNotFoundError, match="--state .*no run there"):
         DynaInputs(POLICY, models["wm"], state=tmp_path).check()
+
+
+def test_a_round_can_record_the_policys_imagined_plans_executed_for_real(models, tmp_path):
+    from gymnast.data.schema import policy_behaviour
+    from gymnast.eval.record import policy_tag
+    from gymnast.experiment.dyna import record_rollouts
+
+    config = dataclasses.replace(DYNA_PRESETS["debug"], record="plans")
+    plans = tmp_path / "plans"
+    counts = record_rollouts(1, POLICY, None, config, plans, progress=False, planned_in=models["wm"])
+    dataset = EpisodeDataset(plans)
+    assert counts["episodes"] == len(dataset) == config.rollouts_per_task
+    assert counts["real_interactions"] == int(sum(dataset.lengths)) > 0
+    # Named by the world model they were planned in: neither the policy's real rollouts nor another model's plans.
+    planned = policy_behaviour(policy_tag(POLICY, config.rollout_temperature, models["wm"]))
+    assert {info.behaviour for info in dataset.episodes} == {planned}
+    assert planned != policy_behaviour(policy_tag(POLICY, config.rollout_temperature))
+    with pytest.raises(ValueError, match="record must be rollouts or plans"):
+        dataclasses.replace(DYNA_PRESETS["debug"], record="dreams")

@@ -10,7 +10,7 @@ import pytest
 from gymnast.cli import main
 from gymnast.experiment.ladder import LadderInputs, parse_rungs
 from gymnast.experiment.rungs import RUNGS
-from gymnast.experiment.ladder_report import write_ladder_index
+from gymnast.experiment.ladder_report import fixed_arms, write_ladder_index
 from gymnast.utils.metrics import read_metrics
 
 RESULTS = Path(__file__).resolve().parents[2] / "results"
@@ -67,6 +67,14 @@ def test_the_ladder_swaps_one_part_per_rung_and_holds_each_reward_to_the_real_ou
     fixed = json.loads((out / "summary.json").read_text())["fixed"]
     assert fixed["finished"] and fixed["reward"] == f"all:judge:{JUDGE}+sim" and "a fix" in fixed["what"]
     assert "| fixed |" in (out / "ladder.md").read_text()
+    # A fix that imagines in a world model of its own says which.
+    other = out / "fixed_refit"
+    other.mkdir()
+    saved = json.loads((out / "fixed" / "config.json").read_text())
+    saved["run"]["wm"] = "elsewhere/world_model"
+    (other / "config.json").write_text(json.dumps(saved))
+    arms = {arm.name: arm.what for arm in fixed_arms(out)}
+    assert "imagined in elsewhere/world_model" in arms["fixed_refit"] and "imagined in" not in arms["fixed"]
 
 
 def test_a_rung_whose_model_is_missing_is_refused_before_any_rung_trains(tmp_path, capsys):

@@ -158,6 +158,7 @@ def dyna(
     resume: bool = False,
     rounds: int | None = None,
     rollouts_per_task: int | None = None,
+    record: Literal["rollouts", "plans"] | None = None,
     steps: int | None = None,
     tasks: str | None = None,
     keyframes: str | None = None,
@@ -194,6 +195,9 @@ def dyna(
         resume: continue the run in OUT with the settings and inputs saved there.
         rounds: rounds of the loop (default: the preset's).
         rollouts_per_task: real episodes recorded per task and round (default: the preset's).
+        record: what those episodes are: rollouts (the policy acting in the real world) or plans (its
+            plans made closed loop in the round's world model, executed for real: the actions the
+            model imagines succeeding where they fail) (default: the preset's, rollouts).
         steps: RL steps in imagination per round (default: the preset's).
         tasks: tasks trained and evaluated on (default: the preset's).
         keyframes: where in the start episodes practice begins (see `gymnast rl --help`; default: the preset's).
@@ -220,7 +224,7 @@ def dyna(
     config, inputs = resolve(
         "dyna", out, resume, DYNA_PRESETS[preset],
         inputs={"policy": policy, "wm": wm, "judge": judge, "state": state, "data": data},
-        overrides={"rounds": rounds, "rollouts_per_task": rollouts_per_task, "rl.steps": steps, "rl.tasks": tasks,
+        overrides={"rounds": rounds, "rollouts_per_task": rollouts_per_task, "record": record, "rl.steps": steps, "rl.tasks": tasks,
                    "rl.keyframes": keyframes, "rl.horizon": horizon, "rl.eval_horizon": eval_horizon,
                    "practice_from_rollouts": practice_from_rollouts,
                    "state_steps": state_steps, "wm_steps": wm_steps, "workers": workers, "runner": runner,

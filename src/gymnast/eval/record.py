@@ -157,11 +157,12 @@ def record_policy(
 
 def record_real_rollouts(run: str | Path, tasks: str, per_task: int, first_seed: int, temperature: float, horizon: int,
                          workers: int, runner: str, out: Path, progress: bool = True,
-                         terminate_on_success: bool = True) -> dict:
+                         terminate_on_success: bool = True, imagine_with: str | Path | None = None) -> dict:
     """Records `per_task` real rollouts per task of `run`'s policy (sampled at `temperature`, data
     seeds from `first_seed`, no action noise) into `out`, and counts what they cost. Episodes end
     at success, or with `terminate_on_success` False play on to the horizon (a judge's data: the
-    frames after a success show it too).
+    frames after a success show it too). With `imagine_with` a world model, each episode is the
+    policy's plan made closed loop in it and executed for real (`record_policy`).
 
     Returns:
         ``episodes``, ``successes`` and ``real_interactions``: the actions taken, read back from
@@ -172,7 +173,7 @@ def record_real_rollouts(run: str | Path, tasks: str, per_task: int, first_seed:
     env = policy_env_config(EnvConfig(horizon=horizon, terminate_on_success=terminate_on_success), str(Path(run).resolve()))
     config = CollectConfig(tasks=tasks, episodes_per_task=per_task, noise=(0.0,), first_seed=first_seed,
                            workers=workers, runner=runner, env=env)
-    record_policy(run, config, out, temperature=temperature, progress=progress)
+    record_policy(run, config, out, temperature=temperature, progress=progress, imagine_with=imagine_with)
     dataset = EpisodeDataset(out)
     return {"episodes": len(dataset), "successes": sum(info.success for info in dataset.episodes),
             "real_interactions": int(sum(dataset.lengths))}

@@ -8,7 +8,11 @@ Each round k (1..rounds), from the policy, world model and reward model that rou
    `practice_from_rollouts`, from the previous round's recorded rollouts: the policy's own newest
    real states, where WoVR restarts imagination.
 2. Real rollouts: `rollouts_per_task` episodes per task of the new policy in the real world
-   (`gymnast.eval.record.record_policy`), from data seeds only. These are the only real
+   (`gymnast.eval.record.record_policy`), from data seeds only; with `record` ``plans``, the
+   policy's imagined plans instead: each episode planned closed loop in the round's world model
+   and executed in the real world, so that the refit sees what the actions the policy chose on the
+   model's own frames really do (where r4 of `gymnast ladder` found the model wrong, while it is
+   right about the actions the policy takes in the real world). These are the only real
    interactions Dyna spends on training, and they are counted from the recorded dataset. The
    last round takes none (and skips step 3): nothing after it would learn from them.
 3. Fine-tuning: the world model and the reward model each continue from their last weights on their
@@ -65,6 +69,11 @@ class DynaConfig:
     """Reward of the real-world arm (sim: Meta-World's success; sim-dense: its shaped reward)."""
     rollouts_per_task: int = 8
     """Real episodes of the current policy recorded per task and round (the training interactions)."""
+    record: str = "rollouts"
+    """What each round records for the refit: ``rollouts``, the policy acting in the real world; or
+    ``plans``, the policy's plans made closed loop in the round's world model and executed in the
+    real world (`gymnast collect --imagine-with`): the actions chosen on the model's own frames,
+    which it imagines succeeding where they fail."""
     rollout_temperature: float = 1.0
     """Temperature of the recorded rollouts' action tokens: sampled, as in RL, so they hold the
     failures the judge should learn to refuse as well as successes."""
@@ -99,6 +108,8 @@ class DynaConfig:
             raise ValueError(f"DynaConfig.wm_steps must be at least 0, got {self.wm_steps}")
         if self.rollout_temperature < 0:
             raise ValueError(f"DynaConfig.rollout_temperature must be >= 0, got {self.rollout_temperature}")
+        if self.record not in ("rollouts", "plans"):
+            raise ValueError(f"DynaConfig.record must be rollouts or plans, got {self.record!r}")
         if self.real_reward not in ("sim", "sim-dense"):
             raise ValueError(f"DynaConfig.real_reward must be sim or sim-dense, got {self.real_reward!r}")
         parse_runner(self.runner)
@@ -255,8 +266,9 @@ def run_round(k: int, config: DynaConfig, inputs: DynaInputs, policy: Path, wm: 
     row = {"round": k, "rl_steps": k * config.rl.steps, "rl": trained}
     if k < config.rounds:  # the last round's rollouts could no longer change the policy: none are taken
         judge = reward if kind == "judge" else None
-        row["rollouts"] = stages.run("rollouts", lambda: record_rollouts(k, rl_run, judge, config, rollouts, progress),
-                                     rollouts)
+        planned_in = wm if config.record == "plans" else None
+        row["rollouts"] = stages.run("rollouts", lambda: record_rollouts(k, rl_run, judge, config, rollouts, progress,
+                                                                         planned_in), rollouts)
         recorded.append(rollouts)
         if config.wm_steps and can_be_refit(inputs.wm):  # else every round imagines in the given world model
             stages.run("world_model", lambda: fine_tune_world_model(inputs.wm, wm, recorded, config.wm_steps, new_wm,
@@ -277,9 +289,11 @@ def run_round(k: int, config: DynaConfig, inputs: DynaInputs, policy: Path, wm: 
     return rl_run, wm, reward, {**evaluated, **row}
 
 
-def record_rollouts(k: int, policy: Path, judge: Path | None, config: DynaConfig, out: Path, progress: bool) -> dict:
-    """Records round `k`'s real rollouts; returns their count, success, real interactions (actions
-    taken, from the dataset itself) and how the judge that guided the round's RL, if one did, scores them."""
+def record_rollouts(k: int, policy: Path, judge: Path | None, config: DynaConfig, out: Path, progress: bool,
+                    planned_in: str | Path | None = None) -> dict:
+    """Records round `k`'s real rollouts (with `planned_in` a world model: the policy's plans made in
+    it, executed for real); returns their count, success, real interactions (actions taken, from the
+    dataset itself) and how the judge that guided the round's RL, if one did, scores them."""
     from gymnast.data.lerobot import EpisodeDataset
     from gymnast.eval.record import record_real_rollouts
     from gymnast.reward.judges.measure import evaluate_judge
@@ -289,7 +303,7 @@ def record_rollouts(k: int, policy: Path, judge: Path | None, config: DynaConfig
     counts = record_real_rollouts(policy, config.rl.tasks, config.rollouts_per_task,
                                   config.first_rollout_seed + (k - 1) * config.rollouts_per_task,
                                   config.rollout_temperature, config.rl.evaluation_horizon, config.workers,
-                                  config.runner, out, progress)
+                                  config.runner, out, progress, imagine_with=planned_in)
     if judge is None:
         return counts
     model = load_judge(judge)

@@ -83,14 +83,17 @@ def fixed_arms(out: Path) -> list[Rung]:
     """OUT/fixed and every OUT/fixed_<lever> as rungs: the RL runs whose settings their config.json
     holds (any env, reward and lever a user mends the broken rung with), by name."""
     arms = []
+    # A fix may be a world model of its own (one refit on what the ladder's got wrong): named where it is not the ladder's.
+    ladder_wm = saved_settings(out, "inputs").get("wm") if (out / "config.json").is_file() else None
     for where in sorted(out.glob(f"{FIXED.name}*")):
         if not (where / "config.json").is_file() or (where.name != FIXED.name and not where.name.startswith("fixed_")):
             continue
         run = RLRun.from_json(saved_settings(where, "run"))
+        model = f", imagined in {run.wm}" if run.wm and run.wm != ladder_wm else ""
         sees = f", the reward seeing {run.reward_sees}" if run.reward_sees else ""
         other = f" in {run.reward_wm}" if run.reward_wm else ""
         arms.append(Rung(where.name, run.env, str(run.reward), run.reward_sees,
-                         f"a fix: --env {run.env} --reward {run.reward}{sees}{other}"))
+                         f"a fix: --env {run.env}{model} --reward {run.reward}{sees}{other}"))
     return arms
 
 
