@@ -9,7 +9,7 @@ from pathlib import Path
 import tyro
 
 import gymnast  # noqa: F401  (sets MUJOCO_GL before anything imports mujoco)
-from gymnast.cli.data import collect, contact_sheet, gap_report, inspect, tasks
+from gymnast.cli.data import collect, contact_sheet, gap_report, inspect, stills, tasks
 from gymnast.cli.judge import calibrate_judge, eval_judge, serve_judge, train_judge
 from gymnast.cli.measure import imagination, practice_summary, rl_signal, worldgym
 from gymnast.cli.policy import check_policy, evaluate_command, sft
@@ -78,6 +78,7 @@ COMMANDS = {
     "practice-summary": practice_summary,
     "worldgym": worldgym,
     "contact-sheet": contact_sheet,
+    "stills": stills,
     "gap-report": gap_report,
     "tasks": tasks,
     "export": export,

@@ -177,3 +177,39 @@ def tasks(task_set: str = "mt10", split: str = "train") -> None:
         print(task)
         for sentence in all_instructions(task, split):
             print(f"    {sentence}")
+
+
+def stills(
+    videos: tuple[Path, ...],
+    out: Path,
+    frames: str = "0,20,40,80,150",
+    tiles: str = "0",
+    tile_width: int = 0,
+) -> None:
+    """Still frames of videos in one PNG: a row per video (or per tile of a video that holds several
+    rollouts side by side, as `gymnast rl`'s group videos do), a column per frame index; to compare
+    what rollouts looked like at the same moments, e.g. a ladder rung's imagined rollouts beside
+    real ones.
+
+    Args:
+        videos: mp4 files, one row (or one row per tile) each, in order.
+        out: PNG to write.
+        frames: frame indices, comma-separated (frame t of an RL rollout video follows t actions; a
+            frame past a video's end shows its last).
+        tiles: which tiles of each video, comma-separated, counted from 0 at the left.
+        tile_width: width of one tile in pixels (an RL group video: 2 x 96 x cameras for 96-px
+            frames); 0: each video is one tile.
+    """
+    from gymnast.utils.images import save_png
+    from gymnast.utils.stills import video_stills
+
+    sheet = video_stills(videos, parse_indices(frames, "--frames"), parse_indices(tiles, "--tiles"), tile_width)
+    print(f"stills: {save_png(sheet, out)}")
+
+
+def parse_indices(text: str, flag: str) -> list[int]:
+    """'0,20,40' as [0, 20, 40]; a ValueError naming `flag` for anything else."""
+    try:
+        return [int(part) for part in text.split(",") if part.strip()]
+    except ValueError:
+        raise ValueError(f"{flag} takes comma-separated integers, got {text!r}") from None
