@@ -203,3 +203,35 @@ def test_a_round_can_record_the_policys_imagined_plans_executed_for_real(models,
     assert planned != policy_behaviour(policy_tag(POLICY, config.rollout_temperature))
     with pytest.raises(ValueError, match="record must be rollouts or plans"):
         dataclasses.replace(DYNA_PRESETS["debug"], record="dreams")
+
+
+def test_a_recipe_gives_every_round_its_grpo_settings_and_the_loop_keeps_its_own(tmp_path):
+    from gymnast.experiment.dyna import with_recipe
+    from gymnast.rl.config import RLConfig
+
+    ladder = tmp_path / "ladder"
+    ladder.mkdir()
+    saved = RLConfig(steps=10, lr=3e-5, kl_coef=0.1, freeze=("vision",), fresh_scenes=True, real_eval=True,
+                     eval_every=5, watch_every=5, video_every=7, checkpoint_every=2)
+    (ladder / "config.json").write_text(json.dumps({"rl": dataclasses.asdict(saved), "inputs": {}}))
+    rl = with_recipe(DYNA_PRESETS["full"], ladder, steps=3).rl
+    assert (rl.lr, rl.kl_coef, rl.freeze, rl.fresh_scenes) == (3e-5, 0.1, ("vision",), True)
+    assert (rl.steps, rl.real_eval, rl.eval_every) == (3, False, 0)  # the round's length, the round's evaluation
+    assert (rl.watch_every, rl.video_every, rl.checkpoint_every) == (3, 3, 2)  # at most a round apart
+    off = dataclasses.replace(saved, watch_every=0)
+    (ladder / "config.json").write_text(json.dumps({"rl": dataclasses.asdict(off)}))
+    assert with_recipe(DYNA_PRESETS["full"], ladder, steps=3).rl.watch_every == 0  # no watch stays none
+    assert with_recipe(DYNA_PRESETS["full"], ladder).rl.steps == DYNA_PRESETS["full"].rl.steps
+
+
+def test_a_recipe_without_rl_settings_or_given_with_resume_is_refused(tmp_path, capsys):
+    from gymnast.experiment.dyna import with_recipe
+
+    with pytest.raises(FileNotFoundError, match="holds no config.json"):
+        with_recipe(DYNA_PRESETS["full"], tmp_path / "nowhere")
+    (tmp_path / "config.json").write_text(json.dumps({"train": {}}))
+    with pytest.raises(ValueError, match=r"config.json holds no rl settings"):
+        with_recipe(DYNA_PRESETS["full"], tmp_path)
+    with pytest.raises(SystemExit):
+        main(["dyna", "--out", str(tmp_path / "run"), "--resume", "--recipe", str(tmp_path)])
+    assert "--recipe starts a new run" in capsys.readouterr().err

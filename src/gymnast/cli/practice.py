@@ -159,7 +159,9 @@ def dyna(
     rounds: int | None = None,
     rollouts_per_task: int | None = None,
     record: Literal["rollouts", "plans"] | None = None,
+    recipe: Path | None = None,
     steps: int | None = None,
+    eval_episodes: int | None = None,
     tasks: str | None = None,
     keyframes: str | None = None,
     horizon: int | None = None,
@@ -198,7 +200,11 @@ def dyna(
         record: what those episodes are: rollouts (the policy acting in the real world) or plans (its
             plans made closed loop in the round's world model, executed for real: the actions the
             model imagines succeeding where they fail) (default: the preset's, rollouts).
+        recipe: an RL run or a ladder directory whose GRPO settings every round's RL uses instead of
+            the preset's (e.g. the ladder's, to set the loop beside its rungs); the rounds' steps,
+            evaluations and watch stay the loop's; --tasks and the other flags still apply.
         steps: RL steps in imagination per round (default: the preset's).
+        eval_episodes: real evaluation episodes per task after each round (default: the preset's).
         tasks: tasks trained and evaluated on (default: the preset's).
         keyframes: where in the start episodes practice begins (see `gymnast rl --help`; default: the preset's).
         horizon: actions per imagined rollout, e.g. 20 for short segments (default: the preset's).
@@ -214,17 +220,22 @@ def dyna(
         tracker: where every round's trainers, the real-world arm and the rounds' figures also log: none,
             or any of tensorboard and wandb, comma-separated (default: the preset's RL setting).
     """
-    from gymnast.experiment.dyna import DYNA_PRESETS, DynaInputs, run_dyna, saved_dyna_settings
+    from gymnast.experiment.dyna import DYNA_PRESETS, DynaInputs, run_dyna, saved_dyna_settings, with_recipe
     from gymnast.experiment.dyna_report import dyna_table
+
+    if recipe is not None and resume:
+        raise ValueError("--recipe starts a new run; --resume continues with the settings saved in --out: give one")
+    base = with_recipe(DYNA_PRESETS[preset], recipe, steps) if recipe is not None else DYNA_PRESETS[preset]
 
     def saved():
         config, inputs = saved_dyna_settings(out)
         return config, dataclasses.asdict(inputs)
 
     config, inputs = resolve(
-        "dyna", out, resume, DYNA_PRESETS[preset],
+        "dyna", out, resume, base,
         inputs={"policy": policy, "wm": wm, "judge": judge, "state": state, "data": data},
-        overrides={"rounds": rounds, "rollouts_per_task": rollouts_per_task, "record": record, "rl.steps": steps, "rl.tasks": tasks,
+        overrides={"rounds": rounds, "rollouts_per_task": rollouts_per_task, "record": record, "rl.steps": steps,
+                   "eval_episodes": eval_episodes, "rl.tasks": tasks,
                    "rl.keyframes": keyframes, "rl.horizon": horizon, "rl.eval_horizon": eval_horizon,
                    "practice_from_rollouts": practice_from_rollouts,
                    "state_steps": state_steps, "wm_steps": wm_steps, "workers": workers, "runner": runner,

@@ -140,6 +140,33 @@ DYNA_PRESETS: dict[str, DynaConfig] = {
 }
 
 
+def with_recipe(config: DynaConfig, run: Path, steps: int | None = None) -> DynaConfig:
+    """`config` practising with the GRPO settings saved in `run` (RUN/config.json's ``rl``, as an RL
+    run or a ladder saves them), so that the loop can be held against a ladder's rungs on the same
+    recipe. What belongs to the loop stays its own: `steps` a round (default: `config`'s), no real
+    evaluation inside RL (each round's evaluation measures the policy), and the watch, the videos
+    and the checkpoints at most a round apart, so that every round has them.
+
+    Raises:
+        FileNotFoundError: `run` holds no config.json.
+        ValueError: its config.json holds no ``rl`` settings (naming the file).
+    """
+    path = Path(run) / "config.json"
+    if not path.exists():
+        raise FileNotFoundError(f"the recipe {run} holds no config.json: give an RL run or a ladder directory")
+    saved = read_json(path).get("rl")
+    if not isinstance(saved, dict):
+        raise ValueError(f"{path} holds no rl settings: give an RL run or a ladder directory")
+    recipe, steps = from_json(RLConfig, saved), steps or config.rl.steps
+
+    def each_round(every: int) -> int:
+        return min(every, steps) if every else 0
+
+    return dataclasses.replace(config, rl=dataclasses.replace(
+        recipe, steps=steps, real_eval=False, eval_every=0, watch_every=each_round(recipe.watch_every),
+        video_every=each_round(recipe.video_every), checkpoint_every=each_round(recipe.checkpoint_every)))
+
+
 @dataclass(frozen=True)
 class DynaInputs:
     """What the loop starts from: runs of the policy, world model and reward model (a judge, or a
