@@ -79,6 +79,24 @@ def test_rounds_report_real_success_against_counted_real_interactions(dyna_run: 
     assert (dyna_run / "dyna.md").read_text().count("| Dyna |") == 4
 
 
+def test_a_ladder_reports_a_dyna_loop_as_a_fix_arm_with_its_steps_counted_across_rounds(dyna_run: Path, tmp_path):
+    from gymnast.experiment.ladder_records import fixed_arms, rung_record
+
+    ladder = tmp_path / "ladder"
+    ladder.mkdir()
+    (ladder / "fixed_dyna").symlink_to(dyna_run, target_is_directory=True)
+    (arm,) = fixed_arms(ladder)
+    assert arm.name == "fixed_dyna" and arm.reward == "judge"
+    assert "gymnast dyna, 3 rounds of 1 steps" in arm.what and "1 real rollouts a task" in arm.what
+    record = rung_record(arm, ladder / "fixed_dyna", steps=3)
+    summary = json.loads((dyna_run / "summary.json").read_text())
+    assert [point["step"] for point in record["curve"]] == [0, 1, 2, 3]  # round k at step k x 1
+    assert [point["success"] for point in record["curve"]] == [row["success"] for row in summary["rounds"]]
+    assert record["real_interactions"] == summary["dyna_real_interactions"] > 0  # the recorded rollouts only
+    assert record["steps_done"] == 3 and record["finished"]
+    assert record["eval_real_interactions"] > 0
+
+
 def test_each_round_fine_tunes_from_the_last_and_learns_from_every_recorded_rollout(dyna_run: Path, models):
     second = json.loads((dyna_run / "round_2" / "world_model" / "config.json").read_text())["train"]
     assert second["extra_data"] == [str(dyna_run / f"round_{k}" / "rollouts") for k in (1, 2)]

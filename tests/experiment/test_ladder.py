@@ -10,7 +10,8 @@ import pytest
 from gymnast.cli import main
 from gymnast.experiment.ladder import LadderInputs, parse_rungs
 from gymnast.experiment.rungs import RUNGS
-from gymnast.experiment.ladder_report import fixed_arms, write_ladder_index
+from gymnast.experiment.ladder_records import fixed_arms
+from gymnast.experiment.ladder_report import write_ladder_index
 from gymnast.utils.metrics import read_metrics
 
 RESULTS = Path(__file__).resolve().parents[2] / "results"

@@ -1,7 +1,6 @@
-"""The learning ladder's report: OUT/summary.json, OUT/ladder.md and two plots, from the rungs' runs.
-
-Everything is read from each rung's RUN/metrics.jsonl, so a ladder still under way reports the
-steps and evaluations it has, and a rung's row says whether it finished. Per rung: real success at
+"""The learning ladder's report: OUT/summary.json, OUT/ladder.md and two plots, from the rungs' runs
+(read by `gymnast.experiment.ladder_records`), so a ladder still under way reports the steps and
+evaluations it has, and a rung's row says whether it finished. Per rung: real success at
 its last evaluation with the 95% Wilson interval, the curve of every evaluation, the real
 interactions it spent (training's, the truth's, the watch's and the evaluations'), the
 reward-hacking watch at every evaluation, and `agreement_by_step`: how often the reward the policy
@@ -14,56 +13,17 @@ from __future__ import annotations
 from pathlib import Path
 
 from gymnast.experiment.formatting import pct
-from gymnast.experiment.rungs import FIXED, RUNGS, Rung, rung_dir
+from gymnast.experiment.ladder_records import fixed_arms, rung_record
 from gymnast.experiment.plots import _figure, _save
-from gymnast.rl.config import RLConfig, RLRun
+from gymnast.experiment.rungs import RUNGS, rung_dir
+from gymnast.rl.config import RLConfig
 from gymnast.utils.atomic import read_json, write_bytes, write_json
-from gymnast.utils.metrics import read_metrics
-from gymnast.utils.settings import saved_settings
-
-TRUTH = ("agreement", "false_success", "missed_success", "truth_success", "truth_signal", "truth_rollouts")
-"""The ``reward/`` metrics of each step that `agreement_by_step` keeps."""
-WATCH = ("agreement", "false_success", "imagined_success", "real_success")
-"""The ``eval/watch_`` metrics kept at each watch."""
-
-
-def rung_record(rung: Rung, run: Path, steps: int) -> dict | None:
-    """Rung `rung`'s figures from its run directory, or None before its first evaluation."""
-    lines = read_metrics(run)
-    # A rung in the real world evaluates itself there ("own"); the others also in the real world.
-    real = "eval/own" if rung.env.real_interactions else "eval/real"
-    curve = [_evaluation(line, real) for line in lines if f"{real}_success" in line]
-    if not curve:
-        return None
-    last = curve[-1]
-    by_step = [{"step": line["step"], **{name: line[f"reward/{name}"] for name in TRUTH if f"reward/{name}" in line},
-                "verdict_success": line.get("rollout/success")}
-               for line in lines if "reward/truth_rollouts" in line]
-    watch = [{"step": line["step"], **{name: line[f"eval/watch_{name}"] for name in WATCH if f"eval/watch_{name}" in line}}
-             for line in lines if "eval/watch_real_success" in line]
-    spent = {key: max([line[f"{prefix}"] for line in lines if prefix in line], default=0) for key, prefix in (
-        ("real_interactions", "rollout/real_interactions"), ("truth_real_interactions", "reward/truth_real_interactions"),
-        ("watch_real_interactions", "eval/watch_real_interactions"), ("eval_real_interactions", "eval/real_interactions"))}
-    done = max((line["step"] for line in lines if "train/lr" in line), default=0)
-    return {"what": rung.what, "env": rung.env.name, "reward": rung.reward,
-            "reward_sees": rung.sees.name if rung.sees else "own",
-            "success": last["success"], "ci_low": last["ci_low"], "ci_high": last["ci_high"],
-            "episodes": last["episodes"], "step": last["step"], "start_success": curve[0]["success"],
-            **spent, "steps_done": done, "finished": done >= steps and last["step"] >= steps,
-            "agreement_by_step": by_step, "curve": curve, "watch": watch}
-
-
-def _evaluation(line: dict, prefix: str) -> dict:
-    tasks = {key.removeprefix(f"{prefix}_success/"): value for key, value in line.items()
-             if key.startswith(f"{prefix}_success/")}
-    return {"step": line["step"], "success": line[f"{prefix}_success"], "ci_low": line[f"{prefix}_ci_low"],
-            "ci_high": line[f"{prefix}_ci_high"], "episodes": line[f"{prefix}_episodes"], "tasks": tasks}
 
 
 def ladder_summary(out: Path, config: RLConfig) -> dict:
     """The ladder's summary.json: ``sft`` (every rung's step-0 evaluation), one entry per rung of
     OUT that has evaluated, in the ladder's order, then the practice arms after a fix: `gymnast rl`
-    runs with the ladder's recipe in OUT/fixed and OUT/fixed_<lever> (`fixed_arms`), where there are."""
+    runs with the ladder's recipe or Dyna loops in OUT/fixed and OUT/fixed_<lever> (`fixed_arms`), where there are."""
     summary: dict = {}
     for rung in (*RUNGS.values(), *fixed_arms(out)):
         record = rung_record(rung, rung_dir(out, rung), config.steps)
@@ -77,24 +37,6 @@ def ladder_summary(out: Path, config: RLConfig) -> dict:
                               "curve": [first]}
         summary[rung.name] = record
     return summary
-
-
-def fixed_arms(out: Path) -> list[Rung]:
-    """OUT/fixed and every OUT/fixed_<lever> as rungs: the RL runs whose settings their config.json
-    holds (any env, reward and lever a user mends the broken rung with), by name."""
-    arms = []
-    # A fix may be a world model of its own (one refit on what the ladder's got wrong): named where it is not the ladder's.
-    ladder_wm = saved_settings(out, "inputs").get("wm") if (out / "config.json").is_file() else None
-    for where in sorted(out.glob(f"{FIXED.name}*")):
-        if not (where / "config.json").is_file() or (where.name != FIXED.name and not where.name.startswith("fixed_")):
-            continue
-        run = RLRun.from_json(saved_settings(where, "run"))
-        model = f", imagined in {run.wm}" if run.wm and run.wm != ladder_wm else ""
-        sees = f", the reward seeing {run.reward_sees}" if run.reward_sees else ""
-        other = f" in {run.reward_wm}" if run.reward_wm else ""
-        arms.append(Rung(where.name, run.env, str(run.reward), run.reward_sees,
-                         f"a fix: --env {run.env}{model} --reward {run.reward}{sees}{other}"))
-    return arms
 
 
 def mean_agreement(record: dict, key: str = "agreement") -> float | None:

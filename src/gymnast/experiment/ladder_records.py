@@ -1,0 +1,143 @@
+"""What the ladder's report reads from each rung's run: its real success at every evaluation, how
+its reward agreed with the truth at every step, the watch, and the real interactions it spent.
+
+A rung, and a fix arm that is a `gymnast rl` run, is read from its RUN/metrics.jsonl; a fix arm
+that is a Dyna loop (`gymnast dyna`, OUT/fixed_<lever> holding its rounds) from its rounds'
+evaluations and their RL runs, its steps counted across rounds. Either way a run still under way
+reports what it has, and says whether it finished.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from gymnast.envs.kinds import IMAGINED
+from gymnast.experiment.rungs import FIXED, Rung
+from gymnast.experiment.stages import Stages
+from gymnast.rl.config import RLRun
+from gymnast.utils.metrics import read_metrics
+from gymnast.utils.settings import saved_settings
+
+TRUTH = ("agreement", "false_success", "missed_success", "truth_success", "truth_signal", "truth_rollouts")
+"""The ``reward/`` metrics of each step that `agreement_by_step` keeps."""
+WATCH = ("agreement", "false_success", "imagined_success", "real_success")
+"""The ``eval/watch_`` metrics kept at each watch."""
+SPENT = (("real_interactions", "rollout/real_interactions"), ("truth_real_interactions", "reward/truth_real_interactions"),
+         ("watch_real_interactions", "eval/watch_real_interactions"), ("eval_real_interactions", "eval/real_interactions"))
+"""Real interactions a run counts (its largest value: the counters are cumulative), by kind."""
+
+
+def rung_record(rung: Rung, run: Path, steps: int) -> dict | None:
+    """Rung `rung`'s figures from its run directory, or None before its first evaluation."""
+    if is_dyna(run):
+        return dyna_record(rung, run)
+    lines = read_metrics(run)
+    # A rung in the real world evaluates itself there ("own"); the others also in the real world.
+    real = "eval/own" if rung.env.real_interactions else "eval/real"
+    curve = [_evaluation(line, real) for line in lines if f"{real}_success" in line]
+    if not curve:
+        return None
+    last, done = curve[-1], _steps_done(lines)
+    spent = {key: max([line[name] for line in lines if name in line], default=0) for key, name in SPENT}
+    return _record(rung, curve, spent, done, done >= steps and last["step"] >= steps, *_truth_and_watch(lines))
+
+
+def dyna_record(rung: Rung, run: Path) -> dict | None:
+    """A Dyna loop's figures in a rung's form: its real evaluation before the first round and after
+    each (round k at step k x its steps a round) as the curve, every round's RL truth and watch at
+    their steps across rounds, and as training's real interactions its rounds' recorded episodes."""
+    settings = saved_settings(run, "dyna")
+    per_round, rounds = settings["rl"]["steps"], settings["rounds"]
+    first = Stages(run)
+    if not first.done("round_0_eval"):
+        return None
+    evaluations = [(0, first.record("round_0_eval"))]
+    by_step, watch, done = [], [], 0
+    spent = {"real_interactions": 0, "truth_real_interactions": 0, "watch_real_interactions": 0,
+             "eval_real_interactions": evaluations[0][1]["eval_real_interactions"]}
+    for k in range(1, rounds + 1):
+        here, offset = Stages(run / f"round_{k}"), (k - 1) * per_round
+        lines = [{**line, "step": line["step"] + offset} for line in read_metrics(run / f"round_{k}" / "rl")] \
+            if (run / f"round_{k}" / "rl" / "metrics.jsonl").exists() else []
+        truth, watched = _truth_and_watch(lines)
+        by_step, watch = by_step + truth, watch + watched
+        done = max(done, _steps_done(lines))
+        for key in ("truth_real_interactions", "watch_real_interactions"):  # cumulative within a round's run
+            spent[key] += max([line[dict(SPENT)[key]] for line in lines if dict(SPENT)[key] in line], default=0)
+        if here.done("rollouts"):
+            spent["real_interactions"] += here.record("rollouts")["real_interactions"]
+        if here.done("eval"):
+            evaluations.append((k * per_round, here.record("eval")))
+            spent["eval_real_interactions"] += evaluations[-1][1]["eval_real_interactions"]
+    curve = [{"step": step, **{key: result[key] for key in ("success", "ci_low", "ci_high", "episodes")},
+              "tasks": {task: figures["success"] for task, figures in result["per_task"].items()}}
+             for step, result in evaluations]
+    return _record(rung, curve, spent, done, len(evaluations) == rounds + 1, by_step, watch)
+
+
+def _record(rung: Rung, curve: list[dict], spent: dict, done: int, finished: bool, by_step: list[dict],
+            watch: list[dict]) -> dict:
+    last = curve[-1]
+    return {"what": rung.what, "env": rung.env.name, "reward": rung.reward,
+            "reward_sees": rung.sees.name if rung.sees else "own",
+            "success": last["success"], "ci_low": last["ci_low"], "ci_high": last["ci_high"],
+            "episodes": last["episodes"], "step": last["step"], "start_success": curve[0]["success"],
+            **spent, "steps_done": done, "finished": finished,
+            "agreement_by_step": by_step, "curve": curve, "watch": watch}
+
+
+def _truth_and_watch(lines: list[dict]) -> tuple[list[dict], list[dict]]:
+    """Per step, how the reward agreed with the real outcome; per watch, what it found."""
+    by_step = [{"step": line["step"], **{name: line[f"reward/{name}"] for name in TRUTH if f"reward/{name}" in line},
+                "verdict_success": line.get("rollout/success")}
+               for line in lines if "reward/truth_rollouts" in line]
+    watch = [{"step": line["step"], **{name: line[f"eval/watch_{name}"] for name in WATCH if f"eval/watch_{name}" in line}}
+             for line in lines if "eval/watch_real_success" in line]
+    return by_step, watch
+
+
+def _steps_done(lines: list[dict]) -> int:
+    return max((line["step"] for line in lines if "train/lr" in line), default=0)
+
+
+def _evaluation(line: dict, prefix: str) -> dict:
+    tasks = {key.removeprefix(f"{prefix}_success/"): value for key, value in line.items()
+             if key.startswith(f"{prefix}_success/")}
+    return {"step": line["step"], "success": line[f"{prefix}_success"], "ci_low": line[f"{prefix}_ci_low"],
+            "ci_high": line[f"{prefix}_ci_high"], "episodes": line[f"{prefix}_episodes"], "tasks": tasks}
+
+
+def is_dyna(run: Path) -> bool:
+    """Whether `run` is a Dyna loop (its config.json holds ``dyna`` settings), not an RL run."""
+    return (run / "config.json").is_file() and "dyna" in saved_settings(run)
+
+
+def fixed_arms(out: Path) -> list[Rung]:
+    """OUT/fixed and every OUT/fixed_<lever> as rungs, by name: an RL run whose settings its
+    config.json holds (any env, reward and lever a user mends the broken rung with), or a Dyna loop."""
+    arms = []
+    # A fix may be a world model of its own (one refit on what the ladder's got wrong): named where it is not the ladder's.
+    ladder_wm = saved_settings(out, "inputs").get("wm") if (out / "config.json").is_file() else None
+    for where in sorted(out.glob(f"{FIXED.name}*")):
+        if not (where / "config.json").is_file() or (where.name != FIXED.name and not where.name.startswith("fixed_")):
+            continue
+        if is_dyna(where):
+            arms.append(_dyna_arm(where))
+            continue
+        run = RLRun.from_json(saved_settings(where, "run"))
+        model = f", imagined in {run.wm}" if run.wm and run.wm != ladder_wm else ""
+        sees = f", the reward seeing {run.reward_sees}" if run.reward_sees else ""
+        other = f" in {run.reward_wm}" if run.reward_wm else ""
+        arms.append(Rung(where.name, run.env, str(run.reward), run.reward_sees,
+                         f"a fix: --env {run.env}{model} --reward {run.reward}{sees}{other}"))
+    return arms
+
+
+def _dyna_arm(where: Path) -> Rung:
+    settings, inputs = saved_settings(where, "dyna"), saved_settings(where, "inputs")
+    kind = "judge" if inputs.get("judge") else "state"
+    refit = "the world model and the " + kind if settings["wm_steps"] else "the " + kind
+    return Rung(where.name, IMAGINED, kind, None,
+                f"a fix: gymnast dyna, {settings['rounds']} rounds of {settings['rl']['steps']} steps in imagination, "
+                f"each recording {settings['rollouts_per_task']} real {settings.get('record', 'rollouts')} a task "
+                f"that {refit} are refit on")
