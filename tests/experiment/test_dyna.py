@@ -253,3 +253,27 @@ def test_a_recipe_without_rl_settings_or_given_with_resume_is_refused(tmp_path, 
     with pytest.raises(SystemExit):
         main(["dyna", "--out", str(tmp_path / "run"), "--resume", "--recipe", str(tmp_path)])
     assert "--recipe starts a new run" in capsys.readouterr().err
+
+
+def test_a_model_whose_training_data_is_gone_is_named_before_anything_runs_unless_it_is_kept(models, tmp_path):
+    import shutil
+
+    judge = tmp_path / "judge"
+    shutil.copytree(models["judge"], judge)
+    saved = json.loads((judge / "config.json").read_text())
+    saved["train"]["extra_data"] = [str(tmp_path / "gone")]
+    (judge / "config.json").write_text(json.dumps(saved))
+    inputs = DynaInputs(POLICY, models["wm"], judge, models["data"])
+    with pytest.raises(FileNotFoundError, match=r"--judge .*judge was trained on .*gone, which is not here.*--judge-steps 0"):
+        run_dyna(DYNA_PRESETS["debug"], inputs, tmp_path / "refused", progress=False)
+    assert not (tmp_path / "refused").exists()  # refused before anything was written
+
+
+def test_with_no_judge_steps_every_round_judges_with_the_given_judge(one_rl_step_per_round, models, tmp_path):
+    config = dataclasses.replace(DYNA_PRESETS["debug"], rounds=2, judge_steps=0, real_rl=False)
+    run_dyna(config, DynaInputs(POLICY, models["wm"], models["judge"], models["data"]), tmp_path / "run",
+             progress=False)
+    second = json.loads((tmp_path / "run" / "round_2" / "rl" / "config.json").read_text())["run"]
+    assert second["reward"] == f"judge:{models['judge']}"
+    assert second["wm"] == str(tmp_path / "run" / "round_1" / "world_model")  # the world model is still refit
+    assert not (tmp_path / "run" / "round_1" / "judge").exists()

@@ -167,6 +167,7 @@ def dyna(
     horizon: int | None = None,
     eval_horizon: int | None = None,
     practice_from_rollouts: bool | None = None,
+    judge_steps: int | None = None,
     state_steps: int | None = None,
     wm_steps: int | None = None,
     workers: int | None = None,
@@ -212,7 +213,8 @@ def dyna(
             the task's 150).
         practice_from_rollouts: rounds after the first practise from the previous round's real
             rollouts instead of --data (default: the preset's, off).
-        state_steps: fine-tuning steps of the state model per round (default: the preset's).
+        judge_steps: fine-tuning steps of the judge per round; 0 keeps the given one (default: the preset's).
+        state_steps: fine-tuning steps of the state model per round; 0 keeps the given one (default: the preset's).
         wm_steps: fine-tuning steps of the world model per round; 0 keeps the given one (default: the preset's).
         workers: simulator processes (default: the preset's).
         runner: where they run: local, ray or ray:ADDRESS (default: the preset's, local).
@@ -235,11 +237,10 @@ def dyna(
         "dyna", out, resume, base,
         inputs={"policy": policy, "wm": wm, "judge": judge, "state": state, "data": data},
         overrides={"rounds": rounds, "rollouts_per_task": rollouts_per_task, "record": record, "rl.steps": steps,
-                   "eval_episodes": eval_episodes, "rl.tasks": tasks,
-                   "rl.keyframes": keyframes, "rl.horizon": horizon, "rl.eval_horizon": eval_horizon,
-                   "practice_from_rollouts": practice_from_rollouts,
-                   "state_steps": state_steps, "wm_steps": wm_steps, "workers": workers, "runner": runner,
-                   "real_rl": real_rl, "rl.tracker": tracker}, saved=saved, required=("policy", "wm"))
+                   "eval_episodes": eval_episodes, "rl.tasks": tasks, "rl.keyframes": keyframes, "rl.horizon": horizon,
+                   "rl.eval_horizon": eval_horizon, "practice_from_rollouts": practice_from_rollouts,
+                   "judge_steps": judge_steps, "state_steps": state_steps, "wm_steps": wm_steps, "workers": workers,
+                   "runner": runner, "real_rl": real_rl, "rl.tracker": tracker}, saved=saved, required=("policy", "wm"))
     summary = run_dyna(config, DynaInputs(**inputs), out)
     print(dyna_table(summary))
     print(f"summary: {out / 'summary.json'}, plot: {out / summary['plot']}")

@@ -85,9 +85,10 @@ class DynaConfig:
     wm_steps: int = 300
     """Fine-tuning steps of the world model per round (0: every round imagines in the given one)."""
     judge_steps: int = 200
-    """Fine-tuning steps of the judge per round."""
+    """Fine-tuning steps of the judge per round (0: every round judges with the given one)."""
     state_steps: int = 500
-    """Fine-tuning steps of the state model (of each member of an ensemble) per round."""
+    """Fine-tuning steps of the state model (of each member of an ensemble) per round (0: every round
+    rewards with the given one)."""
     practice_from_rollouts: bool = False
     """Rounds after the first practise from the previous round's recorded rollouts (their first
     frames, or frames within them with `rl.keyframes`) instead of the original dataset's scenes."""
@@ -101,11 +102,12 @@ class DynaConfig:
     """GRPO settings of every round's imagined RL and of the real-world arm."""
 
     def __post_init__(self) -> None:
-        for name in ("rounds", "rollouts_per_task", "judge_steps", "state_steps", "eval_episodes", "workers"):
+        for name in ("rounds", "rollouts_per_task", "eval_episodes", "workers"):
             if getattr(self, name) < 1:
                 raise ValueError(f"DynaConfig.{name} must be at least 1, got {getattr(self, name)}")
-        if self.wm_steps < 0:
-            raise ValueError(f"DynaConfig.wm_steps must be at least 0, got {self.wm_steps}")
+        for name in ("wm_steps", "judge_steps", "state_steps"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"DynaConfig.{name} must be at least 0, got {getattr(self, name)}")
         if self.rollout_temperature < 0:
             raise ValueError(f"DynaConfig.rollout_temperature must be >= 0, got {self.rollout_temperature}")
         if self.record not in ("rollouts", "plans"):
@@ -113,6 +115,10 @@ class DynaConfig:
         if self.real_reward not in ("sim", "sim-dense"):
             raise ValueError(f"DynaConfig.real_reward must be sim or sim-dense, got {self.real_reward!r}")
         parse_runner(self.runner)
+
+    def reward_steps(self, kind: str) -> int:
+        """Fine-tuning steps a round gives the reward model of `kind` (``judge`` or ``state``)."""
+        return self.judge_steps if kind == "judge" else self.state_steps
 
     @property
     def real_rl_config(self) -> RLConfig:
@@ -217,6 +223,30 @@ class DynaInputs:
         return {name: None if value is None else str(value) for name, value in dataclasses.asdict(self).items()}
 
 
+def check_refit_data(config: DynaConfig, inputs: DynaInputs) -> None:
+    """Every model the rounds refit continues on the datasets it was trained on (RUN/config.json's
+    ``data`` and ``train.extra_data``) plus the rounds' rollouts: raises FileNotFoundError, naming the
+    model and the dataset, before anything runs, where one is no longer there."""
+    from gymnast.world_model.ensemble import is_ensemble, member_paths
+
+    refit = []
+    if config.wm_steps and can_be_refit(inputs.wm):
+        refit.append(("wm", inputs.wm))
+    if config.reward_steps(inputs.reward_kind):
+        model = inputs.reward_model
+        members = member_paths(model) if inputs.reward_kind == "state" and is_ensemble(model) else [model]
+        refit += [(inputs.reward_kind, member) for member in members]
+    for name, run in refit:
+        saved = saved_settings(run)
+        for data in (saved.get("data"), *saved.get("train", {}).get("extra_data", ())):
+            if data and not (Path(data) / "meta" / "info.json").is_file():
+                steps = {"wm": "--wm-steps"}.get(name, f"--{name}-steps")
+                raise FileNotFoundError(
+                    f"--{name} {run} was trained on {data}, which is not here (no meta/info.json): each round refits "
+                    f"it on its datasets plus the round's rollouts; record {data} again, or give {steps} 0 to keep "
+                    f"the {name} as it is")
+
+
 def saved_dyna_settings(out: Path) -> tuple[DynaConfig, DynaInputs]:
     """The settings and inputs a Dyna run in `out` was started with, for ``--resume``."""
     saved = saved_settings(out)
@@ -233,6 +263,7 @@ def run_dyna(config: DynaConfig, inputs: DynaInputs, out: Path, progress: bool =
     from gymnast.utils.checkpoint import write_run_config
 
     inputs.check()
+    check_refit_data(config, inputs)
     resolved = {"dyna": dataclasses.asdict(config), "inputs": inputs.to_json()}
     if (out / "config.json").exists() and not _same_run(saved_dyna_settings(out), config, inputs):
         raise ValueError(f"{out} holds a Dyna run with other settings or inputs; continue it with "
@@ -301,17 +332,17 @@ def run_round(k: int, config: DynaConfig, inputs: DynaInputs, policy: Path, wm: 
             stages.run("world_model", lambda: fine_tune_world_model(inputs.wm, wm, recorded, config.wm_steps, new_wm,
                                                                     progress, config.rl.tracker), new_wm)
             wm = new_wm
-        if kind == "judge":
-            row["judge"] = stages.run("judge", lambda: fine_tune_judge(inputs.judge, reward, wm, recorded,
-                                                                       config.judge_steps, new_reward, progress,
-                                                                       config.rl.tracker),
-                                      new_reward)
-        else:
-            row["state"] = stages.run("state", lambda: fine_tune_state_model(inputs.state, reward, recorded,
-                                                                             config.state_steps, new_reward, progress,
-                                                                             config.rl.tracker),
-                                      new_reward)
-        reward = new_reward
+        if config.reward_steps(kind):  # else every round rewards with the given model
+            if kind == "judge":
+                row["judge"] = stages.run("judge", lambda: fine_tune_judge(inputs.judge, reward, wm, recorded,
+                                                                           config.judge_steps, new_reward, progress,
+                                                                           config.rl.tracker), new_reward)
+            else:
+                row["state"] = stages.run("state", lambda: fine_tune_state_model(inputs.state, reward, recorded,
+                                                                                 config.state_steps, new_reward,
+                                                                                 progress, config.rl.tracker),
+                                          new_reward)
+            reward = new_reward
     evaluated = stages.run("eval", lambda: _evaluate(rl_run, config, here / "eval.json"))
     return rl_run, wm, reward, {**evaluated, **row}
 
