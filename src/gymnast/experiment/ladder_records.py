@@ -38,8 +38,7 @@ def rung_record(rung: Rung, run: Path, steps: int) -> dict | None:
     if not curve:
         return None
     last, done = curve[-1], _steps_done(lines)
-    spent = {key: max([line[name] for line in lines if name in line], default=0) for key, name in SPENT}
-    return _record(rung, curve, spent, done, done >= steps and last["step"] >= steps, *_truth_and_watch(lines))
+    return _record(rung, curve, _spent(lines), done, done >= steps and last["step"] >= steps, *_truth_and_watch(lines))
 
 
 def dyna_record(rung: Rung, run: Path) -> dict | None:
@@ -48,10 +47,10 @@ def dyna_record(rung: Rung, run: Path) -> dict | None:
     their steps across rounds, and as training's real interactions its rounds' recorded episodes."""
     settings = saved_settings(run, "dyna")
     per_round, rounds = settings["rl"]["steps"], settings["rounds"]
-    first = Stages(run)
-    if not first.done("round_0_eval"):
+    loop = Stages(run)
+    if not loop.done("round_0_eval"):
         return None
-    evaluations = [(0, first.record("round_0_eval"))]
+    evaluations = [(0, loop.record("round_0_eval"))]
     by_step, watch, done = [], [], 0
     spent = {"real_interactions": 0, "truth_real_interactions": 0, "watch_real_interactions": 0,
              "eval_real_interactions": evaluations[0][1]["eval_real_interactions"]}
@@ -62,8 +61,9 @@ def dyna_record(rung: Rung, run: Path) -> dict | None:
         truth, watched = _truth_and_watch(lines)
         by_step, watch = by_step + truth, watch + watched
         done = max(done, _steps_done(lines))
-        for key in ("truth_real_interactions", "watch_real_interactions"):  # cumulative within a round's run
-            spent[key] += max([line[dict(SPENT)[key]] for line in lines if dict(SPENT)[key] in line], default=0)
+        used = _spent(lines)  # each round's RL run counts from 0
+        for key in ("truth_real_interactions", "watch_real_interactions"):
+            spent[key] += used[key]
         if here.done("rollouts"):
             spent["real_interactions"] += here.record("rollouts")["real_interactions"]
         if here.done("eval"):
@@ -94,6 +94,10 @@ def _truth_and_watch(lines: list[dict]) -> tuple[list[dict], list[dict]]:
     watch = [{"step": line["step"], **{name: line[f"eval/watch_{name}"] for name in WATCH if f"eval/watch_{name}" in line}}
              for line in lines if "eval/watch_real_success" in line]
     return by_step, watch
+
+
+def _spent(lines: list[dict]) -> dict:
+    return {key: max([line[name] for line in lines if name in line], default=0) for key, name in SPENT}
 
 
 def _steps_done(lines: list[dict]) -> int:
