@@ -242,6 +242,17 @@ def test_a_recipe_gives_every_round_its_grpo_settings_and_the_loop_keeps_its_own
     assert with_recipe(DYNA_PRESETS["full"], ladder).rl.steps == DYNA_PRESETS["full"].rl.steps
 
 
+def test_every_rounds_imagined_evaluation_has_as_many_seeds_as_its_real_one(tmp_path):
+    from gymnast.experiment.dyna import with_recipe
+    from gymnast.rl.config import RLConfig
+
+    (tmp_path / "config.json").write_text(json.dumps({"rl": dataclasses.asdict(RLConfig(eval_episodes=100))}))
+    config = dataclasses.replace(with_recipe(DYNA_PRESETS["full"], tmp_path), eval_episodes=50)
+    assert config.rl.eval_episodes == 100  # the recipe's, for its own evaluations
+    assert config.imagined_rl_config.eval_episodes == 50  # the loop's, as its real evaluation
+    assert dataclasses.replace(config.imagined_rl_config, eval_episodes=100) == config.rl  # nothing else changes
+
+
 def test_a_recipe_without_rl_settings_or_given_with_resume_is_refused(tmp_path, capsys):
     from gymnast.experiment.dyna import with_recipe
 

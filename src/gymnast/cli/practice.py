@@ -205,7 +205,8 @@ def dyna(
             the preset's (e.g. the ladder's, to set the loop beside its rungs); the rounds' steps,
             evaluations and watch stay the loop's; --tasks and the other flags still apply.
         steps: RL steps in imagination per round (default: the preset's).
-        eval_episodes: real evaluation episodes per task after each round (default: the preset's).
+        eval_episodes: real evaluation episodes per task after each round, and the round's imagined RL
+            evaluates on the same seeds (default: the preset's).
         tasks: tasks trained and evaluated on (default: the preset's).
         keyframes: where in the start episodes practice begins (see `gymnast rl --help`; default: the preset's).
         horizon: actions per imagined rollout, e.g. 20 for short segments (default: the preset's).

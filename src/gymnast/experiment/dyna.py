@@ -121,6 +121,12 @@ class DynaConfig:
         return self.judge_steps if kind == "judge" else self.state_steps
 
     @property
+    def imagined_rl_config(self) -> RLConfig:
+        """Each round's imagined RL: Dyna's settings, its imagined evaluation on the seeds (and as
+        many of them) as the round's real one, so that the two read side by side."""
+        return dataclasses.replace(self.rl, eval_episodes=self.eval_episodes)
+
+    @property
     def real_rl_config(self) -> RLConfig:
         """The real-world arm's settings: Dyna's, for all rounds' steps, evaluated at each round's end."""
         return dataclasses.replace(self.rl, steps=self.rounds * self.rl.steps, eval_every=self.rl.steps,
@@ -319,7 +325,7 @@ def run_round(k: int, config: DynaConfig, inputs: DynaInputs, policy: Path, wm: 
     rl_run, rollouts, new_wm, new_reward = here / "rl", here / "rollouts", here / "world_model", here / kind
     starts = recorded[-1] if config.practice_from_rollouts and recorded else inputs.data
     spec = RLRun(str(policy), IMAGINED, RewardSpec(kind, run=Path(reward)), wm=str(wm), data=_str(starts))
-    trained = stages.run("rl", lambda: _rl_record(train_rl(spec, rl_run, config.rl, resume=has_checkpoint(rl_run),
+    trained = stages.run("rl", lambda: _rl_record(train_rl(spec, rl_run, config.imagined_rl_config, resume=has_checkpoint(rl_run),
                                                            progress=progress)), rl_run)
     row = {"round": k, "rl_steps": k * config.rl.steps, "rl": trained}
     if k < config.rounds:  # the last round's rollouts could no longer change the policy: none are taken
