@@ -88,6 +88,7 @@ def test_a_ladder_reports_a_dyna_loop_as_a_fix_arm_with_its_steps_counted_across
     (arm,) = fixed_arms(ladder)
     assert arm.name == "fixed_dyna" and arm.reward == "judge"
     assert "gymnast dyna, 3 rounds of 1 steps" in arm.what and "1 real rollouts a task" in arm.what
+    assert arm.what.startswith("a fix:") and arm.what.endswith("the world model and the judge are refit on")
     record = rung_record(arm, ladder / "fixed_dyna", steps=3)
     summary = json.loads((dyna_run / "summary.json").read_text())
     assert [point["step"] for point in record["curve"]] == [0, 1, 2, 3]  # round k at step k x 1
@@ -95,6 +96,23 @@ def test_a_ladder_reports_a_dyna_loop_as_a_fix_arm_with_its_steps_counted_across
     assert record["real_interactions"] == summary["dyna_real_interactions"] > 0  # the recorded rollouts only
     assert record["steps_done"] == 3 and record["finished"]
     assert record["eval_real_interactions"] > 0
+
+
+def test_a_loop_that_refits_nothing_is_reported_as_a_control(dyna_run: Path, tmp_path):
+    from gymnast.experiment.ladder_records import fixed_arms
+
+    saved = json.loads((dyna_run / "config.json").read_text())
+
+    def described(**refits) -> str:
+        loop = tmp_path / "_".join(refits) / "fixed_loop"
+        loop.mkdir(parents=True)
+        (loop / "config.json").write_text(json.dumps({**saved, "dyna": {**saved["dyna"], **refits}}))
+        (arm,) = fixed_arms(loop.parent)
+        return arm.what
+
+    assert described(wm_steps=0).endswith("a task that the judge is refit on")
+    control = described(wm_steps=0, judge_steps=0)
+    assert control.startswith("a control:") and control.endswith("nothing refit between them")
 
 
 def test_each_round_fine_tunes_from_the_last_and_learns_from_every_recorded_rollout(dyna_run: Path, models):
