@@ -325,8 +325,8 @@ def run_round(k: int, config: DynaConfig, inputs: DynaInputs, policy: Path, wm: 
     rl_run, rollouts, new_wm, new_reward = here / "rl", here / "rollouts", here / "world_model", here / kind
     starts = recorded[-1] if config.practice_from_rollouts and recorded else inputs.data
     spec = RLRun(str(policy), IMAGINED, RewardSpec(kind, run=Path(reward)), wm=str(wm), data=_str(starts))
-    trained = stages.run("rl", lambda: _rl_record(train_rl(spec, rl_run, config.imagined_rl_config, resume=has_checkpoint(rl_run),
-                                                           progress=progress)), rl_run)
+    trained = stages.run("rl", lambda: _rl_record(train_rl(spec, rl_run, config.imagined_rl_config,
+                                                           resume=has_checkpoint(rl_run), progress=progress)), rl_run)
     row = {"round": k, "rl_steps": k * config.rl.steps, "rl": trained}
     if k < config.rounds:  # the last round's rollouts could no longer change the policy: none are taken
         judge = reward if kind == "judge" else None

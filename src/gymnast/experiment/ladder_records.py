@@ -138,14 +138,16 @@ def fixed_arms(out: Path) -> list[Rung]:
 
 
 def _dyna_arm(where: Path) -> Rung:
-    settings, inputs = saved_settings(where, "dyna"), saved_settings(where, "inputs")
-    kind = "judge" if inputs.get("judge") else "state"
-    reward_steps = settings["judge_steps"] if kind == "judge" else settings.get("state_steps", 500)  # the old default
-    refit = [name for name, steps in (("the world model", settings["wm_steps"]),
-                                      ("the " + ("judge" if kind == "judge" else "state model"), reward_steps)) if steps]
-    rounds = f"gymnast dyna, {settings['rounds']} rounds of {settings['rl']['steps']} steps in imagination"
+    from gymnast.experiment.dyna import saved_dyna_settings
+
+    config, inputs = saved_dyna_settings(where)
+    kind = inputs.reward_kind
+    refit = [name for name, steps in (("the world model", config.wm_steps),
+                                      ("the judge" if kind == "judge" else "the state model", config.reward_steps(kind)))
+             if steps]
+    rounds = f"gymnast dyna, {config.rounds} rounds of {config.rl.steps} steps in imagination"
     if not refit:  # the loop's rounds without its refits: what the rounds alone do
         return Rung(where.name, IMAGINED, kind, None, f"a control: {rounds}, nothing refit between them")
     return Rung(where.name, IMAGINED, kind, None,
-                f"a fix: {rounds}, each recording {settings['rollouts_per_task']} real {settings.get('record', 'rollouts')} "
-                f"a task that {' and '.join(refit)} {'are' if len(refit) > 1 else 'is'} refit on")
+                f"a fix: {rounds}, each recording {config.rollouts_per_task} real {config.record} a task that "
+                f"{' and '.join(refit)} {'are' if len(refit) > 1 else 'is'} refit on")
