@@ -33,6 +33,8 @@ def sft(
     device: str | None = None,
     tracker: TrackerNames | None = None,
     keys: Annotated[KeyFlags, tyro.conf.arg(name="")] = KeyFlags(),
+    init: Path | None = None,
+    imagined_by: Path | None = None,
 ) -> None:
     """Behaviour-clone a VLA on N successful expert demonstrations per task.
 
@@ -62,17 +64,25 @@ def sft(
             default: none; --resume may change it.
         keys: which dataset features are the actions and the states (default: LeRobot's action and
             observation.state); saved with the run.
+        init: start from this policy run's weights (its architecture kept) instead of a fresh
+            model: fine-tuning.
+        imagined_by: a world-model run: half of every batch is then the demonstrations as it
+            imagines them under their own actions (the frames a policy reads, one per action chunk),
+            so that the policy learns to act on imagined frames as on real ones, the sight it has
+            when it practises in that world model.
     """
     from gymnast.policy.sft import SFT_PRESETS, saved_sft_config, train_sft
 
     config, inputs = resolve(
-        "sft", out, resume, SFT_PRESETS[preset], inputs={"data": data}, required=("data",),
+        "sft", out, resume, SFT_PRESETS[preset], inputs={"data": data, "init": init, "imagined_by": imagined_by},
+        required=("data",),
         overrides={"demos_per_task": demos_per_task, "steps": steps, "tasks": tasks, "seed": seed,
                    "vla.vision": vision, "camera": camera, "cameras": cameras or None, "policy": policy_type,
                    "robot_state": robot_state, "fit": fit, "device": device, "tracker": tracker,
                    **key_overrides(keys)},
-        saved=lambda: (saved_sft_config(out), saved_inputs(out, "data")))
-    checkpoint = train_sft(inputs["data"], out, config, resume=resume)
+        saved=lambda: (saved_sft_config(out), saved_inputs(out, "data", "init", "imagined_by")))
+    checkpoint = train_sft(inputs["data"], out, config, resume=resume, init=inputs["init"],
+                           imagined_by=inputs["imagined_by"])
     print(f"policy: {checkpoint}")
 
 

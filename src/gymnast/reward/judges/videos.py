@@ -16,9 +16,9 @@ from tqdm import tqdm
 from gymnast.data.lerobot import EpisodeDataset
 from gymnast.data.schema import Episode
 from gymnast.reward.judges.progress import progress_targets
-from gymnast.world_model.base import load_world_model, placed, rollout
+from gymnast.world_model.base import load_world_model, placed
 from gymnast.world_model.data import split_episodes, usable_episodes
-from gymnast.world_model.views import model_cameras
+from gymnast.world_model.reimagine import reimagine, require_same_cameras
 
 NEAR_MISS_STEPS = 10  # a held-out negative: a successful episode cut this many steps before its success
 
@@ -46,9 +46,6 @@ class Video:
     progress: torch.Tensor
 
 
-IMAGINE_BATCH = 32  # episodes re-imagined together: one world-model call per step for all of them
-
-
 def real_video(episode: Episode) -> Video:
     """A recorded episode as a judge sees it: every camera read, side by side, with its successes."""
     frames = torch.from_numpy(episode.observed_frames)
@@ -69,26 +66,11 @@ def load_videos(dataset: EpisodeDataset, indices: list[int], wm: Path | None, pr
     if wm is None:
         return videos
     model = placed(load_world_model(wm), device or torch.device("cpu"))
-    imagines = model_cameras(model)
-    if (len(dataset.cameras) > 1 or imagines) and tuple(dataset.cameras) != imagines:
-        raise ValueError(f"{dataset.root} is read with cameras {','.join(dataset.cameras)}, but the world model {wm} "
-                         f"imagines {','.join(imagines) or 'one camera'}: re-imagine with a world model of the "
-                         "judge's cameras (`gymnast train-wm --cameras`), or train the judge without --wm")
-    # Episodes of similar length share a batch; shorter ones are padded with zero actions at the
-    # end and cut back, which changes none of their frames: frame t follows actions up to t only.
-    order = sorted(range(len(episodes)), key=lambda n: len(episodes[n]))
-    imagined: dict[int, Video] = {}
-    for first in tqdm(range(0, len(order), IMAGINE_BATCH), desc="imagining episodes", disable=not progress):
-        batch = order[first: first + IMAGINE_BATCH]
-        longest = max(len(episodes[n]) for n in batch)
-        actions = torch.stack([torch.nn.functional.pad(episodes[n], (0, 0, 0, longest - len(episodes[n]))) for n in batch])
-        start = torch.stack([videos[n].frames[:1] for n in batch])  # (b, 1, H, W, 3)
-        frames = rollout(model, start, actions=actions).frames  # (b, T_max, H, W, 3)
-        for n, video in zip(batch, frames):
-            real = videos[n]
-            video = torch.cat([real.frames[:1], video[: len(episodes[n])]])
-            imagined[n] = dataclasses.replace(real, frames=video, imagined=True)
-    return [video for n, real in enumerate(videos) for video in (real, imagined[n])]
+    require_same_cameras(dataset, model, wm, "re-imagine with a world model of the judge's cameras "
+                         "(`gymnast train-wm --cameras`), or train the judge without --wm")
+    imagined = reimagine(model, [video.frames[0] for video in videos], episodes, progress)
+    return [video for real, frames in zip(videos, imagined)
+            for video in (real, dataclasses.replace(real, frames=frames, imagined=True))]
 
 
 def heldout_videos(dataset: EpisodeDataset, fraction: float, wm: Path | None = None,
