@@ -89,6 +89,11 @@ def test_a_ladder_reports_a_dyna_loop_as_a_fix_arm_with_its_steps_counted_across
     assert arm.name == "fixed_dyna" and arm.reward == "judge"
     assert "gymnast dyna, 3 rounds of 1 steps" in arm.what and "1 real rollouts a task" in arm.what
     assert arm.what.startswith("a fix:") and arm.what.endswith("the world model and the judge are refit on")
+    # In a ladder of another policy the loop names the policy it started from.
+    (ladder / "config.json").write_text(json.dumps({"inputs": {"policy": "the/ladders/policy"}}))
+    loop_policy = json.loads((dyna_run / "config.json").read_text())["inputs"]["policy"]
+    assert fixed_arms(ladder)[0].what.endswith(f"are refit on, from {loop_policy}")
+    (ladder / "config.json").unlink()
     record = rung_record(arm, ladder / "fixed_dyna", steps=3)
     summary = json.loads((dyna_run / "summary.json").read_text())
     assert [point["step"] for point in record["curve"]] == [0, 1, 2, 3]  # round k at step k x 1

@@ -74,8 +74,15 @@ def test_the_ladder_swaps_one_part_per_rung_and_holds_each_reward_to_the_real_ou
     saved = json.loads((out / "fixed" / "config.json").read_text())
     saved["run"]["wm"] = "elsewhere/world_model"
     (other / "config.json").write_text(json.dumps(saved))
+    # ... and one that starts from another policy (say, one taught the imagined sight) says which.
+    sight = out / "fixed_sight"
+    sight.mkdir()
+    saved = json.loads((out / "fixed" / "config.json").read_text())
+    saved["run"]["policy"] = "elsewhere/policy"
+    (sight / "config.json").write_text(json.dumps(saved))
     arms = {arm.name: arm.what for arm in fixed_arms(out)}
     assert "imagined in elsewhere/world_model" in arms["fixed_refit"] and "imagined in" not in arms["fixed"]
+    assert arms["fixed_sight"].endswith(", from elsewhere/policy") and "from" not in arms["fixed"]
 
 
 def test_a_rung_whose_model_is_missing_is_refused_before_any_rung_trains(tmp_path, capsys):

@@ -120,34 +120,42 @@ def fixed_arms(out: Path) -> list[Rung]:
     """OUT/fixed and every OUT/fixed_<lever> as rungs, by name: an RL run whose settings its
     config.json holds (any env, reward and lever a user mends the broken rung with), or a Dyna loop."""
     arms = []
-    # A fix may be a world model of its own (one refit on what the ladder's got wrong): named where it is not the ladder's.
-    ladder_wm = saved_settings(out, "inputs").get("wm") if (out / "config.json").is_file() else None
+    # A fix may be a world model or a policy of its own (one refit on what the ladder's got wrong, one
+    # taught the imagined sight): named where it is not the ladder's.
+    ladder = saved_settings(out, "inputs") if (out / "config.json").is_file() else {}
     for where in sorted(out.glob(f"{FIXED.name}*")):
         if not (where / "config.json").is_file() or (where.name != FIXED.name and not where.name.startswith("fixed_")):
             continue
         if is_dyna(where):
-            arms.append(_dyna_arm(where))
+            arms.append(_dyna_arm(where, ladder.get("policy")))
             continue
         run = RLRun.from_json(saved_settings(where, "run"))
-        model = f", imagined in {run.wm}" if run.wm and run.wm != ladder_wm else ""
+        model = f", imagined in {run.wm}" if run.wm and run.wm != ladder.get("wm") else ""
         sees = f", the reward seeing {run.reward_sees}" if run.reward_sees else ""
         other = f" in {run.reward_wm}" if run.reward_wm else ""
         arms.append(Rung(where.name, run.env, str(run.reward), run.reward_sees,
-                         f"a fix: --env {run.env}{model} --reward {run.reward}{sees}{other}"))
+                         f"a fix: --env {run.env}{model} --reward {run.reward}{sees}{other}"
+                         f"{_from_policy(run.policy, ladder.get('policy'))}"))
     return arms
 
 
-def _dyna_arm(where: Path) -> Rung:
+def _from_policy(policy: str | Path, ladder_policy: str | None) -> str:
+    """", from POLICY" where an arm starts from another policy than the ladder's rungs, else nothing."""
+    return f", from {policy}" if ladder_policy and str(policy) != ladder_policy else ""
+
+
+def _dyna_arm(where: Path, ladder_policy: str | None) -> Rung:
     from gymnast.experiment.dyna import saved_dyna_settings
 
     config, inputs = saved_dyna_settings(where)
+    start = _from_policy(inputs.policy, ladder_policy)
     kind = inputs.reward_kind
     refit = [name for name, steps in (("the world model", config.wm_steps),
                                       ("the judge" if kind == "judge" else "the state model", config.reward_steps(kind)))
              if steps]
     rounds = f"gymnast dyna, {config.rounds} rounds of {config.rl.steps} steps in imagination"
     if not refit:  # the loop's rounds without its refits: what the rounds alone do
-        return Rung(where.name, IMAGINED, kind, None, f"a control: {rounds}, nothing refit between them")
+        return Rung(where.name, IMAGINED, kind, None, f"a control: {rounds}, nothing refit between them{start}")
     return Rung(where.name, IMAGINED, kind, None,
                 f"a fix: {rounds}, each recording {config.rollouts_per_task} real {config.record} a task that "
-                f"{' and '.join(refit)} {'are' if len(refit) > 1 else 'is'} refit on")
+                f"{' and '.join(refit)} {'are' if len(refit) > 1 else 'is'} refit on{start}")
