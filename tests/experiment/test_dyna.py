@@ -92,7 +92,8 @@ def test_a_ladder_reports_a_dyna_loop_as_a_fix_arm_with_its_steps_counted_across
     # In a ladder of another policy the loop names the policy it started from.
     (ladder / "config.json").write_text(json.dumps({"inputs": {"policy": "the/ladders/policy"}}))
     loop_policy = json.loads((dyna_run / "config.json").read_text())["inputs"]["policy"]
-    assert fixed_arms(ladder)[0].what.endswith(f"are refit on, from {loop_policy}")
+    (other,) = fixed_arms(ladder)
+    assert other.what.endswith(f"are refit on, from {loop_policy}") and other.own_start and not arm.own_start
     (ladder / "config.json").unlink()
     record = rung_record(arm, ladder / "fixed_dyna", steps=3)
     summary = json.loads((dyna_run / "summary.json").read_text())

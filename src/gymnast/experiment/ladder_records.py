@@ -133,9 +133,9 @@ def fixed_arms(out: Path) -> list[Rung]:
         model = f", imagined in {run.wm}" if run.wm and run.wm != ladder.get("wm") else ""
         sees = f", the reward seeing {run.reward_sees}" if run.reward_sees else ""
         other = f" in {run.reward_wm}" if run.reward_wm else ""
+        start = _from_policy(run.policy, ladder.get("policy"))
         arms.append(Rung(where.name, run.env, str(run.reward), run.reward_sees,
-                         f"a fix: --env {run.env}{model} --reward {run.reward}{sees}{other}"
-                         f"{_from_policy(run.policy, ladder.get('policy'))}"))
+                         f"a fix: --env {run.env}{model} --reward {run.reward}{sees}{other}{start}", bool(start)))
     return arms
 
 
@@ -155,7 +155,8 @@ def _dyna_arm(where: Path, ladder_policy: str | None) -> Rung:
              if steps]
     rounds = f"gymnast dyna, {config.rounds} rounds of {config.rl.steps} steps in imagination"
     if not refit:  # the loop's rounds without its refits: what the rounds alone do
-        return Rung(where.name, IMAGINED, kind, None, f"a control: {rounds}, nothing refit between them{start}")
+        return Rung(where.name, IMAGINED, kind, None, f"a control: {rounds}, nothing refit between them{start}",
+                    bool(start))
     return Rung(where.name, IMAGINED, kind, None,
                 f"a fix: {rounds}, each recording {config.rollouts_per_task} real {config.record} a task that "
-                f"{' and '.join(refit)} {'are' if len(refit) > 1 else 'is'} refit on{start}")
+                f"{' and '.join(refit)} {'are' if len(refit) > 1 else 'is'} refit on{start}", bool(start))

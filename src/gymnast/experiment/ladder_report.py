@@ -21,11 +21,14 @@ from gymnast.utils.atomic import read_json, write_bytes, write_json
 
 
 def ladder_summary(out: Path, config: RLConfig) -> dict:
-    """The ladder's summary.json: ``sft`` (every rung's step-0 evaluation), one entry per rung of
-    OUT that has evaluated, in the ladder's order, then the practice arms after a fix: `gymnast rl`
-    runs with the ladder's recipe or Dyna loops in OUT/fixed and OUT/fixed_<lever> (`fixed_arms`), where there are."""
+    """The ladder's summary.json: ``sft`` (every rung's step-0 evaluation; an arm that starts from
+    another policy gives it only where no other does), one entry per rung of OUT that has evaluated,
+    in the ladder's order, then the practice arms after a fix: `gymnast rl` runs with the ladder's
+    recipe or Dyna loops in OUT/fixed and OUT/fixed_<lever> (`fixed_arms`), where there are, those
+    from another policy last."""
     summary: dict = {}
-    for rung in (*RUNGS.values(), *fixed_arms(out)):
+    rungs = [*RUNGS.values(), *fixed_arms(out)]
+    for rung in sorted(rungs, key=lambda rung: rung.own_start):  # the ladder's own start first; sorted() is stable
         record = rung_record(rung, rung_dir(out, rung), config.steps)
         if record is None:
             continue

@@ -22,6 +22,8 @@ class Rung:
         reward: who gives the reward (one of `REWARDS`; the fixed arm's is its whole reward spec).
         sees: where the reward's video comes from (None: the rollouts' own).
         what: the rung in words, for the report.
+        own_start: a fix arm that starts from another policy than the ladder's: its step 0 is
+            not the ladder's starting policy.
     """
 
     name: str
@@ -29,6 +31,7 @@ class Rung:
     reward: str
     sees: EnvKind | None
     what: str
+    own_start: bool = False
 
     @property
     def needs_world_model(self) -> bool:
