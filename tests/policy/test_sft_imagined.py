@@ -11,8 +11,9 @@ import torch
 
 from gymnast.cli import main
 from gymnast.data.lerobot import EpisodeDataset
-from gymnast.policy.sft import imagined_demos, load_demos, select_demos
+from gymnast.policy.sft import load_demos, select_demos
 from gymnast.world_model.base import load_world_model, rollout
+from gymnast.world_model.reimagine import imagined_demos
 from gymnast.world_model.train import WM_PRESETS, train_world_model
 
 CHUNK = 5
@@ -29,7 +30,7 @@ def test_each_imagined_frame_a_policy_reads_is_paired_with_the_actions_the_real_
     dataset = EpisodeDataset(tiny_dataset)
     chosen = select_demos(dataset, per_task=1)
     demos = load_demos(dataset, chosen, CHUNK)
-    imagined = imagined_demos(dataset, chosen, demos, world_model, CHUNK)
+    imagined = imagined_demos(dataset, chosen, demos, CHUNK, world_model)
 
     lengths = [dataset.load(i).length for i in chosen]
     read = torch.cat([torch.arange(length) % CHUNK == 0 for length in lengths])
@@ -66,4 +67,4 @@ def test_a_world_model_that_draws_another_image_size_than_the_policy_reads_is_na
     dataset = EpisodeDataset(tiny_dataset).fitted(16, "resize")  # the world model draws 32 px
     chosen = select_demos(dataset, per_task=1)
     with pytest.raises(ValueError, match="draws 32 px frames, but the policy reads 16 px"):
-        imagined_demos(dataset, chosen, load_demos(dataset, chosen, CHUNK), world_model, CHUNK)
+        imagined_demos(dataset, chosen, load_demos(dataset, chosen, CHUNK), CHUNK, world_model)

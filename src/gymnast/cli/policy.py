@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 from typing import Annotated, Literal
 
@@ -71,7 +72,7 @@ def sft(
             so that the policy learns to act on imagined frames as on real ones, the sight it has
             when it practises in that world model.
     """
-    from gymnast.policy.sft import SFT_PRESETS, saved_sft_config, train_sft
+    from gymnast.policy.sft import SFT_PRESETS, SamplesFrom, saved_sft_config, train_sft
 
     config, inputs = resolve(
         "sft", out, resume, SFT_PRESETS[preset], inputs={"data": data, "init": init, "imagined_by": imagined_by},
@@ -81,8 +82,15 @@ def sft(
                    "robot_state": robot_state, "fit": fit, "device": device, "tracker": tracker,
                    **key_overrides(keys)},
         saved=lambda: (saved_sft_config(out), saved_inputs(out, "data", "init", "imagined_by")))
-    checkpoint = train_sft(inputs["data"], out, config, resume=resume, init=inputs["init"],
-                           imagined_by=inputs["imagined_by"])
+    samples_from = None
+    if inputs["imagined_by"] is not None:
+        from gymnast.utils.device import resolve_device
+        from gymnast.world_model.reimagine import imagined_demos
+
+        wm = inputs["imagined_by"]
+        samples_from = SamplesFrom(functools.partial(imagined_demos, wm=wm, device=resolve_device(config.device)),
+                                   {"imagined_by": str(wm)})
+    checkpoint = train_sft(inputs["data"], out, config, resume=resume, init=inputs["init"], samples_from=samples_from)
     print(f"policy: {checkpoint}")
 
 

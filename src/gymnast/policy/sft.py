@@ -15,7 +15,7 @@ import logging
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Literal
+from typing import Callable, Literal
 
 import torch
 import torch.nn.functional as F
@@ -127,6 +127,17 @@ class DemoSet:
     states: torch.Tensor | None = None
 
 
+@dataclass(frozen=True)
+class SamplesFrom:
+    """Extra samples made from the chosen demonstrations, drawn 1:1 with them: ``make(dataset,
+    indices, demos, chunk_size)`` (say, `gymnast.world_model.reimagine.imagined_demos`: the
+    demonstrations as a world model imagines them); `saved` is what the run records of their
+    source beside its inputs (e.g. ``{"imagined_by": WM}``)."""
+
+    make: Callable[[EpisodeDataset, list[int], DemoSet, int], DemoSet]
+    saved: dict[str, str]
+
+
 def select_demos(dataset: EpisodeDataset, per_task: int, tasks: str = "") -> list[int]:
     """Indices of the first `per_task` successful expert episodes of each task (by seed, noise).
 
@@ -170,38 +181,6 @@ def load_demos(dataset: EpisodeDataset, indices: list[int], chunk_size: int) -> 
                    torch.cat(states))
 
 
-def imagined_demos(dataset: EpisodeDataset, indices: list[int], demos: DemoSet, wm: Path, chunk_size: int,
-                   device: torch.device | None = None) -> DemoSet:
-    """The demonstrations as a policy sees them in imagination: each episode re-imagined by the world
-    model `wm` under its own actions, its frames paired with the same instruction, state and next
-    actions as the real frames in `demos` (`load_demos` of the same `indices`).
-
-    Only the frames a policy reads in imagination are kept, one per action chunk (t = 0, K, 2K...):
-    it acts a chunk at a time and reads the frame after each, so those are the frames whose drawing
-    it must act well on.
-    """
-    from gymnast.world_model.base import load_world_model, placed
-    from gymnast.world_model.reimagine import reimagine, require_same_cameras
-
-    model = placed(load_world_model(wm), device or torch.device("cpu"))
-    require_same_cameras(dataset, model, wm, "imagine the demonstrations with a world model of the policy's "
-                         "cameras (`gymnast train-wm --cameras`)")
-    if model.image_size != demos.images.shape[1]:
-        raise ValueError(f"the world model {wm} draws {model.image_size} px frames, but the policy reads "
-                         f"{demos.images.shape[1]} px ones from {dataset.root}; imagine with a world model of the "
-                         f"policy's image size")
-    episodes = [dataset.load(i) for i in indices]
-    actions = [torch.from_numpy(episode.actions).float() for episode in episodes]
-    videos = reimagine(model, [torch.from_numpy(episode.observed_frames[0]) for episode in episodes], actions)
-    images = torch.cat([video[: len(steps)] for video, steps in zip(videos, actions)])  # frame t, before action t
-    read = torch.cat([torch.arange(len(steps)) % chunk_size == 0 for steps in actions])
-    if len(images) != len(demos.images):
-        raise ValueError(f"{dataset.root}: the demonstrations hold {len(demos.images)} frames but their episodes "
-                         f"{len(images)} actions")
-    return DemoSet(images[read], demos.chunks[read], demos.valid[read], demos.instruction[read], demos.instructions,
-                   demos.episodes, None if demos.states is None else demos.states[read])
-
-
 def random_shift(images: torch.Tensor, pad: int, generator: torch.Generator, views: int = 1) -> torch.Tensor:
     """Shifts each (H, W, 3) uint8 image by up to `pad` pixels (DrQ-style augmentation); an image of
     `views` cameras side by side has each camera's square shifted alone, as if each camera moved."""
@@ -222,7 +201,7 @@ def random_shift(images: torch.Tensor, pad: int, generator: torch.Generator, vie
 
 
 def train_sft(data: Path, out: Path, config: SFTConfig, resume: bool = False, progress: bool = True,
-              init: Path | None = None, extra: DemoSet | None = None, imagined_by: Path | None = None) -> Path:
+              init: Path | None = None, extra: DemoSet | None = None, samples_from: SamplesFrom | None = None) -> Path:
     """Trains (or resumes) an SFT run in `out`; returns the final checkpoint directory.
 
     Args:
@@ -230,12 +209,10 @@ def train_sft(data: Path, out: Path, config: SFTConfig, resume: bool = False, pr
             instead of a fresh model: fine-tuning, as Iter-SFT does.
         extra: more samples (say, a policy's own successful rollouts), drawn 1:1 with the
             demonstrations: half of every batch comes from each.
-        imagined_by: a world-model run: the extra samples are then the demonstrations as this
-            world model imagines them (`imagined_demos`), so that the policy learns to act on
-            imagined frames as it does on real ones (not with `extra`).
+        samples_from: the extra samples made from the chosen demonstrations instead (not with `extra`).
     """
-    if imagined_by is not None and extra is not None:
-        raise ValueError("train_sft takes extra samples or imagined_by, not both")
+    if samples_from is not None and extra is not None:
+        raise ValueError("train_sft takes extra samples or samples_from, not both")
     dataset = EpisodeDataset(data, config.camera, config.cameras or None, keys=config.keys)
     size = model_image_size(dataset.camera_shape, config.vla.image_size)
     if init is not None:
@@ -255,8 +232,8 @@ def train_sft(data: Path, out: Path, config: SFTConfig, resume: bool = False, pr
     dataset = dataset.fitted(size, config.fit)
     chosen = select_demos(dataset, config.demos_per_task, config.tasks)
     demos = load_demos(dataset, chosen, config.vla.chunk_size)
-    if imagined_by is not None:
-        extra = imagined_demos(dataset, chosen, demos, imagined_by, config.vla.chunk_size, resolve_device(config.device))
+    if samples_from is not None:
+        extra = samples_from.make(dataset, chosen, demos, config.vla.chunk_size)
     if config.robot_state and init is None:
         config = dataclasses.replace(config, vla=dataclasses.replace(config.vla, state_dim=state_dim_of(data, demos)))
     logger.info("SFT on %d demonstrations (%d samples, %d instructions)%s", len(demos.episodes), len(demos.images),
@@ -271,17 +248,17 @@ def train_sft(data: Path, out: Path, config: SFTConfig, resume: bool = False, pr
             raise ValueError("sft --policy-type flow draws its noise per sample and does not train under torchrun yet; "
                              "run it as one process")
         model = model.to(parallel.device)  # before the optimizer: it keeps the parameters it is given
-        return _train(out, config, model, demos, extra, _saved_inputs(data, init, extra, stats, demos, imagined_by),
+        return _train(out, config, model, demos, extra, _saved_inputs(data, init, extra, stats, demos, samples_from),
                       resume, progress, parallel)
 
 
 def _saved_inputs(data: Path, init: Path | None, extra: DemoSet | None, stats: ActionStats, demos: DemoSet,
-                  imagined_by: Path | None) -> dict:
-    """What an SFT run saves beside its settings and model: its data, demonstrations, start and the
-    world model that imagined its extra samples."""
+                  samples_from: SamplesFrom | None) -> dict:
+    """What an SFT run saves beside its settings and model: its data, demonstrations, start and where
+    its extra samples came from (``imagined_by``: the world model that imagined them, or None)."""
     return {"data": str(data), "action_stats": stats.to_dict(), "demos": [info.key for info in demos.episodes],
             "init": str(init) if init else None, "extra_samples": len(extra.images) if extra is not None else 0,
-            "imagined_by": str(imagined_by) if imagined_by else None}
+            "imagined_by": None, **(samples_from.saved if samples_from is not None else {})}
 
 
 def _train(out: Path, config: SFTConfig, model: nn.Module, demos: DemoSet, extra: DemoSet | None, inputs: dict,
