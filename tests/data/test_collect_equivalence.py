@@ -3,7 +3,9 @@
 collect_sha256_before_engine.json holds the SHA-256 of every file two collections wrote when
 collect still stepped its episodes by hand (commit af35195): scripted experts, noisy experts and
 failures in the real world, and experts in the mild simulator, all with one worker (with several,
-episodes are stored in completion order).
+episodes are stored in completion order). The videos' bytes are those of the encoder the hashes
+were recorded with (PyAV 18.1.0's FFmpeg); another build encodes the same frames into other bytes,
+so there only the videos' names are held to the record, and every other file's bytes still are.
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ import hashlib
 import json
 from pathlib import Path
 
+import av
 import pytest
 
 from gymnast.config import EnvConfig
@@ -19,6 +22,7 @@ from gymnast.data.collect import CollectConfig, collect
 
 BEFORE = json.loads((Path(__file__).parent / "collect_sha256_before_engine.json").read_text())
 ENV = EnvConfig(image_size=32, horizon=30)
+RECORDED_WITH_AV = "18.1.0"
 
 
 @pytest.mark.slow
@@ -29,4 +33,9 @@ def test_collect_writes_the_same_bytes_as_before_the_rollout_engine(tmp_path: Pa
             tmp_path / "data_mild", progress=False)
     written = {str(path.relative_to(tmp_path)): hashlib.sha256(path.read_bytes()).hexdigest()
                for path in sorted(tmp_path.rglob("*")) if path.is_file()}
-    assert written == BEFORE
+    if av.__version__ == RECORDED_WITH_AV:
+        assert written == BEFORE
+        return
+    assert written.keys() == BEFORE.keys()
+    assert {name: digest for name, digest in written.items() if not name.endswith(".mp4")} == \
+        {name: digest for name, digest in BEFORE.items() if not name.endswith(".mp4")}
