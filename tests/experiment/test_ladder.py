@@ -131,3 +131,79 @@ def test_a_rung_claimed_by_a_live_process_is_left_to_it_and_a_dead_ones_claim_is
     with claimed(where) as mine:
         assert mine
 
+
+
+def _real_run(out, policy=POLICY, *extra):
+    """A `gymnast rl` run in the real world with the simulator's success, on the debug ladder's recipe."""
+    main(["rl", "--policy", str(policy), "--env", "real", "--reward", "sim", "--preset", "debug", "--fresh-scenes",
+          "--out", str(out), *extra])
+    return out
+
+
+def _adopting(out, adoptions):
+    """`gymnast ladder --adopt ...` with the committed models and no rung to train."""
+    return ["ladder", "--out", str(out), "--preset", "debug", "--adopt", adoptions, "--policy", str(POLICY),
+            "--wm", str(WORLD_MODEL), "--judge", str(JUDGE)]
+
+
+def test_a_rung_run_elsewhere_is_adopted_only_when_it_is_the_same_experiment(tmp_path, capsys):
+    real = _real_run(tmp_path / "elsewhere" / "real")
+    ladder = tmp_path / "ladder"
+    trained = len(read_metrics(real))
+    main(_adopting(ladder, f"r0_real={real}"))
+    link = ladder / "r0_real"
+    assert link.is_symlink() and not Path(os.readlink(link)).is_absolute() and link.resolve() == real.resolve()
+    assert len(read_metrics(real)) == trained  # linked, not trained again
+    record = json.loads((ladder / "summary.json").read_text())["r0_real"]
+    assert record["finished"] and record["adopted_from"] == os.readlink(link) and "adopted" in record["what"]
+    main(_ladder(ladder, "r0_real", models=False))  # a rerun that names the rung trains nothing into the run
+    assert len(read_metrics(real)) == trained
+
+    # Another recipe, another reward or a rung that exists already: refused, naming what differs.
+    other_lr = _real_run(tmp_path / "elsewhere" / "lr", POLICY, "--lr", "1e-3")
+    with pytest.raises(SystemExit):
+        main(_adopting(tmp_path / "ladder2", f"r0_real={other_lr}"))
+    assert "lr was 0.001" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(_adopting(tmp_path / "ladder2", f"r1_judge_real={real}"))
+    assert "its reward was sim" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(_adopting(ladder, f"r0_real={other_lr}"))
+    assert "exists already" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(_adopting(tmp_path / "ladder2", "r0_real"))
+    assert "RUNG=RUN" in capsys.readouterr().err
+
+
+def test_an_adopted_runs_starting_policy_is_known_by_its_weights_or_else_by_its_step_0_evaluation(tmp_path):
+    import shutil
+
+    from gymnast.experiment.ladder_adopt import adopt_rung
+    from gymnast.rl.config import RLRun
+    from gymnast.experiment.ladder import LADDER_PRESETS
+    from gymnast.envs.kinds import REAL
+    from gymnast.reward.spec import RewardSpec
+
+    copy = tmp_path / "copy_of_policy"
+    shutil.copytree(POLICY, copy)
+    real = _real_run(tmp_path / "elsewhere" / "real", copy)
+    expected, recipe = RLRun(policy=str(POLICY), env=REAL, reward=RewardSpec("sim")), LADDER_PRESETS["debug"]
+    assert adopt_rung(tmp_path / "by_weights", RUNGS["r0_real"], real, expected, recipe).is_symlink()
+
+    # The copy gone: a ladder with no starting evaluation cannot tell; one whose start evaluated the
+    # same on the same episodes can, and one whose start evaluated otherwise refuses.
+    shutil.rmtree(copy)
+    with pytest.raises(ValueError, match="starting policy"):
+        adopt_rung(tmp_path / "empty", RUNGS["r0_real"], real, expected, recipe)
+    ladder = tmp_path / "with_start"
+    shutil.copytree(real, ladder / "fixed")  # any arm of the ladder gives its starting evaluation
+    assert adopt_rung(ladder, RUNGS["r0_real"], real, expected, recipe).is_symlink()
+    other = tmp_path / "other_start"
+    shutil.copytree(real, other / "fixed")
+    lines = (other / "fixed" / "metrics.jsonl").read_text().splitlines()
+    first = json.loads(lines[0])
+    assert first["step"] == 0 and "eval/own_success" in first
+    first = {key: (1.0 - value if key.startswith("eval/own_success") else value) for key, value in first.items()}
+    (other / "fixed" / "metrics.jsonl").write_text("\n".join([json.dumps(first), *lines[1:]]) + "\n")
+    with pytest.raises(ValueError, match="step-0 evaluation differs"):
+        adopt_rung(other, RUNGS["r0_real"], real, expected, recipe)

@@ -92,7 +92,8 @@ def ladder(
     wm: Path | None = None,
     judge: Path | None = None,
     state: Path | None = None,
-    rungs: str = "all",
+    rungs: str | None = None,
+    adopt: str | None = None,
     index: Path | None = None,
     preset: Literal["debug", "full"] = "full",
     resume: bool = False,
@@ -116,6 +117,11 @@ def ladder(
         rungs: the rungs to run now, in this order, comma-separated, of r0_real, r1_judge_real,
             r1s_state_real, r2_imagined_verdict, r3_imagined_sight, r4_imagined, r4s_imagined_state;
             all: every one. A later call may run others in the same OUT; the report covers them all.
+            (default: all; with --adopt, none)
+        adopt: rungs that ran elsewhere, RUNG=RUN comma-separated (e.g. r0_real=results/rl/my_real_run):
+            each is linked in as the rung, not trained again, once it is shown to be the same
+            experiment (the rung's env, reward and models, the ladder's GRPO recipe and starting
+            policy; how it was evaluated may differ, and the report says so).
         index: also gather every ladder under this directory into INDEX/summary.json, nested by
             path (e.g. --out results/ladder/scarce/mt10 --index results/ladder).
         preset: debug (seconds; tests) or full (the recipe that learns on MT10, 100 evaluation
@@ -125,6 +131,7 @@ def ladder(
         config: the GRPO settings every rung shares; each one left out keeps the preset's value.
     """
     from gymnast.experiment.ladder import LADDER_PRESETS, LadderInputs, parse_rungs, run_ladder
+    from gymnast.experiment.ladder_adopt import adopt_rung, parse_adoptions
     from gymnast.experiment.ladder_report import ladder_table, write_ladder_index
     from gymnast.utils.settings import from_json, saved_settings
 
@@ -140,7 +147,12 @@ def ladder(
         from gymnast.utils.atomic import write_json
 
         write_json(out / "config.json", {"rl": dataclasses.asdict(settings), "inputs": dataclasses.asdict(models)})
-    summary = run_ladder(models, settings, parse_rungs(rungs), out)
+    adoptions = parse_adoptions(adopt)
+    for name, run in adoptions.items():
+        (rung,) = parse_rungs(name)
+        print(f"{name}: the run {run}, adopted as {adopt_rung(out, rung, run, models.run_of(rung), settings)}")
+    to_train = parse_rungs(rungs) if rungs else () if adoptions else parse_rungs("all")
+    summary = run_ladder(models, settings, to_train, out)
     print(ladder_table(summary))
     if index is not None:
         write_ladder_index(index)

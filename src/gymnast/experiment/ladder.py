@@ -117,6 +117,9 @@ def run_rung(rung: Rung, inputs: LadderInputs, config: RLConfig, out: Path, prog
     from gymnast.rl.train import train_rl
 
     where = rung_dir(out, rung)
+    if where.is_symlink():  # adopted (`gymnast.experiment.ladder_adopt`): never trained into another run
+        logger.info("ladder: %s is the run %s, adopted; nothing to train", rung.name, os.readlink(where))
+        return None
     if (where / "summary.json").is_file():
         summary = read_json(where / "summary.json")
         if summary.get("steps") == config.steps and summary["curve"] and summary["curve"][-1]["step"] == config.steps:

@@ -9,6 +9,7 @@ reports what it has, and says whether it finished.
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 from gymnast.envs.kinds import IMAGINED
@@ -28,9 +29,17 @@ SPENT = (("real_interactions", "rollout/real_interactions"), ("truth_real_intera
 
 
 def rung_record(rung: Rung, run: Path, steps: int) -> dict | None:
-    """Rung `rung`'s figures from its run directory, or None before its first evaluation."""
-    if is_dyna(run):
-        return dyna_record(rung, run)
+    """Rung `rung`'s figures from its run directory, or None before its first evaluation. A rung
+    adopted from a run made elsewhere (`gymnast.experiment.ladder_adopt`: OUT/<rung> links to it)
+    names that run."""
+    record = dyna_record(rung, run) if is_dyna(run) else _rl_record(rung, run, steps)
+    if record is not None and run.is_symlink():
+        adopted = os.readlink(run)
+        record = {**record, "what": f"{record['what']} (adopted: the run {adopted})", "adopted_from": adopted}
+    return record
+
+
+def _rl_record(rung: Rung, run: Path, steps: int) -> dict | None:
     lines = read_metrics(run)
     # A rung in the real world evaluates itself there ("own"); the others also in the real world.
     real = "eval/own" if rung.env.real_interactions else "eval/real"

@@ -50,19 +50,19 @@ def mean_agreement(record: dict, key: str = "agreement") -> float | None:
 
 def ladder_table(summary: dict) -> str:
     """The ladder as a markdown table, one row per rung."""
-    rows = ["| rung | real success [95% CI] | from | agreement (first -> last step) | false successes | "
-            "signal | real interactions (training) | steps |", "|---|---|---|---|---|---|---|---|"]
+    rows = ["| rung | real success [95% CI] | episodes | from | agreement (first -> last step) | false successes | "
+            "signal | real interactions (training) | steps |", "|---|---|---|---|---|---|---|---|---|"]
     for name, record in summary.items():
         if name == "sft":
-            rows.append(f"| sft | {pct(record['success'])} [{pct(record['ci_low'])}, {pct(record['ci_high'])}] | | | | "
-                        f"| 0 | |")
+            rows.append(f"| sft | {pct(record['success'])} [{pct(record['ci_low'])}, {pct(record['ci_high'])}] | "
+                        f"{record['episodes']} | | | | | 0 | |")
             continue
         agreement = [row["agreement"] for row in record["agreement_by_step"] if row.get("agreement") is not None]
         moved = f"{pct(agreement[0])} -> {pct(agreement[-1])}" if agreement else "n/a"
         false = mean_agreement(record, "false_success")
         signal = mean_agreement(record, "truth_signal")
         rows.append(f"| {name} | {pct(record['success'])} [{pct(record['ci_low'])}, {pct(record['ci_high'])}] | "
-                    f"{pct(record['start_success'])} | {moved} | {'n/a' if false is None else pct(false)} | "
+                    f"{record['episodes']} | {pct(record['start_success'])} | {moved} | {'n/a' if false is None else pct(false)} | "
                     f"{'n/a' if signal is None else f'{signal:+.2f}'} | {record['real_interactions']:,} | "
                     f"{record['steps_done']}{'' if record['finished'] else ' (under way)'} |")
     return "\n".join(rows)
@@ -77,7 +77,8 @@ def write_ladder_report(out: Path, config: RLConfig) -> dict:
         plot_ladder_agreement(summary, out / "agreement.png")
     lines = ["# The learning ladder", "",
              f"{config.steps} GRPO steps of {config.starts_per_step} x {config.group_size} rollouts on {config.tasks}, "
-             f"real success on {config.eval_episodes} evaluation seeds per task (95% Wilson intervals). Agreement: how "
+             f"real success at the last evaluation, the recipe's on {config.eval_episodes} evaluation seeds per task (a "
+             "row's own episodes beside it; 95% Wilson intervals). Agreement: how "
              "often the reward's verdict equals the real outcome of the same rollouts (first and last step measured); "
              "false successes: the share of its successes that fail for real (mean over steps); signal: the "
              "correlation of its group advantages with the real outcomes (mean over steps).", "",
