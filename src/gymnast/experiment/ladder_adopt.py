@@ -18,6 +18,7 @@ import math
 import os
 from pathlib import Path
 
+from gymnast.experiment.ladder_records import evaluation
 from gymnast.experiment.ladder_report import ladder_summary
 from gymnast.experiment.rungs import Rung, rung_dir
 from gymnast.rl.config import RLConfig, RLRun
@@ -123,12 +124,10 @@ def _same_policy(policy: str, ladder_policy: str, run: Path, out: Path, recipe: 
                  None)
     if start is None or first is None or first["step"] != 0:
         return False
-    prefix = "eval/own" if "eval/own_success" in first else "eval/real"
-    tasks = {key.removeprefix(f"{prefix}_success/"): value for key, value in first.items()
-             if key.startswith(f"{prefix}_success/")}
+    mine = evaluation(first, "eval/own" if "eval/own_success" in first else "eval/real")
     expected = start["curve"][0]
-    return (first[f"{prefix}_episodes"] == expected["episodes"] and tasks.keys() == expected["tasks"].keys()
-            and all(math.isclose(tasks[task], expected["tasks"][task], abs_tol=1e-6) for task in tasks))
+    return (mine["episodes"] == expected["episodes"] and mine["tasks"].keys() == expected["tasks"].keys()
+            and all(math.isclose(value, expected["tasks"][task], abs_tol=1e-6) for task, value in mine["tasks"].items()))
 
 
 def _weights_digest(policy: str) -> str | None:
