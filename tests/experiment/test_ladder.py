@@ -173,6 +173,9 @@ def test_a_rung_run_elsewhere_is_adopted_only_when_it_is_the_same_experiment(tmp
     with pytest.raises(SystemExit):
         main(_adopting(tmp_path / "ladder2", "r0_real"))
     assert "RUNG=RUN" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(_adopting(tmp_path / "ladder2", f"r9_nowhere={real}"))
+    assert "no rung 'r9_nowhere'" in capsys.readouterr().err
 
 
 def test_an_adopted_runs_starting_policy_is_known_by_its_weights_or_else_by_its_step_0_evaluation(tmp_path):

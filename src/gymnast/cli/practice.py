@@ -148,9 +148,8 @@ def ladder(
 
         write_json(out / "config.json", {"rl": dataclasses.asdict(settings), "inputs": dataclasses.asdict(models)})
     adoptions = parse_adoptions(adopt)
-    for name, run in adoptions.items():
-        (rung,) = parse_rungs(name)
-        print(f"{name}: the run {run}, adopted as {adopt_rung(out, rung, run, models.run_of(rung), settings)}")
+    for rung, run in adoptions.items():
+        print(f"{rung.name}: the run {run}, adopted as {adopt_rung(out, rung, run, models.run_of(rung), settings)}")
     to_train = parse_rungs(rungs) if rungs else () if adoptions else parse_rungs("all")
     summary = run_ladder(models, settings, to_train, out)
     print(ladder_table(summary))

@@ -18,11 +18,10 @@ import math
 import os
 from pathlib import Path
 
-from gymnast.experiment.ladder_records import evaluation
+from gymnast.experiment.ladder_records import rung_record
 from gymnast.experiment.ladder_report import ladder_summary
-from gymnast.experiment.rungs import Rung, rung_dir
+from gymnast.experiment.rungs import RUNGS, Rung, rung_dir
 from gymnast.rl.config import RLConfig, RLRun
-from gymnast.utils.metrics import read_metrics
 from gymnast.utils.settings import from_json, saved_settings
 
 NOT_THE_RECIPE = frozenset({
@@ -32,18 +31,20 @@ NOT_THE_RECIPE = frozenset({
 (`micro_batch` accumulates the same gradient; `remember_vision` reuses the same tokens)."""
 
 
-def parse_adoptions(text: str | None) -> dict[str, Path]:
-    """``RUNG=RUN[,RUNG=RUN...]`` as {rung name: run}.
+def parse_adoptions(text: str | None) -> dict[Rung, Path]:
+    """``RUNG=RUN[,RUNG=RUN...]`` as {rung: run}.
 
     Raises:
-        ValueError: an entry without ``=`` (the message shows the form).
+        ValueError: an entry without ``=`` (the message shows the form) or an unknown rung.
     """
     adoptions = {}
     for entry in filter(None, (part.strip() for part in (text or "").split(","))):
-        name, sep, run = entry.partition("=")
-        if not sep or not name.strip() or not run.strip():
+        name, sep, run = (part.strip() for part in entry.partition("="))
+        if not sep or not name or not run:
             raise ValueError(f"--adopt {entry!r}: give RUNG=RUN, e.g. r0_real=results/rl/scarce_mt10_real")
-        adoptions[name.strip()] = Path(run.strip())
+        if name not in RUNGS:
+            raise ValueError(f"--adopt {entry!r}: no rung {name!r}; the rungs are {', '.join(RUNGS)}")
+        adoptions[RUNGS[name]] = Path(run)
     return adoptions
 
 
@@ -70,7 +71,7 @@ def adopt_rung(out: Path, rung: Rung, run: Path, expected: RLRun, recipe: RLConf
     saved = _rl_run_settings(run)
     problems = _run_differences(RLRun.from_json(saved["run"]), expected)
     problems += _recipe_differences(from_json(RLConfig, saved["rl"]), recipe)
-    if not problems and not _same_policy(saved["run"]["policy"], expected.policy, run, out, recipe):
+    if not problems and not _same_policy(saved["run"]["policy"], expected.policy, rung, run, out, recipe):
         problems.append(f"its starting policy {saved['run']['policy']} is not the ladder's {expected.policy}: not "
                         "the same path or weights, and its step-0 evaluation differs from the ladder's (or the "
                         "ladder has none yet to compare with)")
@@ -111,7 +112,7 @@ def _recipe_differences(run: RLConfig, recipe: RLConfig) -> list[str]:
             if field.name not in NOT_THE_RECIPE and getattr(run, field.name) != getattr(recipe, field.name)]
 
 
-def _same_policy(policy: str, ladder_policy: str, run: Path, out: Path, recipe: RLConfig) -> bool:
+def _same_policy(policy: str, ladder_policy: str, rung: Rung, run: Path, out: Path, recipe: RLConfig) -> bool:
     """Whether the run started from the ladder's policy: by path, by weights, or else by its step-0
     real evaluation."""
     if os.path.normpath(policy) == os.path.normpath(ladder_policy):
@@ -120,14 +121,12 @@ def _same_policy(policy: str, ladder_policy: str, run: Path, out: Path, recipe: 
     if mine is not None and theirs is not None:
         return mine == theirs
     start = ladder_summary(out, recipe).get("sft") if out.is_dir() else None
-    first = next((line for line in read_metrics(run) if "eval/own_success" in line or "eval/real_success" in line),
-                 None)
-    if start is None or first is None or first["step"] != 0:
+    record = rung_record(rung, run, recipe.steps)
+    if start is None or record is None or record["curve"][0]["step"] != 0:
         return False
-    mine = evaluation(first, "eval/own" if "eval/own_success" in first else "eval/real")
-    expected = start["curve"][0]
-    return (mine["episodes"] == expected["episodes"] and mine["tasks"].keys() == expected["tasks"].keys()
-            and all(math.isclose(value, expected["tasks"][task], abs_tol=1e-6) for task, value in mine["tasks"].items()))
+    first, expected = record["curve"][0], start["curve"][0]
+    return (first["episodes"] == expected["episodes"] and first["tasks"].keys() == expected["tasks"].keys()
+            and all(math.isclose(value, expected["tasks"][task], abs_tol=1e-6) for task, value in first["tasks"].items()))
 
 
 def _weights_digest(policy: str) -> str | None:

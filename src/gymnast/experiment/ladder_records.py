@@ -43,7 +43,7 @@ def _rl_record(rung: Rung, run: Path, steps: int) -> dict | None:
     lines = read_metrics(run)
     # A rung in the real world evaluates itself there ("own"); the others also in the real world.
     real = "eval/own" if rung.env.real_interactions else "eval/real"
-    curve = [evaluation(line, real) for line in lines if f"{real}_success" in line]
+    curve = [_evaluation(line, real) for line in lines if f"{real}_success" in line]
     if not curve:
         return None
     last, done = curve[-1], _steps_done(lines)
@@ -113,8 +113,7 @@ def _steps_done(lines: list[dict]) -> int:
     return max((line["step"] for line in lines if "train/lr" in line), default=0)
 
 
-def evaluation(line: dict, prefix: str) -> dict:
-    """The real evaluation a metrics line logged under `prefix` (``eval/own``, ``eval/real``)."""
+def _evaluation(line: dict, prefix: str) -> dict:
     tasks = {key.removeprefix(f"{prefix}_success/"): value for key, value in line.items()
              if key.startswith(f"{prefix}_success/")}
     return {"step": line["step"], "success": line[f"{prefix}_success"], "ci_low": line[f"{prefix}_ci_low"],
