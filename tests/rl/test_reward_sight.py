@@ -1,6 +1,7 @@
 """What the reward sees (the rollouts' own video, or their actions replayed in another world) and
 how its verdicts are held to the real outcome, against the real simulator and the committed models."""
 
+import json
 import math
 
 import pytest
@@ -12,7 +13,8 @@ from gymnast.envs.factory import EnvFactory
 from gymnast.envs.kinds import IMAGINED, REAL
 from gymnast.policy.load import load_policy
 from gymnast.reward.spec import RewardSpec
-from gymnast.rl.config import RLRun
+from gymnast.rl.config import RLConfig, RLRun
+from gymnast.rl.reanchor import frames_at_calls, on_replays, with_logp_on_observations
 from gymnast.rl.rollout import collect_rollouts, dataset_starts
 from gymnast.rl.sight import RewardSight, reward_truth_metrics
 from gymnast.world_model.base import load_world_model
@@ -125,3 +127,67 @@ def test_a_reward_world_model_is_refused_without_imagined_replays(rl_dataset, tm
               "--reward-wm", str(WORLD_MODEL), "--out", str(tmp_path / "run"), "--data", str(rl_dataset),
               "--preset", "debug"])
     assert "--reward-sees imagined" in capsys.readouterr().err
+
+
+def test_the_frame_before_each_call_is_what_the_policy_saw_there(imagined_and_real):
+    _, _, real = imagined_and_real
+    calls = real.tokens.shape[1]
+    chunk = real.actions.shape[1] // calls
+    acting = real.token_mask.any(-1)  # (R, S) calls made before the rollout's end
+    assert torch.equal(frames_at_calls(real.frames, calls, chunk)[acting], real.observations[acting])
+
+
+def test_a_replay_that_renders_only_what_the_policy_reads_keeps_its_outcome_and_those_frames(imagined_and_real):
+    envs, imagined, _ = imagined_and_real
+    full, spent = RewardSight(envs, IMAGINED, sees=REAL).seen(imagined)
+    light, spent_light = RewardSight(envs, IMAGINED, sees=REAL, video=False).seen(imagined)
+    calls = imagined.tokens.shape[1]
+    chunk = imagined.actions.shape[1] // calls
+    assert torch.equal(light.success, full.success) and spent_light == spent
+    assert torch.equal(frames_at_calls(light.frames, calls, chunk), frames_at_calls(full.frames, calls, chunk))
+    assert not torch.equal(light.frames, full.frames)  # the frames inside a chunk were not rendered
+
+
+def test_learning_on_replays_holds_the_imagined_actions_to_the_real_frames_at_each_call(imagined_and_real):
+    envs, imagined, _ = imagined_and_real
+    seen, _ = RewardSight(envs, IMAGINED, sees=REAL, video=False).seen(imagined)
+    chunk = imagined.actions.shape[1] // imagined.tokens.shape[1]
+    anchored = on_replays(imagined, seen, chunk)
+    assert torch.equal(anchored.observations, frames_at_calls(seen.frames, imagined.tokens.shape[1], chunk))
+    assert not torch.equal(anchored.observations[:, 1:], imagined.observations[:, 1:])
+    assert torch.equal(anchored.tokens, imagined.tokens) and torch.equal(anchored.rendered, imagined.rendered)
+    with pytest.raises(ValueError, match="are not those of"):
+        on_replays(imagined, seen.select(torch.arange(1)), chunk)
+
+
+def test_the_ratio_starts_from_the_tokens_log_probabilities_on_the_frames_the_update_reads(imagined_and_real):
+    envs, imagined, _ = imagined_and_real
+    policy = load_policy(POLICY)
+    mask = imagined.token_mask
+    again = with_logp_on_observations(policy, imagined, 1.0, micro_batch=3)
+    # on the frames it sampled on, the policy's log-probabilities are those it sampled with
+    assert torch.allclose(again.logp[mask], imagined.logp[mask], atol=1e-4)
+    seen, _ = RewardSight(envs, IMAGINED, sees=REAL, video=False).seen(imagined)
+    anchored = with_logp_on_observations(policy, on_replays(imagined, seen, policy.chunk_size), 1.0, micro_batch=3)
+    assert not torch.allclose(anchored.logp[mask], imagined.logp[mask], atol=1e-3)
+    assert (anchored.logp[~mask] == 0).all()
+
+
+def test_learning_on_replays_needs_replays_and_trains_from_a_ratio_of_one(rl_dataset, tmp_path, capsys):
+    from gymnast.cli import main
+
+    common = ["rl", "--policy", str(POLICY), "--env", "imagined", "--wm", str(WORLD_MODEL), "--reward", "sim",
+              "--data", str(rl_dataset), "--preset", "debug", "--learn-on", "replays"]
+    with pytest.raises(SystemExit):
+        main(common + ["--out", str(tmp_path / "refused")])
+    assert "--reward-sees real" in capsys.readouterr().err
+    out = tmp_path / "anchored"
+    main(common + ["--reward-sees", "real", "--out", str(out), "--tracker", "none"])
+    steps = [json.loads(line) for line in (out / "metrics.jsonl").read_text().splitlines()]
+    ratios = [row["train/ratio"] for row in steps if "train/ratio" in row]
+    assert ratios and all(r == pytest.approx(1.0, abs=1e-5) for r in ratios)
+
+
+def test_learning_on_an_unknown_world_is_refused():
+    with pytest.raises(ValueError, match="learn_on must be one of own, replays"):
+        RLConfig(learn_on="imagined")

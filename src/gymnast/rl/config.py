@@ -23,6 +23,9 @@ from gymnast.utils.trackers import TrackerNames, check_trackers
 CREDITS = ("rollout", "reward-to-go", "critic")
 """How a rollout's reward is shared among its policy calls (`RLConfig.credit`)."""
 
+LEARN_ON = ("own", "replays")
+"""The frames the update reads the policy's actions on (`RLConfig.learn_on`)."""
+
 
 @dataclass(frozen=True)
 class RLConfig:
@@ -103,6 +106,11 @@ class RLConfig:
     gae_lambda: float = 0.95
     """GAE's lambda over policy calls (--credit critic): 1 the return minus the value, 0 one call's
     temporal difference."""
+    learn_on: str = "own"
+    """The frames the update holds the policy's actions to: own (the frames it acted on) or replays
+    (the frames of the same actions replayed where the reward saw them, --reward-sees). With --env
+    imagined --reward-sees real the policy acts on imagined frames and learns on the real frames its
+    actions led to: what it learns is anchored on what reality shows it (`gymnast.rl.reanchor`)."""
     normalize_std: bool = True
     """Divide group advantages by the group's standard deviation."""
     keep_low: float = 0.1
@@ -211,6 +219,8 @@ class RLConfig:
             raise ValueError("RLConfig.instruction is empty; give a sentence or leave it out")
         if self.credit not in CREDITS:
             raise ValueError(f"RLConfig.credit must be one of {', '.join(CREDITS)}, got {self.credit!r}")
+        if self.learn_on not in LEARN_ON:
+            raise ValueError(f"RLConfig.learn_on must be one of {', '.join(LEARN_ON)}, got {self.learn_on!r}")
         if self.critic_lr <= 0 or not 0 <= self.gae_lambda <= 1:
             raise ValueError(f"RLConfig: need critic_lr > 0 and 0 <= gae_lambda <= 1, got {self.critic_lr} and "
                              f"{self.gae_lambda}")

@@ -189,7 +189,8 @@ class Replay:
     interactions: int
 
 
-def replay_actions(env: VectorEnv, starts: Sequence[Start], actions: torch.Tensor, lengths: torch.Tensor) -> Replay:
+def replay_actions(env: VectorEnv, starts: Sequence[Start], actions: torch.Tensor, lengths: torch.Tensor,
+                   every_frame: bool = True) -> Replay:
     """Replays R rollouts' actions, action for action, in a simulator (or a world model) from the
     same start states.
 
@@ -209,6 +210,9 @@ def replay_actions(env: VectorEnv, starts: Sequence[Start], actions: torch.Tenso
         starts: the R start states (their task and seed fix the scene).
         actions: (R, T, A) float32 the actions to replay (0 after each rollout's end).
         lengths: (R,) int64 actions each rollout executed.
+        every_frame: False when only the outcome and the frames the policy would read are wanted: a
+            simulator renders each chunk's last frame alone, and the frames inside a chunk repeat it
+            (rendering is most of a simulator step's cost).
     """
     count, steps = actions.shape[:2]
     if env.num_envs != count or len(starts) != count or lengths.shape != (count,):
@@ -225,7 +229,8 @@ def replay_actions(env: VectorEnv, starts: Sequence[Start], actions: torch.Tenso
     success = torch.zeros(count, dtype=torch.bool)
     reports = True  # a world model reports no outcome
     for index, result in enumerate(run_batch(env, lambda images, instructions, states: next(plan).numpy(),
-                                             start_options(starts), seed=0, max_calls=calls)):
+                                             start_options(starts) | {"every_frame": every_frame}, seed=0,
+                                             max_calls=calls)):
         if not frames:
             frames.append(torch.from_numpy(result.observation)[:, None])  # (R, 1, H, W, 3) the start frame
         frames.append(torch.from_numpy(result.frames))  # (R, K, H, W, 3)
@@ -273,7 +278,8 @@ def watch_hacking(envs: EnvFactory, rollouts: Rollouts, scores: torch.Tensor, ve
     count = min(count, len(rollouts.starts))
     pick = torch.linspace(0, len(rollouts.starts) - 1, count).round().long()
     chosen = rollouts.select(pick)
-    replay = replay_actions(envs.get(REAL, count), chosen.starts, chosen.actions, chosen.lengths)
+    replay = replay_actions(envs.get(REAL, count), chosen.starts, chosen.actions, chosen.lengths,
+                            every_frame=False)  # the outcome alone is read
     real, interactions = replay.success, replay.interactions
     values = {"eval/watch_real_success": real.float().mean().item(), "eval/watch_interactions": interactions}
     judged = torch.isfinite(verdict[pick])

@@ -48,6 +48,9 @@ class RewardSight:
             which did not show the policy the frames it acted on, so that a policy practising in
             imagination is judged on a re-imagining whose errors it could not have chosen its
             actions by (None: `envs`').
+        video: whether the reward reads the replays' video. False: a simulator's replay renders only
+            the frame before each policy call (what re-anchoring reads, `gymnast.rl.reanchor`), the
+            frames inside a chunk repeating it; its outcome is the same.
     """
 
     envs: EnvFactory
@@ -55,6 +58,7 @@ class RewardSight:
     sees: EnvKind | None = None
     truth_groups: int = 0
     replays: EnvFactory | None = None
+    video: bool = True
 
     def __post_init__(self) -> None:
         another_model = self.replays is not None and self.sees is not None and self.sees.imagined
@@ -79,7 +83,7 @@ class RewardSight:
             return rollouts, 0
         where = self.replays if self.replays is not None and self.sees.imagined else self.envs
         replay = replay_actions(where.get(self.sees, len(rollouts.starts)), rollouts.starts, rollouts.actions,
-                                rollouts.lengths)
+                                rollouts.lengths, every_frame=self.video)
         replayed = dataclasses.replace(rollouts, rendered=replay.frames, hold=1, success=replay.success,
                                        env_rewards=replay.rewards, disagreement=None, env_states=None)
         return replayed, replay.interactions
@@ -105,7 +109,8 @@ class RewardSight:
         chosen = torch.linspace(0, groups - 1, count).round().long()  # groups spread over the batch's tasks
         index = (chosen[:, None] * size + torch.arange(size)[None]).reshape(-1)  # (count * G,)
         picked = rollouts.select(index)
-        replay = replay_actions(self.envs.get(REAL, len(index)), picked.starts, picked.actions, picked.lengths)
+        replay = replay_actions(self.envs.get(REAL, len(index)), picked.starts, picked.actions, picked.lengths,
+                                every_frame=False)  # the outcome alone is read
         truth[index] = replay.success.float()
         return truth, replay.interactions
 

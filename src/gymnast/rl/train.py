@@ -46,7 +46,7 @@ from gymnast.policy.base import state_inputs
 from gymnast.policy.frozen_vision import remembered_vision
 from gymnast.policy.lerobot_policy import LeRobotPolicy
 from gymnast.reward.base import Reward, StepReward, check_fits
-from gymnast.rl import grpo
+from gymnast.rl import grpo, reanchor
 from gymnast.rl.config import RLConfig, RLRun
 from gymnast.rl.critic import CallCritic, ValueCritic
 from gymnast.rl.evaluate import evaluate_in_env, verdicts, watch_hacking
@@ -113,6 +113,9 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
               if getattr(config, name) > 0]
     if levers and not env.imagined:
         raise ValueError(f"{levers[0]} acts on imagined rollouts; --env {env} imagines none")
+    if config.learn_on == "replays" and run_spec.reward_sees is None:
+        raise ValueError("--learn-on replays holds the actions to the frames of their replays where the reward "
+                         "saw them: give --reward-sees real (or imagined)")
     device = resolve_device(config.device)
     policy = load_policy(run_spec.policy).to(device)
     cameras = getattr(policy.config, "cameras", ())
@@ -176,7 +179,7 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
         check_policy_views(cameras, reward_world_model, run_spec.policy, run_spec.reward_wm)
         replays = EnvFactory(IMAGINED, policy.chunk_size, env_config, config.gap, config.workers, reward_world_model,
                              runner=config.runner, batch=batch)
-    sight = RewardSight(envs, env, run_spec.reward_sees, config.truth_groups, replays)
+    sight = RewardSight(envs, env, run_spec.reward_sees, config.truth_groups, replays, video=reward.needs.video)
     resolved = {"rl": dataclasses.asdict(config), "run": run_spec.to_json(), "model": policy_spec(policy),
                 "data": str(data) if data else None, "frames": frames}
 
@@ -392,6 +395,8 @@ def rl_step(env: VectorEnv, policy, reward: Reward, draw_starts: Callable[[int, 
         began = time.perf_counter()
         seen, replayed = sight.seen(rollouts) if sight is not None else (rollouts, 0)
         values["rollout/replay_interactions"] += replayed
+        if config.learn_on == "replays":  # the update reads the frames the replays showed at each call
+            rollouts = reanchor.on_replays(rollouts, seen, policy.chunk_size)
         if per_call:
             steps = score_groups(reward, seen, size, per_step=True)  # (R, T)
             scores = torch.nanmean(steps, dim=1)  # what score() gives
@@ -442,6 +447,8 @@ def rl_step(env: VectorEnv, policy, reward: Reward, draw_starts: Callable[[int, 
             raise ValueError("disagreement_penalty needs rollouts from a world-model ensemble, which report disagreement")
         if config.disagreement_penalty > 0:
             rewards = grpo.penalise_disagreement(scores, batch.disagreement, config.disagreement_penalty)
+        if config.learn_on == "replays":  # the ratio starts from the tokens' log-probabilities on those frames
+            batch = reanchor.with_logp_on_observations(policy, batch, config.temperature, config.micro_batch)
         advantages, advantage_metrics = grpo.group_advantages(rewards.view(-1, size), config.normalize_std)
         advantages = advantages.reshape(-1)  # (R,)
         with released():  # a world model on a GPU may give the update its memory

@@ -1,0 +1,73 @@
+"""Re-anchoring the update on the replays' frames: the policy acts on one world's frames and learns
+on another's (`RLConfig.learn_on` replays).
+
+Legend: R rollouts, S policy calls per rollout, N action tokens per call, K actions per chunk,
+T actions per rollout, H/W image size.
+
+On the learning ladder (docs/rl.md, "Where learning dies") the policy that acts on imagined frames
+and is rewarded by the real outcome of its actions (R3) learns to succeed on imagined frames, and
+little of it reaches rendered ones: on door-open its imagined actions succeed for real 72-88% of the
+time while the same policy acting on rendered frames succeeds 46%. When those actions are replayed
+in the real world for the reward anyway, the real frames they led to are at hand: the update can
+hold each action to the real frame at its call instead of the imagined one, so that the policy
+learns how to act on what reality shows it. The actions were sampled on the imagined frames, so the
+update's ratio starts from the log-probabilities of the same tokens on the real frames under the
+policy before the update (`with_logp_on_observations`), not from those it sampled with.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import torch
+
+from gymnast.policy.base import state_inputs
+from gymnast.rl.rollout import Rollouts
+
+
+def frames_at_calls(frames: torch.Tensor, calls: int, chunk: int) -> torch.Tensor:
+    """(R, S, H, W, 3) the frame before each policy call: the start frame, then each chunk's last.
+
+    Args:
+        frames: (R, T + 1, H, W, 3) the start frame, then one frame per action (the end frame
+            repeating after a rollout's end, as `Rollouts.frames` and replays keep them).
+        calls: S, the policy calls of the rollouts.
+        chunk: K, the actions each call executes.
+    """
+    index = (torch.arange(calls) * chunk).clamp(max=frames.shape[1] - 1)  # calls after the end see the end
+    return frames[:, index]
+
+
+def on_replays(rollouts: Rollouts, replays: Rollouts, chunk: int) -> Rollouts:
+    """The rollouts with the frames their replays showed at each policy call as the observations
+    the update reads; their tokens, outcome and own video (what the reward and the videos read) stay.
+    `chunk` is K, the actions each policy call executes.
+
+    Raises:
+        ValueError: the replays are not of these rollouts (another count or another action length).
+    """
+    calls = rollouts.tokens.shape[1]
+    if len(replays.starts) != len(rollouts.starts) or replays.actions.shape != rollouts.actions.shape:
+        raise ValueError(f"replays of {len(replays.starts)} rollouts with actions {tuple(replays.actions.shape)} "
+                         f"are not those of {len(rollouts.starts)} rollouts with {tuple(rollouts.actions.shape)}")
+    seen = frames_at_calls(replays.frames, calls, chunk)
+    if seen.shape[2:] != rollouts.observations.shape[2:]:
+        raise ValueError(f"the replays' frames are {tuple(seen.shape[2:])}, the policy's observations "
+                         f"{tuple(rollouts.observations.shape[2:])}: learning on replays needs the same views and size")
+    return dataclasses.replace(rollouts, observations=seen.contiguous())
+
+
+def with_logp_on_observations(policy, batch: Rollouts, temperature: float, micro_batch: int) -> Rollouts:
+    """The batch with ``logp`` the policy's (as it is now) log-probabilities of its tokens on its
+    observations: the reference the update's ratio starts from once the observations are not those
+    the tokens were sampled on. Calls that executed nothing keep 0."""
+    logp = torch.zeros_like(batch.logp)
+    rows_r, rows_s = batch.token_mask.any(-1).nonzero(as_tuple=True)
+    instructions = batch.instructions
+    with torch.no_grad():
+        for part in torch.arange(len(rows_r)).split(micro_batch):
+            r, s = rows_r[part], rows_s[part]
+            states = state_inputs(policy, None if batch.states is None else batch.states[r, s])
+            logp[r, s] = policy.log_prob(batch.observations[r, s], [instructions[i] for i in r.tolist()],
+                                         batch.tokens[r, s], temperature, **states).float().cpu()
+    return dataclasses.replace(batch, logp=logp)
