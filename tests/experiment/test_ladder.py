@@ -80,8 +80,16 @@ def test_the_ladder_swaps_one_part_per_rung_and_holds_each_reward_to_the_real_ou
     saved = json.loads((out / "fixed" / "config.json").read_text())
     saved["run"]["policy"] = "elsewhere/policy"
     (sight / "config.json").write_text(json.dumps(saved))
+    # ... and one whose lever is a GRPO setting the ladder's recipe does not have names it.
+    anchored = out / "fixed_reanchor"
+    anchored.mkdir()
+    saved = json.loads((out / "fixed" / "config.json").read_text())
+    saved["rl"] |= {"learn_on": "replays", "eval_episodes": 99}  # how it is evaluated is not its lever
+    (anchored / "config.json").write_text(json.dumps(saved))
     arms = {arm.name: arm.what for arm in fixed_arms(out)}
     assert "imagined in elsewhere/world_model" in arms["fixed_refit"] and "imagined in" not in arms["fixed"]
+    assert "--learn-on replays" in arms["fixed_reanchor"] and "eval" not in arms["fixed_reanchor"]
+    assert "--learn-on" not in arms["fixed"]
     assert arms["fixed_sight"].endswith(", from elsewhere/policy") and "from" not in arms["fixed"]
 
 

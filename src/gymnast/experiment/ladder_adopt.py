@@ -12,24 +12,16 @@ episodes as the ladder's starting policy (greedy evaluation on the same seeds is
 
 from __future__ import annotations
 
-import dataclasses
 import hashlib
 import math
 import os
 from pathlib import Path
 
-from gymnast.experiment.ladder_records import rung_record
+from gymnast.experiment.ladder_records import recipe_changes, rung_record
 from gymnast.experiment.ladder_report import ladder_summary
 from gymnast.experiment.rungs import RUNGS, Rung, rung_dir
 from gymnast.rl.config import RLConfig, RLRun
 from gymnast.utils.settings import from_json, saved_settings
-
-NOT_THE_RECIPE = frozenset({
-    "eval_every", "eval_episodes", "eval_horizon", "real_eval", "truth_groups", "watch_every", "watch_rollouts",
-    "video_every", "checkpoint_every", "tracker", "workers", "device", "runner", "micro_batch", "remember_vision"})
-"""RL settings that say how a run is evaluated, watched, logged or computed, not what it learns
-(`micro_batch` accumulates the same gradient; `remember_vision` reuses the same tokens)."""
-
 
 def parse_adoptions(text: str | None) -> dict[Rung, Path]:
     """``RUNG=RUN[,RUNG=RUN...]`` as {rung: run}.
@@ -107,9 +99,8 @@ def _run_differences(run: RLRun, expected: RLRun) -> list[str]:
 
 
 def _recipe_differences(run: RLConfig, recipe: RLConfig) -> list[str]:
-    return [f"{field.name} was {getattr(run, field.name)!r}, the ladder's is {getattr(recipe, field.name)!r}"
-            for field in dataclasses.fields(RLConfig)
-            if field.name not in NOT_THE_RECIPE and getattr(run, field.name) != getattr(recipe, field.name)]
+    return [f"{name} was {getattr(run, name)!r}, the ladder's is {getattr(recipe, name)!r}"
+            for name in recipe_changes(run, recipe)]
 
 
 def _same_policy(policy: str, ladder_policy: str, rung: Rung, run: Path, out: Path, recipe: RLConfig) -> bool:

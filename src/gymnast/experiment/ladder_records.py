@@ -9,13 +9,14 @@ reports what it has, and says whether it finished.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 from pathlib import Path
 
 from gymnast.envs.kinds import IMAGINED
 from gymnast.experiment.rungs import FIXED, Rung
 from gymnast.experiment.stages import Stages
-from gymnast.rl.config import RLRun
+from gymnast.rl.config import RLConfig, RLRun
 from gymnast.utils.metrics import read_metrics
 from gymnast.utils.settings import saved_settings
 
@@ -125,6 +126,20 @@ def is_dyna(run: Path) -> bool:
     return (run / "config.json").is_file() and "dyna" in saved_settings(run)
 
 
+NOT_THE_RECIPE = frozenset({
+    "eval_every", "eval_episodes", "eval_horizon", "real_eval", "truth_groups", "watch_every", "watch_rollouts",
+    "video_every", "checkpoint_every", "tracker", "workers", "device", "runner", "micro_batch", "remember_vision"})
+"""RL settings that say how a run is evaluated, watched, logged or computed, not what it learns
+(`micro_batch` accumulates the same gradient; `remember_vision` reuses the same tokens)."""
+
+
+def recipe_changes(run: RLConfig, recipe: RLConfig) -> list[str]:
+    """The names of the GRPO settings in which `run` differs from the ladder's `recipe`, those in
+    `NOT_THE_RECIPE` aside."""
+    return [field.name for field in dataclasses.fields(RLConfig)
+            if field.name not in NOT_THE_RECIPE and getattr(run, field.name) != getattr(recipe, field.name)]
+
+
 def fixed_arms(out: Path) -> list[Rung]:
     """OUT/fixed and every OUT/fixed_<lever> as rungs, by name: an RL run whose settings its
     config.json holds (any env, reward and lever a user mends the broken rung with), or a Dyna loop."""
@@ -132,6 +147,7 @@ def fixed_arms(out: Path) -> list[Rung]:
     # A fix may be a world model or a policy of its own (one refit on what the ladder's got wrong, one
     # taught the imagined sight): named where it is not the ladder's.
     ladder = saved_settings(out, "inputs") if (out / "config.json").is_file() else {}
+    recipe = saved_rl(out) if (out / "config.json").is_file() else None
     for where in sorted(out.glob(f"{FIXED.name}*")):
         if not (where / "config.json").is_file() or (where.name != FIXED.name and not where.name.startswith("fixed_")):
             continue
@@ -143,9 +159,22 @@ def fixed_arms(out: Path) -> list[Rung]:
         sees = f", the reward seeing {run.reward_sees}" if run.reward_sees else ""
         other = f" in {run.reward_wm}" if run.reward_wm else ""
         start = _from_policy(run.policy, ladder.get("policy"))
+        lever = "".join(f" --{name.replace('_', '-')} {_flag(getattr(settings, name))}"
+                        for settings in [saved_rl(where)] if recipe is not None
+                        for name in recipe_changes(settings, recipe))
         arms.append(Rung(where.name, run.env, str(run.reward), run.reward_sees,
-                         f"a fix: --env {run.env}{model} --reward {run.reward}{sees}{other}{start}", bool(start)))
+                         f"a fix: --env {run.env}{model} --reward {run.reward}{lever}{sees}{other}{start}", bool(start)))
     return arms
+
+
+def saved_rl(run: Path) -> RLConfig:
+    """The GRPO settings RUN/config.json keeps (a ladder's recipe, or a run's)."""
+    return RLConfig(**RLConfig.upgrade_saved(saved_settings(run, "rl")))
+
+
+def _flag(value) -> str:
+    """A setting as the command line writes it."""
+    return ",".join(map(str, value)) if isinstance(value, (list, tuple)) else str(value)
 
 
 def _from_policy(policy: str | Path, ladder_policy: str | None) -> str:
