@@ -1,6 +1,7 @@
 """What the reward sees (the rollouts' own video, or their actions replayed in another world) and
 how its verdicts are held to the real outcome, against the real simulator and the committed models."""
 
+import dataclasses
 import json
 import math
 
@@ -14,7 +15,7 @@ from gymnast.envs.kinds import IMAGINED, REAL
 from gymnast.policy.load import load_policy
 from gymnast.reward.spec import RewardSpec
 from gymnast.rl.config import RLConfig, RLRun
-from gymnast.rl.reanchor import frames_at_calls, on_replays, with_logp_on_observations
+from gymnast.rl.reanchor import frames_at_calls, learning_batch, replay_observations, with_logp_on_observations
 from gymnast.rl.rollout import collect_rollouts, dataset_starts
 from gymnast.rl.sight import RewardSight, reward_truth_metrics
 from gymnast.world_model.base import load_world_model
@@ -150,14 +151,25 @@ def test_a_replay_that_renders_only_what_the_policy_reads_keeps_its_outcome_and_
 
 def test_learning_on_replays_holds_the_imagined_actions_to_the_real_frames_at_each_call(imagined_and_real):
     envs, imagined, _ = imagined_and_real
+    policy = load_policy(POLICY)
     seen, _ = RewardSight(envs, IMAGINED, sees=REAL, video=False).seen(imagined)
-    chunk = imagined.actions.shape[1] // imagined.tokens.shape[1]
-    anchored = on_replays(imagined, seen, chunk)
-    assert torch.equal(anchored.observations, frames_at_calls(seen.frames, imagined.tokens.shape[1], chunk))
-    assert not torch.equal(anchored.observations[:, 1:], imagined.observations[:, 1:])
-    assert torch.equal(anchored.tokens, imagined.tokens) and torch.equal(anchored.rendered, imagined.rendered)
+    chunk = policy.chunk_size
+    replayed = replay_observations(imagined, seen, chunk)
+    assert torch.equal(replayed, frames_at_calls(seen.frames, imagined.tokens.shape[1], chunk))
+    assert not torch.equal(replayed[:, 1:], imagined.observations[:, 1:])
     with pytest.raises(ValueError, match="are not those of"):
-        on_replays(imagined, seen.select(torch.arange(1)), chunk)
+        replay_observations(imagined, seen.select(torch.arange(1)), chunk)
+    advantages = torch.arange(len(imagined.starts), dtype=torch.float32)
+    anchored, same = learning_batch(policy, imagined, replayed, advantages, "replays", 1.0, 3)
+    assert torch.equal(anchored.observations, replayed) and torch.equal(same, advantages)
+    assert torch.equal(anchored.tokens, imagined.tokens) and torch.equal(anchored.rendered, imagined.rendered)
+    # both: every call a row twice, once on the frame it acted on and once on its replay's
+    doubled, twice = learning_batch(policy, imagined, replayed, advantages, "both", 1.0, 3)
+    count = len(imagined.starts)
+    assert torch.equal(doubled.observations[:count], imagined.observations)
+    assert torch.equal(doubled.observations[count:], replayed)
+    assert torch.equal(doubled.logp[:count], imagined.logp) and torch.equal(doubled.logp[count:], anchored.logp)
+    assert torch.equal(twice, torch.cat([advantages, advantages]))
 
 
 def test_the_ratio_starts_from_the_tokens_log_probabilities_on_the_frames_the_update_reads(imagined_and_real):
@@ -168,7 +180,8 @@ def test_the_ratio_starts_from_the_tokens_log_probabilities_on_the_frames_the_up
     # on the frames it sampled on, the policy's log-probabilities are those it sampled with
     assert torch.allclose(again.logp[mask], imagined.logp[mask], atol=1e-4)
     seen, _ = RewardSight(envs, IMAGINED, sees=REAL, video=False).seen(imagined)
-    anchored = with_logp_on_observations(policy, on_replays(imagined, seen, policy.chunk_size), 1.0, micro_batch=3)
+    replayed = replay_observations(imagined, seen, policy.chunk_size)
+    anchored = with_logp_on_observations(policy, dataclasses.replace(imagined, observations=replayed), 1.0, 3)
     assert not torch.allclose(anchored.logp[mask], imagined.logp[mask], atol=1e-3)
     assert (anchored.logp[~mask] == 0).all()
 
@@ -186,8 +199,13 @@ def test_learning_on_replays_needs_replays_and_trains_from_a_ratio_of_one(rl_dat
     steps = [json.loads(line) for line in (out / "metrics.jsonl").read_text().splitlines()]
     ratios = [row["train/ratio"] for row in steps if "train/ratio" in row]
     assert ratios and all(r == pytest.approx(1.0, abs=1e-5) for r in ratios)
+    out = tmp_path / "both"
+    main(common[:-1] + ["both", "--reward-sees", "real", "--out", str(out), "--tracker", "none"])
+    steps = [json.loads(line) for line in (out / "metrics.jsonl").read_text().splitlines()]
+    calls = [row["train/policy_calls"] for row in steps if "train/policy_calls" in row]
+    assert calls and all(count == 2 * 8 for count in calls)  # 2 groups x 2 rollouts x 2 calls, twice
 
 
 def test_learning_on_an_unknown_world_is_refused():
-    with pytest.raises(ValueError, match="learn_on must be one of own, replays"):
+    with pytest.raises(ValueError, match="learn_on must be one of own, replays, both"):
         RLConfig(learn_on="imagined")

@@ -23,7 +23,7 @@ from gymnast.utils.trackers import TrackerNames, check_trackers
 CREDITS = ("rollout", "reward-to-go", "critic")
 """How a rollout's reward is shared among its policy calls (`RLConfig.credit`)."""
 
-LEARN_ON = ("own", "replays")
+LEARN_ON = ("own", "replays", "both")
 """The frames the update reads the policy's actions on (`RLConfig.learn_on`)."""
 
 
@@ -107,10 +107,11 @@ class RLConfig:
     """GAE's lambda over policy calls (--credit critic): 1 the return minus the value, 0 one call's
     temporal difference."""
     learn_on: str = "own"
-    """The frames the update holds the policy's actions to: own (the frames it acted on) or replays
-    (the frames of the same actions replayed where the reward saw them, --reward-sees). With --env
-    imagined --reward-sees real the policy acts on imagined frames and learns on the real frames its
-    actions led to: what it learns is anchored on what reality shows it (`gymnast.rl.reanchor`)."""
+    """The frames the update holds the policy's actions to: own (the frames it acted on), replays
+    (the frames of the same actions replayed where the reward saw them, --reward-sees) or both. With
+    --env imagined --reward-sees real the policy acts on imagined frames and learns on the real frames
+    its actions led to: what it learns is anchored on what reality shows it; with both, its proposals
+    on the imagined frames move with it (`gymnast.rl.reanchor`)."""
     normalize_std: bool = True
     """Divide group advantages by the group's standard deviation."""
     keep_low: float = 0.1

@@ -22,7 +22,7 @@ import dataclasses
 import torch
 
 from gymnast.policy.base import state_inputs
-from gymnast.rl.rollout import Rollouts
+from gymnast.rl.rollout import Rollouts, concat_rollouts
 
 
 def frames_at_calls(frames: torch.Tensor, calls: int, chunk: int) -> torch.Tensor:
@@ -38,23 +38,44 @@ def frames_at_calls(frames: torch.Tensor, calls: int, chunk: int) -> torch.Tenso
     return frames[:, index]
 
 
-def on_replays(rollouts: Rollouts, replays: Rollouts, chunk: int) -> Rollouts:
-    """The rollouts with the frames their replays showed at each policy call as the observations
-    the update reads; their tokens, outcome and own video (what the reward and the videos read) stay.
-    `chunk` is K, the actions each policy call executes.
+def replay_observations(rollouts: Rollouts, replays: Rollouts, chunk: int) -> torch.Tensor:
+    """(R, S, H, W, 3) the frames the rollouts' replays showed before each policy call: what the
+    policy would have seen there had it acted where its actions were replayed. `chunk` is K, the
+    actions each policy call executes.
 
     Raises:
-        ValueError: the replays are not of these rollouts (another count or another action length).
+        ValueError: the replays are not of these rollouts (another count or action length), or their
+            frames are not the shape of the policy's observations.
     """
-    calls = rollouts.tokens.shape[1]
     if len(replays.starts) != len(rollouts.starts) or replays.actions.shape != rollouts.actions.shape:
         raise ValueError(f"replays of {len(replays.starts)} rollouts with actions {tuple(replays.actions.shape)} "
                          f"are not those of {len(rollouts.starts)} rollouts with {tuple(rollouts.actions.shape)}")
-    seen = frames_at_calls(replays.frames, calls, chunk)
+    seen = frames_at_calls(replays.frames, rollouts.tokens.shape[1], chunk)
     if seen.shape[2:] != rollouts.observations.shape[2:]:
         raise ValueError(f"the replays' frames are {tuple(seen.shape[2:])}, the policy's observations "
                          f"{tuple(rollouts.observations.shape[2:])}: learning on replays needs the same views and size")
-    return dataclasses.replace(rollouts, observations=seen.contiguous())
+    return seen.contiguous()
+
+
+def learning_batch(policy, batch: Rollouts, replayed: torch.Tensor, advantages: torch.Tensor, learn_on: str,
+                   temperature: float, micro_batch: int) -> tuple[Rollouts, torch.Tensor]:
+    """The batch the update learns from, and its advantages.
+
+    Args:
+        batch: the kept rollouts, with the observations the policy acted on.
+        replayed: (R, S, H, W, 3) the frames their replays showed at each call (`replay_observations`).
+        advantages: (R,) or (R, S) the batch's advantages.
+        learn_on: replays (each action held to its replay's frame) or both (held to both frames:
+            every policy call is a row twice, so that the policy's proposals on the frames it acts on
+            move with what it learns on the replays' frames).
+    """
+    anchored = with_logp_on_observations(policy, dataclasses.replace(batch, observations=replayed), temperature,
+                                         micro_batch)
+    if learn_on == "replays":
+        return anchored, advantages
+    if learn_on == "both":
+        return concat_rollouts([batch, anchored]), torch.cat([advantages, advantages])
+    raise ValueError(f"learn_on must be replays or both here, got {learn_on!r}")
 
 
 def with_logp_on_observations(policy, batch: Rollouts, temperature: float, micro_batch: int) -> Rollouts:

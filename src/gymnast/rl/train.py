@@ -113,8 +113,8 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
               if getattr(config, name) > 0]
     if levers and not env.imagined:
         raise ValueError(f"{levers[0]} acts on imagined rollouts; --env {env} imagines none")
-    if config.learn_on == "replays" and run_spec.reward_sees is None:
-        raise ValueError("--learn-on replays holds the actions to the frames of their replays where the reward "
+    if config.learn_on != "own" and run_spec.reward_sees is None:
+        raise ValueError(f"--learn-on {config.learn_on} holds the actions to the frames of their replays where the reward "
                          "saw them: give --reward-sees real (or imagined)")
     device = resolve_device(config.device)
     policy = load_policy(run_spec.policy).to(device)
@@ -379,6 +379,7 @@ def rl_step(env: VectorEnv, policy, reward: Reward, draw_starts: Callable[[int, 
     kept: list[Rollouts] = []
     kept_scores: list[torch.Tensor] = []
     kept_steps: list[torch.Tensor] = []  # (G, T) each, with per-call credit
+    kept_replayed: list[torch.Tensor] = []  # (G, S, H, W, 3) each, with --learn-on replays or both
     values: dict[str, float] = {"rollout/interactions": 0, "rollout/replay_interactions": 0,
                                 "reward/truth_interactions": 0, "time/rollout_s": 0.0, "time/policy_s": 0.0,
                                 "time/reward_s": 0.0}
@@ -395,8 +396,8 @@ def rl_step(env: VectorEnv, policy, reward: Reward, draw_starts: Callable[[int, 
         began = time.perf_counter()
         seen, replayed = sight.seen(rollouts) if sight is not None else (rollouts, 0)
         values["rollout/replay_interactions"] += replayed
-        if config.learn_on == "replays":  # the update reads the frames the replays showed at each call
-            rollouts = reanchor.on_replays(rollouts, seen, policy.chunk_size)
+        if config.learn_on != "own":  # the frames the replays showed at each call, for the update to read
+            replayed_calls = reanchor.replay_observations(rollouts, seen, policy.chunk_size)
         if per_call:
             steps = score_groups(reward, seen, size, per_step=True)  # (R, T)
             scores = torch.nanmean(steps, dim=1)  # what score() gives
@@ -428,6 +429,8 @@ def rl_step(env: VectorEnv, policy, reward: Reward, draw_starts: Callable[[int, 
         for g in keep.nonzero().flatten().tolist()[: groups - len(kept)]:
             index = torch.arange(g * size, (g + 1) * size)
             kept.append(rollouts.select(index))
+            if config.learn_on != "own":
+                kept_replayed.append(replayed_calls[index])
             kept_scores.append(scores[index])
             if per_call:
                 kept_steps.append(steps[index])
@@ -447,8 +450,6 @@ def rl_step(env: VectorEnv, policy, reward: Reward, draw_starts: Callable[[int, 
             raise ValueError("disagreement_penalty needs rollouts from a world-model ensemble, which report disagreement")
         if config.disagreement_penalty > 0:
             rewards = grpo.penalise_disagreement(scores, batch.disagreement, config.disagreement_penalty)
-        if config.learn_on == "replays":  # the ratio starts from the tokens' log-probabilities on those frames
-            batch = reanchor.with_logp_on_observations(policy, batch, config.temperature, config.micro_batch)
         advantages, advantage_metrics = grpo.group_advantages(rewards.view(-1, size), config.normalize_std)
         advantages = advantages.reshape(-1)  # (R,)
         with released():  # a world model on a GPU may give the update its memory
@@ -462,7 +463,11 @@ def rl_step(env: VectorEnv, policy, reward: Reward, draw_starts: Callable[[int, 
                     values |= critic_metrics
                 else:
                     advantages = grpo.call_advantages(returns, batch.token_mask.any(-1), size, config.normalize_std)
-            values |= advantage_metrics | update_policy(policy, optimizer, batch, advantages, config, reference,
+            learned = batch  # what the update reads; the batch itself stays the rollouts' own (videos, the watch)
+            if config.learn_on != "own":
+                learned, advantages = reanchor.learning_batch(policy, batch, torch.cat(kept_replayed), advantages,
+                                                              config.learn_on, config.temperature, config.micro_batch)
+            values |= advantage_metrics | update_policy(policy, optimizer, learned, advantages, config, reference,
                                                         anchor, actions)
     with warnings.catch_warnings():
         # The schedule counts RL steps, those whose rollouts left nothing to learn from included;
