@@ -106,28 +106,51 @@ def write_ladder_index(root: Path) -> dict:
 
 
 def plot_ladder_curves(summary: dict, path: Path) -> Path:
-    """Real success against RL step, one line per rung, SFT as a horizontal line."""
+    """Real success against RL step, one line per rung, SFT as a horizontal line; the rungs' 95%
+    intervals shaded (the fix arms', beside so many lines, would hide them: the table gives them)."""
     plt, figure, axes = _figure(8.0, 5.2)
+    styles = _line_styles(summary)
     for name, record in summary.items():
         if name == "sft":
             axes.axhline(record["success"], color="grey", linestyle="--", label="SFT")
             continue
         steps = [point["step"] for point in record["curve"]]
-        axes.plot(steps, [point["success"] for point in record["curve"]], marker="o", label=name)
-        axes.fill_between(steps, [p["ci_low"] for p in record["curve"]], [p["ci_high"] for p in record["curve"]],
-                          alpha=0.1)
+        axes.plot(steps, [point["success"] for point in record["curve"]], label=name, **styles[name])
+        if name in RUNGS:
+            axes.fill_between(steps, [p["ci_low"] for p in record["curve"]],
+                              [p["ci_high"] for p in record["curve"]], color=styles[name]["color"], alpha=0.08)
     return _by_step(plt, figure, axes, "real-world success", "The learning ladder: real success by step (95% CI)", path)
 
 
 def plot_ladder_agreement(summary: dict, path: Path) -> Path:
     """Each rung's agreement of its reward with the real outcome, step by step."""
     plt, figure, axes = _figure(8.0, 5.2)
+    styles = _line_styles(summary)
     for name, record in summary.items():
         points = [row for row in record["agreement_by_step"] if row.get("agreement") is not None]
         if points:
-            axes.plot([row["step"] for row in points], [row["agreement"] for row in points], marker=".", label=name)
+            axes.plot([row["step"] for row in points], [row["agreement"] for row in points], label=name,
+                      **styles[name])
     return _by_step(plt, figure, axes, "reward verdict = real outcome",
                     "Does the reward still tell the truth as the policy moves?", path)
+
+
+def _line_styles(summary: dict) -> dict[str, dict]:
+    """A line style per row that no other row of up to 20 arms shares: the ladder's rungs solid with
+    round markers (tab10), the fix arms dashed or dotted with square ones (tab20b: five hues, each
+    hue's darker shades first)."""
+    import matplotlib
+
+    rung_colours = matplotlib.colormaps["tab10"].colors
+    arm_colours = matplotlib.colormaps["tab20b"].colors
+    order = [hue * 4 + shade for shade in (0, 2, 1, 3) for hue in range(5)]
+    styles = {}
+    for i, name in enumerate(name for name in summary if name in RUNGS):
+        styles[name] = {"color": rung_colours[i % 10], "linestyle": "-", "marker": "o"}
+    for i, name in enumerate(name for name in summary if name != "sft" and name not in RUNGS):
+        styles[name] = {"color": arm_colours[order[i % 20]], "linestyle": ("--", ":")[i % 2], "marker": "s",
+                        "markersize": 4}
+    return styles
 
 
 def _by_step(plt, figure, axes, ylabel: str, title: str, path: Path) -> Path:
