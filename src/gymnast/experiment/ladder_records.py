@@ -146,8 +146,9 @@ def fixed_arms(out: Path) -> list[Rung]:
     arms = []
     # A fix may be a world model or a policy of its own (one refit on what the ladder's got wrong, one
     # taught the imagined sight): named where it is not the ladder's.
-    ladder = saved_settings(out, "inputs") if (out / "config.json").is_file() else {}
-    recipe = saved_rl(out) if (out / "config.json").is_file() else None
+    saved = saved_settings(out) if (out / "config.json").is_file() else {}
+    ladder = saved.get("inputs", {})
+    recipe = RLConfig(**RLConfig.upgrade_saved(saved["rl"])) if "rl" in saved else None  # the arms' levers are read against it
     for where in sorted(out.glob(f"{FIXED.name}*")):
         if not (where / "config.json").is_file() or (where.name != FIXED.name and not where.name.startswith("fixed_")):
             continue
