@@ -1,5 +1,5 @@
 """Re-anchoring the update on the replays' frames: the policy acts on one world's frames and learns
-on another's (`RLConfig.learn_on` replays).
+on another's (`RLConfig.learn_on` replays, or both).
 
 Legend: R rollouts, S policy calls per rollout, N action tokens per call, K actions per chunk,
 T actions per rollout, H/W image size.
@@ -13,6 +13,11 @@ hold each action to the real frame at its call instead of the imagined one, so t
 learns how to act on what reality shows it. The actions were sampled on the imagined frames, so the
 update's ratio starts from the log-probabilities of the same tokens on the real frames under the
 policy before the update (`with_logp_on_observations`), not from those it sampled with.
+
+Measured there (docs/rl.md, "Re-anchoring R3 on the real frames"): learning on the real frames
+took door-open to 70% in 5 steps, as reality did (R3: 42%), and then stalled, because the policy's
+proposals on the imagined frames, which still choose what it learns from, got worse as it improved
+on the real ones. Holding each action to both frames (``both``) slowed that decline without ending it.
 """
 
 from __future__ import annotations
