@@ -246,6 +246,25 @@ def test_policy_loss_matches_loop_reference(explicit_total):
     assert 0 < metrics["train/clip_fraction"] < 1
 
 
+def test_per_token_advantages_are_the_rows_spread_or_weighted_token_by_token():
+    generator = torch.Generator().manual_seed(5)
+    m, n = 6, 4
+    old_logp = -2 * torch.rand(m, n, generator=generator)
+    logp = (old_logp + 0.3 * torch.randn(m, n, generator=generator)).requires_grad_()
+    advantages = torch.randn(m, generator=generator)
+    mask = torch.rand(m, n, generator=generator) < 0.8
+    by_row, _ = policy_loss(logp, old_logp, advantages, mask, 0.2, 0.28)
+    spread, _ = policy_loss(logp, old_logp, advantages[:, None].expand(m, n), mask, 0.2, 0.28)
+    assert spread.item() == pytest.approx(by_row.item(), rel=1e-6)
+    # a token weighted 0 teaches nothing; the others learn as before
+    weights = torch.ones(m, n)
+    weights[0, 0] = 0.0
+    weighted, _ = policy_loss(logp, old_logp, advantages[:, None] * weights, mask, 0.2, 0.28)
+    (gradient,) = torch.autograd.grad(weighted, logp)
+    (reference,) = torch.autograd.grad(by_row, logp)
+    assert gradient[0, 0] == 0 and torch.allclose(gradient[1:], reference[1:])
+
+
 def test_policy_loss_reports_kl_and_entropy_only_when_given():
     logp = torch.zeros(2, 3)
     _, metrics = policy_loss(logp, logp, torch.ones(2), torch.ones(2, 3, dtype=torch.bool), 0.2, 0.28)
@@ -342,7 +361,7 @@ def test_masked_tokens_with_garbage_log_probs_change_nothing():
     ("changes", "pattern"),
     [
         ({"old_logp": torch.zeros(4, 2)}, r"old_logp \(4, 2\)"),
-        ({"advantages": torch.zeros(4, 3)}, r"advantages \(4, 3\)"),
+        ({"advantages": torch.zeros(4, 2)}, r"advantages \(4, 2\)"),
         ({"mask": torch.ones(3, 4, dtype=torch.bool)}, r"mask \(3, 4\)"),
         ({"ref_logp": torch.zeros(4)}, r"ref_logp \(4,\)"),
         ({"entropy": torch.zeros(1, 3)}, r"entropy \(1, 3\)"),

@@ -170,6 +170,16 @@ def test_learning_on_replays_holds_the_imagined_actions_to_the_real_frames_at_ea
     assert torch.equal(doubled.observations[count:], replayed)
     assert torch.equal(doubled.logp[:count], imagined.logp) and torch.equal(doubled.logp[count:], anchored.logp)
     assert torch.equal(twice, torch.cat([advantages, advantages]))
+    # weighted by importance: each token's advantage on the real frame times how much likelier the
+    # policy makes it there than on the imagined frame it was sampled on, capped
+    weighted_batch, weighted = learning_batch(policy, imagined, replayed, advantages, "replays", 1.0, 3, 1.0)
+    ratio = torch.exp(weighted_batch.logp - imagined.logp).clamp(max=1.0)
+    expected = torch.where(imagined.token_mask, advantages[:, None, None] * ratio, 0.0)
+    assert weighted.shape == imagined.logp.shape and torch.allclose(weighted, expected)
+    assert (weighted.abs() <= advantages.abs()[:, None, None] + 1e-6).all()
+    _, both_weighted = learning_batch(policy, imagined, replayed, advantages, "both", 1.0, 3, 1.0)
+    assert torch.equal(both_weighted[:count], advantages[:, None, None].expand_as(imagined.logp))
+    assert torch.allclose(both_weighted[count:], expected)
 
 
 def test_the_ratio_starts_from_the_tokens_log_probabilities_on_the_frames_the_update_reads(imagined_and_real):
@@ -200,12 +210,17 @@ def test_learning_on_replays_needs_replays_and_trains_from_a_ratio_of_one(rl_dat
     ratios = [row["train/ratio"] for row in steps if "train/ratio" in row]
     assert ratios and all(r == pytest.approx(1.0, abs=1e-5) for r in ratios)
     out = tmp_path / "both"
-    main(common[:-1] + ["both", "--reward-sees", "real", "--out", str(out), "--tracker", "none"])
+    main(common[:-1] + ["both", "--reward-sees", "real", "--importance-cap", "1.0", "--out", str(out),
+                        "--tracker", "none"])
     steps = [json.loads(line) for line in (out / "metrics.jsonl").read_text().splitlines()]
     calls = [row["train/policy_calls"] for row in steps if "train/policy_calls" in row]
     assert calls and all(count == 2 * 8 for count in calls)  # 2 groups x 2 rollouts x 2 calls, twice
 
 
-def test_learning_on_an_unknown_world_is_refused():
+def test_learning_on_an_unknown_world_or_weighing_what_is_not_re_anchored_is_refused():
     with pytest.raises(ValueError, match="learn_on must be one of own, replays, both"):
         RLConfig(learn_on="imagined")
+    with pytest.raises(ValueError, match="give --learn-on replays or both"):
+        RLConfig(importance_cap=1.0)
+    with pytest.raises(ValueError, match="importance_cap must be at least 0"):
+        RLConfig(learn_on="replays", importance_cap=-1.0)

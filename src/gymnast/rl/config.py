@@ -112,6 +112,11 @@ class RLConfig:
     --env imagined --reward-sees real the policy acts on imagined frames and learns on the real frames
     its actions led to: what it learns is anchored on what reality shows it; with both, its proposals
     on the imagined frames move with it (`gymnast.rl.reanchor`)."""
+    importance_cap: float = 0.0
+    """With --learn-on replays or both: weight each token's advantage on the replay's frame by the
+    probability the policy gives it there against the one it was sampled with, capped at this
+    (truncated importance sampling: an action the policy would rarely take on the real frame teaches
+    little there); 0: no weighting."""
     normalize_std: bool = True
     """Divide group advantages by the group's standard deviation."""
     keep_low: float = 0.1
@@ -220,6 +225,11 @@ class RLConfig:
             raise ValueError("RLConfig.instruction is empty; give a sentence or leave it out")
         if self.credit not in CREDITS:
             raise ValueError(f"RLConfig.credit must be one of {', '.join(CREDITS)}, got {self.credit!r}")
+        if self.importance_cap < 0:
+            raise ValueError(f"RLConfig.importance_cap must be at least 0, got {self.importance_cap}")
+        if self.importance_cap > 0 and self.learn_on == "own":
+            raise ValueError("RLConfig.importance_cap weighs actions held to their replays' frames: give "
+                             "--learn-on replays or both")
         if self.learn_on not in LEARN_ON:
             raise ValueError(f"RLConfig.learn_on must be one of {', '.join(LEARN_ON)}, got {self.learn_on!r}")
         if self.critic_lr <= 0 or not 0 <= self.gae_lambda <= 1:

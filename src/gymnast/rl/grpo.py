@@ -339,8 +339,9 @@ def policy_loss(
     Args:
         logp: (M, N) log-probs of the sampled tokens under the policy being trained.
         old_logp: (M, N) their log-probs under the policy that sampled them (treated as constant).
-        advantages: (M,) one advantage per row (policy call), shared by its N tokens (treated as
-            constant).
+        advantages: (M,) one advantage per row (policy call), shared by its N tokens, or (M, N) one
+            per token (a row's advantage weighted token by token, `gymnast.rl.reanchor`); treated
+            as constant.
         mask: (M, N) bool, True for tokens that count.
         clip_low: the ratio is clipped below at 1 - clip_low.
         clip_high: the ratio is clipped above at 1 + clip_high.
@@ -360,9 +361,10 @@ def policy_loss(
     """
     tokens = {"logp": logp, "old_logp": old_logp, "mask": mask, "ref_logp": ref_logp, "entropy": entropy}
     tokens = {name: x for name, x in tokens.items() if x is not None}
-    if logp.ndim != 2 or advantages.shape != logp.shape[:1] or any(x.shape != logp.shape for x in tokens.values()):
+    if (logp.ndim != 2 or advantages.shape not in (logp.shape[:1], logp.shape)
+            or any(x.shape != logp.shape for x in tokens.values())):
         got = ", ".join(f"{name} {tuple(x.shape)}" for name, x in (tokens | {"advantages": advantages}).items())
-        raise ValueError(f"policy_loss expects (M, N) token tensors and (M,) advantages, got {got}")
+        raise ValueError(f"policy_loss expects (M, N) token tensors and (M,) or (M, N) advantages, got {got}")
     if mask.dtype != torch.bool:
         raise ValueError(f"mask must be bool, got {mask.dtype}")
     if clip_low < 0 or clip_high < 0:
@@ -379,7 +381,8 @@ def policy_loss(
 
     logp = clean(logp)
     old_logp = clean(old_logp).detach()
-    adv = _at_least_float32(advantages).detach()[:, None]  # (M, 1), broadcast over the N tokens
+    adv = _at_least_float32(advantages).detach()
+    adv = adv[:, None] if adv.ndim == 1 else torch.where(mask, adv, 0.0)  # (M, 1) broadcast over the N tokens, or (M, N)
     ratio = torch.exp(logp - old_logp)  # (M, N)
     unclipped = ratio * adv
     clipped = ratio.clamp(1.0 - clip_low, 1.0 + clip_high) * adv

@@ -23,6 +23,7 @@ on the real ones. Holding each action to both frames (``both``) slowed that decl
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import torch
 
@@ -63,7 +64,7 @@ def replay_observations(rollouts: Rollouts, replays: Rollouts, chunk: int) -> to
 
 
 def learning_batch(policy, batch: Rollouts, replayed: torch.Tensor, advantages: torch.Tensor, learn_on: str,
-                   temperature: float, micro_batch: int) -> tuple[Rollouts, torch.Tensor]:
+                   temperature: float, micro_batch: int, importance_cap: float = 0.0) -> tuple[Rollouts, torch.Tensor]:
     """The batch the update learns from, and its advantages.
 
     Args:
@@ -73,13 +74,21 @@ def learning_batch(policy, batch: Rollouts, replayed: torch.Tensor, advantages: 
         learn_on: replays (each action held to its replay's frame) or both (held to both frames:
             every policy call is a row twice, so that the policy's proposals on the frames it acts on
             move with what it learns on the replays' frames).
+        importance_cap: above 0, each token's advantage on the replay's frame is weighted by
+            min(cap, p(token | replay's frame) / p(token | the frame it was sampled on)), both under
+            the policy before the update (`importance_weights`); the advantages are then (R, S, N).
     """
     anchored = with_logp_on_observations(policy, dataclasses.replace(batch, observations=replayed), temperature,
                                          micro_batch)
+    on_replays = advantages
+    if importance_cap > 0:
+        on_replays = per_token(advantages, batch.logp.shape) * importance_weights(anchored.logp, batch.logp,
+                                                                                 batch.token_mask, importance_cap)
     if learn_on == "replays":
-        return anchored, advantages
+        return anchored, on_replays
     if learn_on == "both":
-        return concat_rollouts([batch, anchored]), torch.cat([advantages, advantages])
+        own = per_token(advantages, batch.logp.shape) if importance_cap > 0 else advantages
+        return concat_rollouts([batch, anchored]), torch.cat([own, on_replays])
     raise ValueError(f"learn_on must be replays or both here, got {learn_on!r}")
 
 
@@ -97,3 +106,20 @@ def with_logp_on_observations(policy, batch: Rollouts, temperature: float, micro
             logp[r, s] = policy.log_prob(batch.observations[r, s], [instructions[i] for i in r.tolist()],
                                          batch.tokens[r, s], temperature, **states).float().cpu()
     return dataclasses.replace(batch, logp=logp)
+
+
+def importance_weights(logp: torch.Tensor, sampled_logp: torch.Tensor, mask: torch.Tensor,
+                       cap: float) -> torch.Tensor:
+    """(R, S, N) min(cap, exp(logp - sampled_logp)) per token, 0 where `mask` is False: how much
+    likelier the policy makes each token on the frame it is held to than on the one it was
+    sampled on, truncated (as V-trace and Retrace truncate theirs) so that no token outweighs its
+    advantage by more than `cap`."""
+    ratio = torch.exp((logp - sampled_logp).clamp(max=math.log(cap)))
+    return torch.where(mask, ratio, 0.0)
+
+
+def per_token(advantages: torch.Tensor, shape: torch.Size) -> torch.Tensor:
+    """(R,) or (R, S) advantages spread to every token: (R, S, N)."""
+    while advantages.ndim < len(shape):
+        advantages = advantages[..., None]
+    return advantages.expand(shape)

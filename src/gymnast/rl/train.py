@@ -466,7 +466,8 @@ def rl_step(env: VectorEnv, policy, reward: Reward, draw_starts: Callable[[int, 
             learned = batch  # what the update reads; the batch itself stays the rollouts' own (videos, the watch)
             if config.learn_on != "own":
                 learned, advantages = reanchor.learning_batch(policy, batch, torch.cat(kept_replayed), advantages,
-                                                              config.learn_on, config.temperature, config.micro_batch)
+                                                              config.learn_on, config.temperature, config.micro_batch,
+                                                              config.importance_cap)
             values |= advantage_metrics | update_policy(policy, optimizer, learned, advantages, config, reference,
                                                         anchor, actions)
     with warnings.catch_warnings():
@@ -504,7 +505,8 @@ def update_policy(policy, optimizer: torch.optim.Optimizer, batch: Rollouts, adv
                   generator: torch.Generator | None = None) -> dict[str, float]:
     """`minibatches` clipped policy-gradient steps on the batch's policy calls; returns metrics.
 
-    `advantages` is (R,), one per rollout, or (R, S), one per policy call (per-call credit).
+    `advantages` is (R,), one per rollout, (R, S), one per policy call (per-call credit), or
+    (R, S, N), one per token (re-anchoring weighted by importance, `gymnast.rl.reanchor`).
     Every policy call (r, s) that executed at least one action is a row; rows are processed in
     micro-batches whose gradients accumulate, normalised by the token count of the whole
     minibatch, so the step does not depend on `micro_batch`.
@@ -533,7 +535,7 @@ def update_policy(policy, optimizer: torch.optim.Optimizer, batch: Rollouts, adv
             if reference is not None:
                 with torch.no_grad():
                     ref_logp = reference.log_prob(obs, texts, tokens, config.temperature, **states)
-            advantage = advantages[r, s] if advantages.ndim == 2 else advantages[r]
+            advantage = advantages[r, s] if advantages.ndim >= 2 else advantages[r]  # (m,) or, per token, (m, N)
             old, advantage, mask = (to_device(x, logp.device) for x in (batch.logp[r, s], advantage,
                                                                           batch.token_mask[r, s]))
             loss, values = grpo.policy_loss(logp, old, advantage, mask,
