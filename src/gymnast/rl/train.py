@@ -350,6 +350,8 @@ def rl_step(env: VectorEnv, policy, reward: Reward, draw_starts: Callable[[int, 
        with ``credit`` critic, GAE against the critic, which is then fitted on the batch)
        and `minibatches` clipped policy-gradient steps; the learning
        rate schedule advances even when no group was kept, so steps and the schedule stay aligned.
+       With ``learn_on`` replays or both, the update holds the actions to the frames their replays
+       showed at each call (`gymnast.rl.reanchor`); the batch returned stays the rollouts' own.
 
     Args:
         env: the run's vector env with R = B * G rollouts.
