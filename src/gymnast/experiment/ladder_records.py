@@ -148,29 +148,32 @@ def fixed_arms(out: Path) -> list[Rung]:
     # taught the imagined sight): named where it is not the ladder's.
     saved = saved_settings(out) if (out / "config.json").is_file() else {}
     ladder = saved.get("inputs", {})
-    recipe = RLConfig(**RLConfig.upgrade_saved(saved["rl"])) if "rl" in saved else None  # the arms' levers are read against it
+    recipe = _grpo_settings(saved["rl"]) if "rl" in saved else None  # the arms' levers are read against it
     for where in sorted(out.glob(f"{FIXED.name}*")):
         if not (where / "config.json").is_file() or (where.name != FIXED.name and not where.name.startswith("fixed_")):
             continue
         if is_dyna(where):
             arms.append(_dyna_arm(where, ladder.get("policy")))
             continue
-        run = RLRun.from_json(saved_settings(where, "run"))
+        arm = saved_settings(where)
+        run = RLRun.from_json(arm["run"])
         model = f", imagined in {run.wm}" if run.wm and run.wm != ladder.get("wm") else ""
         sees = f", the reward seeing {run.reward_sees}" if run.reward_sees else ""
         other = f" in {run.reward_wm}" if run.reward_wm else ""
         start = _from_policy(run.policy, ladder.get("policy"))
-        lever = "".join(f" --{name.replace('_', '-')} {_flag(getattr(settings, name))}"
-                        for settings in [saved_rl(where)] if recipe is not None
-                        for name in recipe_changes(settings, recipe))
-        arms.append(Rung(where.name, run.env, str(run.reward), run.reward_sees,
-                         f"a fix: --env {run.env}{model} --reward {run.reward}{lever}{sees}{other}{start}", bool(start)))
+        lever = ""
+        if recipe is not None:
+            settings = _grpo_settings(arm["rl"])
+            lever = "".join(f" --{name.replace('_', '-')} {_flag(getattr(settings, name))}"
+                            for name in recipe_changes(settings, recipe))
+        what = f"a fix: --env {run.env}{model} --reward {run.reward}{lever}{sees}{other}{start}"
+        arms.append(Rung(where.name, run.env, str(run.reward), run.reward_sees, what, bool(start)))
     return arms
 
 
-def saved_rl(run: Path) -> RLConfig:
-    """The GRPO settings RUN/config.json keeps (a ladder's recipe, or a run's)."""
-    return RLConfig(**RLConfig.upgrade_saved(saved_settings(run, "rl")))
+def _grpo_settings(saved: dict) -> RLConfig:
+    """The GRPO settings a config.json's ``rl`` section keeps (a ladder's recipe, or a run's)."""
+    return RLConfig(**RLConfig.upgrade_saved(saved))
 
 
 def _flag(value) -> str:

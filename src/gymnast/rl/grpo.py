@@ -382,7 +382,8 @@ def policy_loss(
     logp = clean(logp)
     old_logp = clean(old_logp).detach()
     adv = _at_least_float32(advantages).detach()
-    adv = adv[:, None] if adv.ndim == 1 else torch.where(mask, adv, 0.0)  # (M, 1) broadcast over the N tokens, or (M, N)
+    # (M, 1) broadcast over the N tokens, or (M, N) one per token
+    adv = adv[:, None] if adv.ndim == 1 else torch.where(mask, adv, 0.0)
     ratio = torch.exp(logp - old_logp)  # (M, N)
     unclipped = ratio * adv
     clipped = ratio.clamp(1.0 - clip_low, 1.0 + clip_high) * adv

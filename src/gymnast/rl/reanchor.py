@@ -27,8 +27,7 @@ import math
 
 import torch
 
-from gymnast.policy.base import state_inputs
-from gymnast.rl.rollout import Rollouts, concat_rollouts
+from gymnast.rl.rollout import Rollouts, call_inputs, concat_rollouts
 
 
 def frames_at_calls(frames: torch.Tensor, calls: int, chunk: int) -> torch.Tensor:
@@ -98,13 +97,11 @@ def with_logp_on_observations(policy, batch: Rollouts, temperature: float, micro
     the tokens were sampled on. Calls that executed nothing keep 0."""
     logp = torch.zeros_like(batch.logp)
     rows_r, rows_s = batch.token_mask.any(-1).nonzero(as_tuple=True)
-    instructions = batch.instructions
     with torch.no_grad():
         for part in torch.arange(len(rows_r)).split(micro_batch):
             r, s = rows_r[part], rows_s[part]
-            states = state_inputs(policy, None if batch.states is None else batch.states[r, s])
-            logp[r, s] = policy.log_prob(batch.observations[r, s], [instructions[i] for i in r.tolist()],
-                                         batch.tokens[r, s], temperature, **states).float().cpu()
+            obs, texts, tokens, states = call_inputs(policy, batch, r, s)
+            logp[r, s] = policy.log_prob(obs, texts, tokens, temperature, **states).float().cpu()
     return dataclasses.replace(batch, logp=logp)
 
 

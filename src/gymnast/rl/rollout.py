@@ -251,6 +251,15 @@ def reward_context(rollouts: Rollouts) -> RewardContext:
     )
 
 
+def call_inputs(policy, batch: Rollouts, r: torch.Tensor,
+                s: torch.Tensor) -> tuple[torch.Tensor, list[str], torch.Tensor, dict]:
+    """What the policy read and sampled at the calls (r, s): their images, instructions and tokens,
+    and the keyword arguments that give it their robot states (for a policy that reads them)."""
+    instructions = batch.instructions
+    states = state_inputs(policy, None if batch.states is None else batch.states[r, s])  # (m, D), a simulator's
+    return batch.observations[r, s], [instructions[i] for i in r.tolist()], batch.tokens[r, s], states
+
+
 def concat_rollouts(parts: list[Rollouts]) -> Rollouts:
     """One `Rollouts` of the parts in order (rollouts of one env share their shapes; parts that keep
     their frames differently are given one frame per action)."""

@@ -42,7 +42,6 @@ from gymnast.envs.metaworld import CONTROL_FPS, STATE_DIM
 from gymnast.data.keyframes import KeyframeConfig
 from gymnast.envs.starts import Start, StartSampler, evaluation_starts, own_instruction, scene_starts
 from gymnast.envs.tasks import parse_scenes, resolve_tasks
-from gymnast.policy.base import state_inputs
 from gymnast.policy.frozen_vision import remembered_vision
 from gymnast.policy.lerobot_policy import LeRobotPolicy
 from gymnast.reward.base import Reward, StepReward, check_fits
@@ -52,8 +51,8 @@ from gymnast.rl.critic import CallCritic, ValueCritic
 from gymnast.rl.evaluate import evaluate_in_env, verdicts, watch_hacking
 from gymnast.rl.imitation import ImitationAnchor
 from gymnast.rl.inputs import check_other_robot, policy_dataset, policy_frames, policy_keys
-from gymnast.rl.rollout import (Rollouts, collect_rollouts, concat_rollouts, dataset_starts, heldout_starts,
-                                own_tasks, recorded_elsewhere, score_groups)
+from gymnast.rl.rollout import (Rollouts, call_inputs, collect_rollouts, concat_rollouts, dataset_starts,
+                                heldout_starts, own_tasks, recorded_elsewhere, score_groups)
 from gymnast.rl.sight import RewardSight, reward_truth_metrics, reward_verdicts
 from gymnast.rl.videos import write_group_video
 from gymnast.utils.atomic import write_json
@@ -114,8 +113,8 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
     if levers and not env.imagined:
         raise ValueError(f"{levers[0]} acts on imagined rollouts; --env {env} imagines none")
     if config.learn_on != "own" and run_spec.reward_sees is None:
-        raise ValueError(f"--learn-on {config.learn_on} holds the actions to the frames of their replays where the reward "
-                         "saw them: give --reward-sees real (or imagined)")
+        raise ValueError(f"--learn-on {config.learn_on} holds the actions to the frames of their replays where "
+                         "the reward saw them: give --reward-sees real (or imagined)")
     device = resolve_device(config.device)
     policy = load_policy(run_spec.policy).to(device)
     cameras = getattr(policy.config, "cameras", ())
@@ -514,7 +513,6 @@ def update_policy(policy, optimizer: torch.optim.Optimizer, batch: Rollouts, adv
     minibatch, so the step does not depend on `micro_batch`.
     """
     rows_r, rows_s = batch.token_mask.any(-1).nonzero(as_tuple=True)  # (M,) each
-    instructions = batch.instructions
     totals: dict[str, float] = {}
     parts = torch.tensor_split(torch.arange(len(rows_r)), config.minibatches)
     for part in parts:
@@ -525,9 +523,7 @@ def update_policy(policy, optimizer: torch.optim.Optimizer, batch: Rollouts, adv
         part_values: dict[str, float] = {}
         for micro in part.split(config.micro_batch):
             r, s = rows_r[micro], rows_s[micro]
-            obs, texts, tokens = batch.observations[r, s], [instructions[i] for i in r.tolist()], batch.tokens[r, s]
-            # (m, D) the robot states a simulator gave the policy, for a policy that reads them
-            states = state_inputs(policy, None if batch.states is None else batch.states[r, s])
+            obs, texts, tokens, states = call_inputs(policy, batch, r, s)
             entropy = None
             if config.entropy_coef > 0:
                 logp, entropy = policy.log_prob_and_entropy(obs, texts, tokens, config.temperature, **states)
