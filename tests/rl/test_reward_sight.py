@@ -224,3 +224,26 @@ def test_learning_on_an_unknown_world_or_weighing_what_is_not_re_anchored_is_ref
         RLConfig(importance_cap=1.0)
     with pytest.raises(ValueError, match="importance_cap must be at least 0"):
         RLConfig(learn_on="replays", importance_cap=-1.0)
+
+
+def test_an_anchored_sight_rolls_out_for_real_and_is_evaluated_in_the_real_world(rl_dataset, tmp_path, capsys):
+    from gymnast.cli import main
+
+    common = ["rl", "--policy", str(POLICY), "--wm", str(WORLD_MODEL), "--reward", "sim", "--data", str(rl_dataset),
+              "--preset", "debug", "--tracker", "none"]
+    with pytest.raises(SystemExit):
+        main(common + ["--env", "anchored", "--out", str(tmp_path / "refused")])
+    assert "give both or neither" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(common + ["--env", "imagined", "--anchor-every", "10", "--out", str(tmp_path / "refused_too")])
+    assert "give both or neither" in capsys.readouterr().err
+    out = tmp_path / "anchored"
+    main(common + ["--env", "anchored", "--anchor-every", "10", "--out", str(out)])
+    lines = [json.loads(line) for line in (out / "metrics.jsonl").read_text().splitlines()]
+    steps = [line for line in lines if "train/lr" in line]
+    assert steps and all(line["rollout/real_interactions"] > 0 for line in steps)  # the rollouts are real
+    # Seen through the world model, so evaluated both ways: as it practises and in the real world.
+    evaluations = [line for line in lines if "eval/real_success" in line]
+    assert evaluations and all("eval/own_success" in line for line in evaluations)
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["env"] == "anchored" and summary["real_interactions"] == steps[-1]["rollout/real_interactions"]

@@ -42,7 +42,9 @@ def rl(
         policy: the SFT (or RL) run or checkpoint to start from (required unless --resume); also lerobot:PATH
             (a LeRobot pretrained_model folder), or your own: python:MODULE:FACTORY[@ARG] or plugin:NAME[@ARG]
             (gymnast check-policy --help).
-        env: where rollouts happen: imagined (in --wm), sim (the software simulator, --gap) or real.
+        env: where rollouts happen: imagined (in --wm), sim (the software simulator, --gap), real, or
+            anchored (in the real world, the policy seeing it through --wm restarted from the real
+            frame every --anchor-every actions: the imagined sight, cut short).
         reward: judge:RUN | state:RUN | vlm:MODEL@BASE_URL | verified | sim | sim-dense, or all:REWARD+REWARD
             (success only where every one reads success, e.g. all:judge:RUN+state:RUN).
         wm: the world model run or ensemble (needed by --env imagined and --reward verified); or your own:

@@ -1,4 +1,5 @@
-"""The chunked vector envs a run rolls out in, built by kind (`gymnast.envs.kinds`): imagined, sim or real.
+"""The chunked vector envs a run rolls out in, built by kind (`gymnast.envs.kinds`): imagined, sim, real
+or anchored (real rollouts the policy sees through the world model, `gymnast.envs.anchored`).
 
 Legend: B rollouts stepped together, K actions per chunk, A action dimensions.
 
@@ -15,13 +16,14 @@ from __future__ import annotations
 from gymnasium.vector import VectorEnv
 
 from gymnast.config import EnvConfig
+from gymnast.envs.anchored import AnchoredImaginedEnv
 from gymnast.envs.imagined import BatchedImaginedEnv
-from gymnast.envs.kinds import EnvKind
+from gymnast.envs.kinds import ANCHORED, IMAGINED, REAL, EnvKind
 from gymnast.envs.sim_vector import SimVectorEnv
 
 
 class EnvFactory:
-    """Builds the vector envs a run needs, once each, by kind (imagined, sim, real) and size.
+    """Builds the vector envs a run needs, once each, by kind (imagined, sim, real, anchored) and size.
 
     Args:
         kind: the run's own env.
@@ -37,12 +39,16 @@ class EnvFactory:
             `train` sets it to the training batch. One runs a single episode at a time, in this process.
         robot_state: the imagined env's robot state beside its frames (`BatchedImaginedEnv`), for
             a policy that reads one; None imagines none.
+        anchor_every: the anchored env's actions between restarts from the real frame
+            (`AnchoredImaginedEnv`); needed by that kind alone.
     """
 
     def __init__(self, kind: EnvKind, chunk_size: int, config: EnvConfig, gap: str, workers: int, world_model=None,
-                 stop_above: float | None = None, runner: str = "local", batch: int = 1, robot_state=None) -> None:
+                 stop_above: float | None = None, runner: str = "local", batch: int = 1, robot_state=None,
+                 anchor_every: int = 0) -> None:
         self.kind, self.chunk_size, self.config, self.gap, self.workers = kind, chunk_size, config, gap, workers
         self.world_model, self.stop_above, self.runner, self.robot_state = world_model, stop_above, runner, robot_state
+        self.anchor_every = anchor_every
         self.batch = batch
         self._envs: dict[tuple[str, int], VectorEnv] = {}
         self._training: tuple[str, int] | None = None  # the key of `train`'s env
@@ -68,14 +74,18 @@ class EnvFactory:
     def get(self, kind: EnvKind, num_envs: int) -> VectorEnv:
         key = (kind.name, num_envs)
         if key not in self._envs:
-            if kind.imagined:
-                self._envs[key] = BatchedImaginedEnv(self.world_model, num_envs, self.chunk_size, self.config.horizon,
-                                                     self.stop_above, self.robot_state)
-            else:
-                gap = "none" if kind.real_interactions else self.gap
-                self._envs[key] = SimVectorEnv(num_envs, self.chunk_size, self.config, gap=gap, workers=self.workers,
-                                                 runner=self.runner)
+            self._envs[key] = self._build(kind, num_envs)
         return self._envs[key]
+
+    def _build(self, kind: EnvKind, num_envs: int) -> VectorEnv:
+        if kind == ANCHORED:
+            return AnchoredImaginedEnv(self._build(IMAGINED, num_envs),
+                                       self._build(REAL, num_envs), self.anchor_every)
+        if kind.imagined:
+            return BatchedImaginedEnv(self.world_model, num_envs, self.chunk_size, self.config.horizon,
+                                      self.stop_above, self.robot_state)
+        gap = "none" if kind.real_interactions else self.gap
+        return SimVectorEnv(num_envs, self.chunk_size, self.config, gap=gap, workers=self.workers, runner=self.runner)
 
     def close(self) -> None:
         for env in self._envs.values():

@@ -155,6 +155,17 @@ class _Imagination:
         self.steps, self.chunks = 0, [context[:, -1:]]
         return context[:, -1].copy()
 
+    def restart(self, context: np.ndarray) -> None:
+        """Continues every rollout from (B, C, H, W, 3) real frames instead of its own last ones: the
+        model's state starts again there, the step count goes on, and the video's newest frame
+        becomes the real one."""
+        if self.state is None:
+            raise RuntimeError("call reset() with real start frames before restarting from other ones")
+        self.state = self.model.init_state(torch.from_numpy(context).to(self.device), generator=self.generator)
+        newest = self.chunks[-1].copy()  # the model's own frames may share memory with its state
+        newest[:, -1] = context[:, -1]
+        self.chunks[-1] = newest
+
     def remaining(self, actions: np.ndarray) -> np.ndarray:
         """(B, K, A) actions cut at the horizon: the (B, k, A) that `step` imagines."""
         if self.state is None:
@@ -389,6 +400,22 @@ class BatchedImaginedEnv(VectorEnv):
         if self._reports_state:
             obs["state"] = self.robot_state.robot()
         return obs, zeros, zeros.astype(bool), ended, infos
+
+    def restart(self, frames: np.ndarray) -> np.ndarray:
+        """Continues every rollout from real frames, (B, [C,] H, W, 3) uint8 (the world each rollout's
+        actions reached), instead of the ones it imagined; returns the (B, H, W, 3) frames now
+        shown. The step count and the video go on, the video's newest frame the real one.
+
+        Raises:
+            ValueError: frames of the wrong shape or dtype, or a robot state beside the frames
+                (which would have to restart from the real state as well).
+        """
+        if self.robot_state is not None:
+            raise ValueError("an imagined env with a robot state cannot restart from real frames alone: "
+                             "its state would go on from the imagined one")
+        context = _check_frames(frames, frame_shape(self._sim.model), batch=self.num_envs)
+        self._sim.restart(context)
+        return context[:, -1].copy()
 
     def _stop(self, frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Stops rollouts before their first frame over `stop_above`; returns the step's (B, k, H, W, 3)

@@ -1,10 +1,15 @@
 """The kinds of environment a rollout runs in, each with what it declares about itself.
 
 The RL loop, the env factory and the rewards read these declarations rather than comparing names:
-whether a step is a real interaction (counted, and the reason a run trained elsewhere is also
-evaluated and watched in the real world), whether the env reports success (a simulator's verdict
-and per-step rewards, which the simulator rewards read), and whether its frames are imagined by a
-world model (which then needs one, and can only continue real start frames, never set up a scene).
+whether a step is a real interaction (counted), whether the env reports success (a simulator's
+verdict and per-step rewards, which the simulator rewards read), and whether its frames are imagined
+by a world model (which then needs one, and can only continue real start frames, never set up a
+scene). A run whose policy does not see the real world is also evaluated and watched there.
+
+`ANCHORED` is both: the rollout happens in the real world, while the policy sees it through the
+world model, which is restarted from the real frame every few actions
+(`gymnast.envs.anchored`). It tells how long a policy can act on imagined frames before what it
+learns stops carrying over to real ones: the imagined sight of the learning ladder, cut short.
 """
 
 from __future__ import annotations
@@ -12,7 +17,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Literal
 
-EnvName = Literal["imagined", "sim", "real"]
+EnvName = Literal["imagined", "sim", "real", "anchored"]
 
 
 @dataclass(frozen=True)
@@ -32,6 +37,11 @@ class EnvKind:
     reports_success: bool
     imagined: bool
 
+    @property
+    def real_sight(self) -> bool:
+        """The policy sees the real world as it is: its own evaluation is the real one."""
+        return self.real_interactions and not self.imagined
+
     def __str__(self) -> str:
         return self.name
 
@@ -39,7 +49,8 @@ class EnvKind:
 IMAGINED = EnvKind("imagined", real_interactions=False, reports_success=False, imagined=True)
 SIM = EnvKind("sim", real_interactions=False, reports_success=True, imagined=False)
 REAL = EnvKind("real", real_interactions=True, reports_success=True, imagined=False)
-ENV_KINDS: dict[str, EnvKind] = {kind.name: kind for kind in (IMAGINED, SIM, REAL)}
+ANCHORED = EnvKind("anchored", real_interactions=True, reports_success=True, imagined=True)
+ENV_KINDS: dict[str, EnvKind] = {kind.name: kind for kind in (IMAGINED, SIM, REAL, ANCHORED)}
 
 
 def env_kind(name: str) -> EnvKind:

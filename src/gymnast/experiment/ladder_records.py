@@ -43,7 +43,7 @@ def rung_record(rung: Rung, run: Path, steps: int) -> dict | None:
 def _rl_record(rung: Rung, run: Path, steps: int) -> dict | None:
     lines = read_metrics(run)
     # A rung in the real world evaluates itself there ("own"); the others also in the real world.
-    real = "eval/own" if rung.env.real_interactions else "eval/real"
+    real = "eval/own" if rung.env.real_sight else "eval/real"
     curve = [_evaluation(line, real) for line in lines if f"{real}_success" in line]
     if not curve:
         return None

@@ -117,6 +117,10 @@ class RLConfig:
     probability the policy gives it there against the one it was sampled with, capped at this
     (truncated importance sampling: an action the policy would rarely take on the real frame teaches
     little there); 0: no weighting."""
+    anchor_every: int = 0
+    """With --env anchored: the actions the policy acts on imagined frames before the world model
+    restarts from the real frame its actions reached (a multiple of its chunk). The rollout is real;
+    only the sight is imagined, and never for longer than this (`gymnast.envs.anchored`)."""
     normalize_std: bool = True
     """Divide group advantages by the group's standard deviation."""
     keep_low: float = 0.1
@@ -207,7 +211,8 @@ class RLConfig:
             raise ValueError(f"RLConfig.group_size must be at least 2 (advantages compare a group), got {self.group_size}")
         if self.temperature <= 0:
             raise ValueError(f"RLConfig.temperature must be positive, got {self.temperature}")
-        for name in ("kl_coef", "disagreement_stop", "disagreement_penalty", "imitation_coef", "imitation_kl_gate"):
+        for name in ("kl_coef", "disagreement_stop", "disagreement_penalty", "imitation_coef", "imitation_kl_gate",
+                     "anchor_every"):
             if getattr(self, name) < 0:
                 raise ValueError(f"RLConfig.{name} must be at least 0, got {getattr(self, name)}")
         if self.scenes is not None:

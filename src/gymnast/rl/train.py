@@ -37,7 +37,7 @@ from tqdm import tqdm
 
 from gymnast.config import EnvConfig
 from gymnast.envs.factory import EnvFactory
-from gymnast.envs.kinds import IMAGINED, REAL, EnvKind
+from gymnast.envs.kinds import ANCHORED, IMAGINED, REAL, EnvKind
 from gymnast.envs.metaworld import CONTROL_FPS, STATE_DIM
 from gymnast.data.keyframes import KeyframeConfig
 from gymnast.envs.starts import Start, StartSampler, evaluation_starts, own_instruction, scene_starts
@@ -112,6 +112,9 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
               if getattr(config, name) > 0]
     if levers and not env.imagined:
         raise ValueError(f"{levers[0]} acts on imagined rollouts; --env {env} imagines none")
+    if (env == ANCHORED) != (config.anchor_every > 0):
+        raise ValueError("--anchor-every is how often --env anchored restarts the world model from the real frame: "
+                         "give both or neither")
     if config.learn_on != "own" and run_spec.reward_sees is None:
         raise ValueError(f"--learn-on {config.learn_on} holds the actions to the frames of their replays where "
                          "the reward saw them: give --reward-sees real (or imagined)")
@@ -121,6 +124,10 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
     world_model = placed(load_world_model(run_spec.wm), device) if run_spec.wm else None
     if env.imagined or (run_spec.reward_sees is not None and run_spec.reward_sees.imagined):
         check_policy_views(cameras, world_model, run_spec.policy, run_spec.wm)
+    if env == ANCHORED and (run_spec.robot_state is not None or getattr(policy, "state_dim", 0)):
+        raise ValueError(f"--env anchored shows the policy imagined frames alone, restarted from real ones; a robot "
+                         f"state beside them ({run_spec.robot_state or f'the policy {run_spec.policy} reads one'}) "
+                         "would go on from the imagined state")
     robot_state = robot_state_for(getattr(policy, "state_dim", 0), env, run_spec, world_model)
     # A user's own model may report disagreement too: the imagined env finds out at its first step.
     if levers and not isinstance(world_model, EnsembleWorldModel) and not is_plugin(run_spec.wm):
@@ -163,12 +170,12 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
     batch = min(config.starts_per_step * config.group_size, 32 * config.workers)
     envs = EnvFactory(env, policy.chunk_size, env_config, config.gap, config.workers, world_model,
                       stop_above=config.disagreement_stop or None, runner=config.runner, batch=batch,
-                      robot_state=robot_state)
+                      robot_state=robot_state, anchor_every=config.anchor_every)
     # Segments from keyframes are shorter than the task's episodes, which evaluation runs whole.
     eval_envs = envs if config.evaluation_horizon == config.horizon else EnvFactory(
         env, policy.chunk_size, dataclasses.replace(env_config, horizon=config.evaluation_horizon), config.gap,
         config.workers, world_model, stop_above=config.disagreement_stop or None, runner=config.runner, batch=batch,
-        robot_state=robot_state)
+        robot_state=robot_state, anchor_every=config.anchor_every)
     replays = None  # the reward's own world model: its replays are not the loop the policy acted in
     if run_spec.reward_wm is not None:
         if run_spec.reward_sees is None or not run_spec.reward_sees.imagined:
@@ -231,7 +238,7 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
         # (the real world's verdict on imagined actions) has its evaluation there, below.
         if env.reports_success or run_spec.reward_sees is None:
             values = evaluate_in_env(eval_envs, env, policy, reward, eval_starts, prefix="eval/own", progress=progress)
-        if config.real_eval and not env.real_interactions:  # else its own evaluation is the real one
+        if config.real_eval and not env.real_sight:  # else its own evaluation is the real one
             real = evaluate_in_env(eval_envs, REAL, policy, reward, eval_starts, prefix="eval/real",
                                    progress=progress)
             state["eval_real_interactions"] += int(real.pop("eval/real_interactions"))
@@ -566,7 +573,7 @@ def write_summary(out: Path, run_spec: RLRun, config: RLConfig, state: dict) -> 
     video) and, when the run trained elsewhere, in the real world (``start_real_success``...).
     """
     first, last = state["curve"][0], state["curve"][-1]
-    where = {"": "own", "_real": "own" if run_spec.env.real_interactions else "real"}
+    where = {"": "own", "_real": "own" if run_spec.env.real_sight else "real"}
     summary = {"env": run_spec.env.name, "reward": str(run_spec.reward), "reward_sees": run_spec.to_json()["reward_sees"],
                "steps": config.steps, "policy": run_spec.policy, "wm": run_spec.wm}
     for suffix, env in where.items():

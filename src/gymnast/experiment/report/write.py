@@ -61,7 +61,7 @@ def _curves(stages: Stages) -> dict[str, list[dict]]:
                                   "own": None} for row in _dyna_summary(stages)["rounds"]]
             continue
         summary = read_json(stages.path(f"arm_{spec.name}") / "summary.json")
-        where = "own" if spec.env.real_interactions else "real"
+        where = "own" if spec.env.real_sight else "real"
         curves[spec.name] = [{"step": point["step"], "real": point.get(f"eval/{where}_success"),
                               "real_ci": [point.get(f"eval/{where}_ci_low"), point.get(f"eval/{where}_ci_high")],
                               "own": point.get("eval/own_success")} for point in summary["curve"]]
