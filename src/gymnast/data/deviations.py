@@ -134,6 +134,11 @@ def _check_timestamps(table: pa.Table, path: Path, fps: float, notes: Deviations
         notes.add(path, "timestamp", "timestamps are not all finite", f"ignored: frames placed by frame_index at {fps:g} fps")
         return
     steps = np.diff(stamps)
+    if "episode_index" in table.column_names:  # a file of several episodes starts each one at 0 again
+        episodes = table.column("episode_index").to_numpy(zero_copy_only=False)
+        steps = steps[episodes[1:] == episodes[:-1]]
+        if not len(steps):
+            return
     regular = np.abs(steps - 1 / fps).max() <= 0.5 / fps
     if stamps[0] > 1e6:
         notes.add(path, "timestamp", f"timestamps are wall-clock (from {stamps[0]:.4g} s)",
