@@ -86,7 +86,14 @@ def test_the_ladder_swaps_one_part_per_rung_and_holds_each_reward_to_the_real_ou
     saved = json.loads((out / "fixed" / "config.json").read_text())
     saved["rl"] |= {"learn_on": "replays", "eval_episodes": 99}  # how it is evaluated is not its lever
     (anchored / "config.json").write_text(json.dumps(saved))
+    # ... and one that starts from keyframes of another dataset names the dataset.
+    segments = out / "fixed_segments"
+    segments.mkdir()
+    saved = json.loads((out / "fixed" / "config.json").read_text())
+    saved["run"]["data"] = "elsewhere/rollouts"
+    (segments / "config.json").write_text(json.dumps(saved))
     arms = {arm.name: arm.what for arm in fixed_arms(out)}
+    assert "--data elsewhere/rollouts" in arms["fixed_segments"] and "--data" not in arms["fixed"]
     assert "imagined in elsewhere/world_model" in arms["fixed_refit"] and "imagined in" not in arms["fixed"]
     assert "--learn-on replays" in arms["fixed_reanchor"] and "eval" not in arms["fixed_reanchor"]
     assert "--learn-on" not in arms["fixed"]

@@ -166,7 +166,8 @@ def fixed_arms(out: Path) -> list[Rung]:
             settings = _grpo_settings(arm["rl"])
             lever = "".join(f" --{name.replace('_', '-')} {_flag(getattr(settings, name))}"
                             for name in recipe_changes(settings, recipe))
-        what = f"a fix: --env {run.env}{model} --reward {run.reward}{lever}{sees}{other}{start}"
+        data = f" --data {run.data}" if run.data else ""  # starts from another dataset's scenes or keyframes
+        what = f"a fix: --env {run.env}{model} --reward {run.reward}{lever}{data}{sees}{other}{start}"
         arms.append(Rung(where.name, run.env, str(run.reward), run.reward_sees, what, bool(start)))
     return arms
 
