@@ -10,8 +10,10 @@ model's, and the world model drifts further from the real scene with every actio
 `AnchoredImaginedEnv` pulls them apart. Its rollouts happen in the real world (the actions, the
 success and the rewards are the real world's, and count as real interactions), while the policy
 sees them through the world model, which restarts from the real frame those actions reached
-every `every` actions: the policy never acts on an imagination more than `every` actions long.
-`every` = K shows it one imagined chunk at a time from a real frame; the horizon shows it R3's
+every `every` actions. The policy reads the frame at the end of each chunk: every `every` actions
+that is the real frame itself, and in between the world model's, imagined at most `every` - K
+actions past the last real one. `every` = K shows it the real world alone (a control: it learns as
+RL in the real world does); `every` = 2K real and imagined frames in turn; the horizon R3's
 whole-episode imagination.
 
 It keeps the contract of `gymnast.envs.sim_vector.SimVectorEnv` (one step is a (B, K, A) chunk,

@@ -118,9 +118,10 @@ class RLConfig:
     (truncated importance sampling: an action the policy would rarely take on the real frame teaches
     little there); 0: no weighting."""
     anchor_every: int = 0
-    """With --env anchored: the actions the policy acts on imagined frames before the world model
-    restarts from the real frame its actions reached (a multiple of its chunk). The rollout is real;
-    only the sight is imagined, and never for longer than this (`gymnast.envs.anchored`)."""
+    """With --env anchored: actions between the real frames the policy is shown (a multiple of its
+    chunk); in between it sees the world model's frames, imagined from the last real one. The
+    rollout is real; the sight is imagined, never more than this less one chunk past a real frame
+    (`gymnast.envs.anchored`)."""
     normalize_std: bool = True
     """Divide group advantages by the group's standard deviation."""
     keep_low: float = 0.1
