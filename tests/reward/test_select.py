@@ -108,9 +108,11 @@ def test_each_reward_fits_exactly_the_envs_that_give_what_it_needs():
                 fits[type(reward).__name__].append(env.name)
             except ValueError:
                 pass
-    assert fits == {"SimSuccess": ["sim", "real"], "SimDense": ["sim", "real"], "VerifiedReward": ["imagined"],
-                    "LearnedJudge": ["imagined", "sim", "real"], "FrameJudge": ["imagined", "sim", "real"],
-                    "VLMJudge": ["imagined", "sim", "real"]}
+    # The anchored env is both: a real rollout (its success) seen through the world model (its frames).
+    every = ["imagined", "sim", "real", "anchored"]
+    assert fits == {"SimSuccess": ["sim", "real", "anchored"], "SimDense": ["sim", "real", "anchored"],
+                    "VerifiedReward": ["imagined", "anchored"], "LearnedJudge": every, "FrameJudge": every,
+                    "VLMJudge": every}
 
 
 @pytest.mark.parametrize("spec, reward, env, why", [
