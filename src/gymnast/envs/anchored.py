@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 
-from gymnast.envs.imagined import BatchedImaginedEnv
+from gymnast.envs.imagined import BatchedImaginedEnv, hold_after_end
 from gymnast.envs.metaworld import CONTROL_FPS
 from gymnast.envs.sim_vector import SimVectorEnv
 
@@ -93,9 +93,7 @@ class AnchoredImaginedEnv(VectorEnv):
         if self._since >= self.every:
             frames[:, -1] = self.imagined.restart(infos["frames"][:, -1:])
             self._since = 0
-        executed = infos["executed"]
-        for b in np.flatnonzero(executed < frames.shape[1]):  # ended, now or before: the last frame shown holds
-            frames[b, executed[b]:] = frames[b, executed[b] - 1] if executed[b] else self._shown[b]
+        hold_after_end(frames, infos["executed"], self._shown)  # ended, now or before, in the real world
         self._shown = frames[:, -1].copy()
         shown = {key: infos[key] for key in REAL_INFOS if key in infos} | {"frames": frames}
         if "disagreement" in imagined:

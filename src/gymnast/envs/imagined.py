@@ -106,6 +106,15 @@ def _check_actions(actions: Any, space: Box, names: str) -> np.ndarray:
     return np.clip(actions, space.low, space.high)
 
 
+def hold_after_end(frames: np.ndarray, executed: np.ndarray, before: np.ndarray) -> None:
+    """Holds, in place, each rollout's last frame over the (B, k, H, W, 3) `frames` of a step after its
+    (B,) `executed` actions: the frame of its last action, or `before` (B, H, W, 3), the frame
+    it showed before the step, where it executed none. An ended rollout shows its last frame from then
+    on, as a finished simulator episode does."""
+    for b in np.flatnonzero(executed < frames.shape[1]):
+        frames[b, executed[b]:] = frames[b, executed[b] - 1] if executed[b] else before[b]
+
+
 class HostCopier:
     """Brings frames to the host as fresh arrays (the env keeps every step's frames as the video).
 
@@ -429,8 +438,7 @@ class BatchedImaginedEnv(VectorEnv):
         executed = np.where(self._stopped, 0, trusted)
         before = self._sim.chunks[-2][:, -1]  # (B, H, W, 3) the last frame of the previous step
         frames = frames.copy()  # the model's own frames may share memory with its state
-        for b in np.flatnonzero(executed < count):
-            frames[b, executed[b]:] = frames[b, executed[b] - 1] if executed[b] else before[b]
+        hold_after_end(frames, executed, before)
         self._sim.chunks[-1] = frames
         self._stopped |= executed < count
         return frames, executed
