@@ -237,6 +237,10 @@ def test_an_anchored_sight_rolls_out_for_real_and_is_evaluated_in_the_real_world
     with pytest.raises(SystemExit):
         main(common + ["--env", "imagined", "--anchor-every", "10", "--out", str(tmp_path / "refused_too")])
     assert "give both or neither" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(common + ["--env", "anchored", "--anchor-every", "10", "--disagreement-penalty", "0.5",
+                       "--out", str(tmp_path / "refused_lever")])
+    assert "--env anchored's rollouts are real" in capsys.readouterr().err
     out = tmp_path / "anchored"
     main(common + ["--env", "anchored", "--anchor-every", "10", "--out", str(out)])
     lines = [json.loads(line) for line in (out / "metrics.jsonl").read_text().splitlines()]

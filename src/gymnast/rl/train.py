@@ -112,6 +112,8 @@ def train_rl(run_spec: RLRun, out: Path, config: RLConfig, resume: bool = False,
               if getattr(config, name) > 0]
     if levers and not env.imagined:
         raise ValueError(f"{levers[0]} acts on imagined rollouts; --env {env} imagines none")
+    if levers and env.real_interactions:  # anchored: only the sight is imagined, the rollout goes on for real
+        raise ValueError(f"{levers[0]} acts on imagined rollouts; --env {env}'s rollouts are real")
     if (env == ANCHORED) != (config.anchor_every > 0):
         raise ValueError("--anchor-every is how often --env anchored restarts the world model from the real frame: "
                          "give both or neither")
